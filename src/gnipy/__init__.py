@@ -1,0 +1,57 @@
+"""gnipy: the Geometric Nonholonomic Integrator and its extensions, in JAX.
+
+Importing gnipy enables float64 in JAX (`jax_enable_x64`).
+"""
+
+import jax as _jax
+
+_jax.config.update("jax_enable_x64", True)
+
+__version__ = "0.1.0"
+
+from . import models  # noqa: E402
+from .discrete_lagrangians import (  # noqa: E402
+    CustomDiscreteLagrangian,
+    DiscreteLagrangian,
+    EulerA,
+    EulerB,
+    Midpoint,
+    Trapezoid,
+)
+from .integrators import GNI, Integrator, MethodError, StepInfo  # noqa: E402
+from .methods import get_method, method_names  # noqa: E402
+from .models import get_model, make_system, model_names  # noqa: E402
+from .projectors import projectors, reflect_momentum, reported_momentum  # noqa: E402
+from .reference import ContinuousReference  # noqa: E402
+from .simulate import simulate  # noqa: E402
+from .solution import Solution, SolverFailure  # noqa: E402
+from .system import System, SystemError  # noqa: E402
+
+__all__ = [
+    "__version__",
+    "System",
+    "SystemError",
+    "DiscreteLagrangian",
+    "EulerA",
+    "EulerB",
+    "Trapezoid",
+    "Midpoint",
+    "CustomDiscreteLagrangian",
+    "Integrator",
+    "StepInfo",
+    "MethodError",
+    "GNI",
+    "ContinuousReference",
+    "simulate",
+    "Solution",
+    "SolverFailure",
+    "projectors",
+    "reflect_momentum",
+    "reported_momentum",
+    "get_method",
+    "method_names",
+    "get_model",
+    "make_system",
+    "model_names",
+    "models",
+]

@@ -1,0 +1,108 @@
+"""Discrete Lagrangians $l_d(q_k, q_{k+1}, h) \\approx \\int_0^h l\\,dt$ (DESIGN.md §2, (LagEuler), (Verlet)).
+
+Each family is written once against the configuration space's `step_points`, so the same classes
+serve $\\mathbb{R}^n$ and, later, $\\mathbb{R}^n \\times G$.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import ClassVar
+
+import equinox as eqx
+
+__all__ = [
+    "DiscreteLagrangian",
+    "EulerA",
+    "EulerB",
+    "Trapezoid",
+    "Midpoint",
+    "CustomDiscreteLagrangian",
+    "DISCRETE_LAGRANGIANS",
+]
+
+
+class DiscreteLagrangian(eqx.Module):
+    """Base class: `ld(system, b0, z, h)` is the discrete Lagrangian of the step from `b0` with
+    unknowns `z` ($z = q_{k+1}$ on $\\mathbb{R}^n$).
+
+    `explicit_if_flat` says that $FL^-$ is affine in the unknowns whenever the metric is constant,
+    so that the GNI step is explicit (one linear solve, no Newton iteration).
+    """
+
+    explicit_if_flat: ClassVar[bool] = False
+    name: ClassVar[str] = "discrete-lagrangian"
+
+    def __call__(self, system, b0, z, h):
+        raise NotImplementedError
+
+
+class EulerA(DiscreteLagrangian):
+    """Euler A: $l_d = h\\, l(q_k, (q_{k+1} - q_k)/h)$ ((LagEuler))."""
+
+    explicit_if_flat: ClassVar[bool] = True
+    name: ClassVar[str] = "euler-a"
+
+    def __call__(self, system, b0, z, h):
+        _, _, v = system.space.step_points(b0, z, h)
+        return h * system.lagrangian(b0, v)
+
+
+class EulerB(DiscreteLagrangian):
+    """Euler B: $l_d = h\\, l(q_{k+1}, (q_{k+1} - q_k)/h)$ ((LagEuler))."""
+
+    explicit_if_flat: ClassVar[bool] = True
+    name: ClassVar[str] = "euler-b"
+
+    def __call__(self, system, b0, z, h):
+        b1, _, v = system.space.step_points(b0, z, h)
+        return h * system.lagrangian(b1, v)
+
+
+class Trapezoid(DiscreteLagrangian):
+    """Trapezoid (Störmer–Verlet): the average of Euler A and Euler B ((Verlet)).
+
+    With the GNI this gives nonholonomic SHAKE/RATTLE (Remark 5.1).
+    """
+
+    explicit_if_flat: ClassVar[bool] = True
+    name: ClassVar[str] = "trapezoid"
+
+    def __call__(self, system, b0, z, h):
+        b1, _, v = system.space.step_points(b0, z, h)
+        return 0.5 * h * (system.lagrangian(b0, v) + system.lagrangian(b1, v))
+
+
+class Midpoint(DiscreteLagrangian):
+    """Midpoint: $l_d = h\\, l((q_k + q_{k+1})/2, (q_{k+1} - q_k)/h)$."""
+
+    name: ClassVar[str] = "midpoint"
+
+    def __call__(self, system, b0, z, h):
+        _, bm, v = system.space.step_points(b0, z, h)
+        return h * system.lagrangian(bm, v)
+
+
+class CustomDiscreteLagrangian(DiscreteLagrangian):
+    """A discrete Lagrangian supplied by the user.
+
+    Arguments:
+        fn: `fn(q0, q1, h) -> scalar`, smooth, with $\\partial^2 l_d/\\partial q_0 \\partial q_1$ regular.
+        explicit: declare that $-\\partial l_d / \\partial q_0$ is affine in `q1` (then the GNI step is
+            one linear solve); leave False when unsure: the Newton solve is always correct.
+    """
+
+    fn: Callable = eqx.field(static=True)
+    explicit: bool = eqx.field(static=True, default=False)
+    name: ClassVar[str] = "custom"
+
+    def __call__(self, system, b0, z, h):
+        return self.fn(b0, z, h)
+
+
+DISCRETE_LAGRANGIANS: dict[str, type[DiscreteLagrangian]] = {
+    "euler-a": EulerA,
+    "euler-b": EulerB,
+    "trapezoid": Trapezoid,
+    "midpoint": Midpoint,
+}

@@ -1,0 +1,61 @@
+"""The contact oscillator of McLachlan–Perlmutter (2006, §5.2).
+
+$H = \\tfrac12(|v|^2 + |q|^2 + \\varepsilon x^2 z^2)$ on $q = (x, y, z)$, constraint
+$\\dot x + y\\dot z = 0$. Both $H$ and $H_y = \\tfrac12(y^2 + \\dot y^2)$ are conserved (the constraint
+force has no y-component, so y is a free harmonic oscillator).
+"""
+
+from __future__ import annotations
+
+import jax.numpy as jnp
+import jax.tree_util as jtu
+
+from ..system import System
+from .registry import ModelSpec, register
+
+__all__ = ["MODEL"]
+
+
+def _lagrangian(eps, q, v):
+    x, _, z = q
+    return 0.5 * (v @ v) - 0.5 * (q @ q + eps * x**2 * z**2)
+
+
+def _constraints(q):
+    y = q[1]
+    return jnp.stack([jnp.ones_like(y), jnp.zeros_like(y), y])[None, :]
+
+
+def _build(p):
+    return System(
+        jtu.Partial(_lagrangian, jnp.asarray(p["epsilon"])),
+        _constraints,
+        coordinates=("x", "y", "z"),
+        name="contact-oscillator",
+        params=p,
+        defaults=MODEL.initial_condition(p),
+    )
+
+
+def _H(p, q, v):
+    x, _, z = q
+    return 0.5 * (v @ v + q @ q + p["epsilon"] * x**2 * z**2)
+
+
+def _Hy(p, q, v):
+    return 0.5 * (q[1] ** 2 + v[1] ** 2)
+
+
+MODEL = register(
+    ModelSpec(
+        name="contact-oscillator",
+        description="McLachlan–Perlmutter contact oscillator, ẋ + y ż = 0, H and H_y conserved",
+        build=_build,
+        params={"epsilon": 0.3},
+        coordinates=("x", "y", "z"),
+        q0=(1.0, 1.0, 1.0),
+        v0=(-1.0, 1.0, 1.0),
+        invariants={"H": _H, "H_y": _Hy},
+        notes=__doc__,
+    )
+)

@@ -1,0 +1,101 @@
+"""The model registry: each model is a :class:`ModelSpec` with parameters, defaults, and its exact
+solution or invariants where known."""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping
+from typing import Any
+
+from ..system import System, SystemError
+
+__all__ = ["ModelSpec", "register", "get_model", "model_names", "make_system"]
+
+
+@dataclasses.dataclass(frozen=True)
+class ModelSpec:
+    """A model of the zoo.
+
+    Attributes:
+        name: the CLI name (e.g. `"nonholonomic-particle"`).
+        description: one line.
+        build: `build(params: dict[str, float]) -> System`.
+        params: parameter names and default values.
+        coordinates: the names of q.
+        q0, v0: the documented initial condition for the default parameters.
+        default_ic: optional `default_ic(params) -> (q0, v0)` when the default initial condition
+            depends on the parameters (it must satisfy the constraints).
+        exact: optional `exact(params, q0, v0, t) -> (q, v)` (t an array; returns arrays (T, n)).
+        invariants: conserved quantities `f(params, q, v) -> scalar` by name.
+        notes: longer documentation.
+    """
+
+    name: str
+    description: str
+    build: Callable[[dict[str, float]], System]
+    params: Mapping[str, float]
+    coordinates: tuple[str, ...]
+    q0: tuple[float, ...]
+    v0: tuple[float, ...]
+    default_ic: Callable[[dict[str, float]], tuple[Any, Any]] | None = None
+    exact: Callable[..., Any] | None = None
+    invariants: Mapping[str, Callable[..., Any]] = dataclasses.field(default_factory=dict)
+    notes: str = ""
+
+    def resolve_params(self, overrides: Mapping[str, Any] | None = None) -> dict[str, float]:
+        """Defaults updated with `overrides`; unknown names and non-finite values raise SystemError."""
+        import math
+
+        params = dict(self.params)
+        for k, v in (overrides or {}).items():
+            if k not in params:
+                known = ", ".join(params) or "none"
+                raise SystemError(f"--set/params: unknown parameter {k!r} of model {self.name!r} (known: {known})")
+            try:
+                v = float(v)
+            except (TypeError, ValueError) as e:
+                raise SystemError(f"--set/params: parameter {k!r} must be a number, got {v!r}") from e
+            if not math.isfinite(v):
+                raise SystemError(f"--set/params: parameter {k!r} must be finite, got {v!r}")
+            params[k] = v
+        return params
+
+    def initial_condition(self, params: Mapping[str, float]) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """The documented initial condition for these parameters."""
+        if self.default_ic is not None:
+            q0, v0 = self.default_ic(dict(params))
+            return tuple(float(x) for x in q0), tuple(float(x) for x in v0)
+        return self.q0, self.v0
+
+    def system(self, **overrides) -> System:
+        """Build the System for the defaults updated with `overrides`."""
+        params = self.resolve_params(overrides)
+        return self.build(params)
+
+
+_REGISTRY: dict[str, ModelSpec] = {}
+
+
+def register(spec: ModelSpec) -> ModelSpec:
+    """Add a model to the registry (names are unique)."""
+    if spec.name in _REGISTRY:
+        raise ValueError(f"model {spec.name!r} registered twice")
+    _REGISTRY[spec.name] = spec
+    return spec
+
+
+def get_model(name: str) -> ModelSpec:
+    """The model called `name`; unknown names raise SystemError listing the known ones."""
+    if name not in _REGISTRY:
+        raise SystemError(f"model: unknown model {name!r} (known: {', '.join(sorted(_REGISTRY))})")
+    return _REGISTRY[name]
+
+
+def model_names() -> list[str]:
+    """Names of all registered models."""
+    return sorted(_REGISTRY)
+
+
+def make_system(name: str, **params) -> System:
+    """Build the System of model `name` with parameters overriding the defaults."""
+    return get_model(name).system(**params)
