@@ -1,0 +1,184 @@
+"""Methods the GNI is compared against (DESIGN.md §2, "Methods to compare against").
+
+- :class:`DiscreteLagrangeDAlembert` (`"dla"`): the discrete Lagrange–d'Alembert principle of
+  Cortés–Martínez, $p^+_k - p^-_k = \\mu(q_k)^T\\lambda_k$ with a discrete constraint imposed at the
+  midpoint of each step.
+- :class:`McLachlanPerlmutter` (`"mp"`): the reversible scheme (4.18) of McLachlan–Perlmutter (2006),
+  for a constant metric.
+
+Both are implicit: each step is one Newton solve through :func:`~gnipy.integrators.base.solve_step`
+(optimistix, `throw=False`, the result promoted into :class:`~gnipy.StepInfo`), so a failed step is
+reported by :func:`~gnipy.simulate` like any other method's.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ..discrete_lagrangians import DiscreteLagrangian, EulerA, EulerB, Midpoint, Trapezoid
+from .base import Integrator, require_constant_metric, solve_step
+
+__all__ = ["DiscreteLagrangeDAlembert", "DLAState", "McLachlanPerlmutter", "MPState"]
+
+
+class DLAState(NamedTuple):
+    """DLA state at node k: the configuration $q_k$ and the post-momentum $p^+_k$."""
+
+    b: jax.Array
+    p_plus: jax.Array
+
+
+class DiscreteLagrangeDAlembert(Integrator):
+    """Discrete Lagrange–d'Alembert integrator (Cortés–Martínez; DESIGN.md §2).
+
+    One step from $(q_k, p^+_k)$ solves, for the $n + m$ unknowns $(q_{k+1}, \\lambda_k)$,
+
+    $$FL^-(q_k, q_{k+1}) = p^+_k - \\mu(q_k)^T\\lambda_k \\qquad (p^+_k - p^-_k = \\mu(q_k)^T\\lambda_k),$$
+    $$\\mu(q_{k+1/2})\\Big(\\frac{q_{k+1} - q_k}{h} - Y(q_{k+1/2})\\Big) = 0,
+      \\qquad q_{k+1/2} = \\tfrac12(q_k + q_{k+1}),$$
+
+    and sets $p^+_{k+1} = FL^+(q_k, q_{k+1})$. The first equation is the discrete
+    Lagrange–d'Alembert principle (the constraint force acts at the node $q_k$, as in (GNIloca));
+    the second is the continuous constraint evaluated at the step's velocity and the step's midpoint
+    (the documented base point of the discrete constraint). It starts from $p^+_0 = \\mathbb{G}(q_0)v_0$.
+
+    What is reported at node k is $p = p^+_k$ and $v = \\mathbb{G}(q_k)^{-1}p^+_k$. Unlike the GNI's
+    $\\bar v$, this velocity does **not** satisfy the continuous constraint $\\mu(q_k)(v - Y(q_k)) = 0$
+    exactly (its residual is $O(h)$ near the constraint force): what DLA preserves exactly is the
+    *discrete* constraint above, on consecutive configurations. The reported velocity is therefore only
+    first-order accurate, while the configurations are second order with the midpoint $l_d$.
+
+    Works for position-dependent metrics and affine constraints (the Newton solve is always used).
+
+    Arguments:
+        discrete_lagrangian: the $l_d$ (default :class:`~gnipy.Midpoint`).
+        root_finder: optimistix root finder (default Newton, tolerances 1e-12).
+        max_steps: Newton iteration cap.
+    """
+
+    discrete_lagrangian: DiscreteLagrangian = Midpoint()
+    root_finder: Any = None
+    max_steps: int = eqx.field(static=True, default=50)
+    name: ClassVar[str] = "dla"
+    order: ClassVar[int | None] = 2
+
+    @property
+    def expected_order(self) -> int | None:
+        """Expected global order of the configurations: 2 for the midpoint and trapezoid $l_d$
+        (a symmetric two-step scheme), 1 for Euler A/B, None for a user-supplied $l_d$."""
+        ld = self.discrete_lagrangian
+        if isinstance(ld, (EulerA, EulerB)):
+            return 1
+        if isinstance(ld, (Trapezoid, Midpoint)):
+            return 2
+        return None
+
+    def init(self, system, q0, v0, h):
+        """$(q_0, p^+_0 = \\mathbb{G}(q_0)v_0)$."""
+        return DLAState(q0, system.momentum(q0, v0))
+
+    def step(self, system, state, h):
+        """One DLA step: Newton on $(q_{k+1}, \\lambda_k)$; returns `(DLAState, StepInfo)`."""
+        b, p_plus = state
+        space = system.space
+        mu_k = system.mu(b)
+        m = mu_k.shape[0]
+        n = p_plus.shape[0]
+
+        def ld(b0, z):
+            return self.discrete_lagrangian(system, b0, z, h)
+
+        def residual(w):
+            z, lam = w[:n], w[n:]
+            momentum = space.legendre_minus(ld, b, z) - (p_plus - mu_k.T @ lam)  # p⁺ − p⁻ = μ(q_k)ᵀλ
+            _, b_mid, vel = space.step_points(b, z, h)
+            constraint = system.mu(b_mid) @ (vel - system.Y(b_mid))  # discrete constraint at q_{k+½}
+            return jnp.concatenate([momentum, constraint])
+
+        v = system.velocity(b, p_plus)
+        guess = jnp.concatenate([space.initial_guess(b, v, h), jnp.zeros(m, dtype=p_plus.dtype)])
+        w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps)
+        z = w[:n]
+        b1 = space.advance(b, z)
+        p1 = space.legendre_plus(ld, b, z)
+        return DLAState(b1, p1), info
+
+    def observe(self, system, state, h):
+        """$(q_k,\\ \\mathbb{G}^{-1}p^+_k,\\ p^+_k)$ (see the class docstring on the velocity)."""
+        b, p_plus = state
+        return system.space.coordinates(b), system.velocity(b, p_plus), p_plus
+
+
+class MPState(NamedTuple):
+    """McLachlan–Perlmutter state at node k: configuration and velocity (on the constraints)."""
+
+    q: jax.Array
+    v: jax.Array
+
+
+class McLachlanPerlmutter(Integrator):
+    """The reversible nonholonomic scheme (4.18) of McLachlan–Perlmutter (2006), DESIGN.md §2.
+
+    For $l = \\tfrac12 v^TMv - V(q)$ with a constant metric $M$, one step from $(q_0, v_0)$:
+
+    $$q_{1/2} = q_0 + \\tfrac h2 v_0,\\qquad
+      v_1 = v_0 + hM^{-1}\\big(-V_q(q_{1/2}) + \\mu(q_{1/2})^T\\lambda\\big),$$
+    $$q_1 = q_{1/2} + \\tfrac h2 v_1,\\qquad \\mu(q_1)\\big(v_1 - Y(q_1)\\big) = 0,$$
+
+    with the $m$ unknowns $\\lambda$ found by Newton's method. The velocity satisfies the constraints
+    exactly at every node. For linear constraints ($Y = 0$) the map is reversible:
+    $(q_1, -v_1) \\mapsto (q_0, -v_0)$ with the same $\\lambda$, hence symmetric and of order 2.
+    Reports $v$ and $p = Mv$.
+
+    Arguments:
+        root_finder: optimistix root finder (default Newton, tolerances 1e-12).
+        max_steps: Newton iteration cap.
+
+    Raises:
+        MethodError: from :meth:`check`, when the metric depends on q.
+    """
+
+    root_finder: Any = None
+    max_steps: int = eqx.field(static=True, default=50)
+    name: ClassVar[str] = "mp"
+    order: ClassVar[int | None] = 2
+
+    def check(self, system, q0) -> None:
+        """Raise :class:`~gnipy.MethodError` unless the metric is constant (the scheme uses $M^{-1}$)."""
+        require_constant_metric(self.name, system, q0)
+
+    def init(self, system, q0, v0, h):
+        """$(q_0, v_0)$."""
+        return MPState(q0, v0)
+
+    def step(self, system, state, h):
+        """One step of (4.18): Newton on λ; returns `(MPState, StepInfo)`."""
+        q0, v0 = state
+        q_half = q0 + 0.5 * h * v0
+        M = system.metric(q_half)  # constant by `check`
+        mu_half = system.mu(q_half)
+        force = -system.potential_gradient(q_half)
+        m = mu_half.shape[0]
+
+        def velocity(lam):
+            return v0 + h * jnp.linalg.solve(M, force + mu_half.T @ lam)
+
+        def residual(lam):
+            v1 = velocity(lam)
+            q1 = q_half + 0.5 * h * v1
+            return system.mu(q1) @ (v1 - system.Y(q1))
+
+        lam, info = solve_step(
+            residual, jnp.zeros(m, dtype=v0.dtype), explicit=False, solver=self.root_finder, max_steps=self.max_steps
+        )
+        v1 = velocity(lam)
+        return MPState(q_half + 0.5 * h * v1, v1), info
+
+    def observe(self, system, state, h):
+        """$(q_k, v_k, Mv_k)$."""
+        q, v = state
+        return q, v, system.momentum(q, v)

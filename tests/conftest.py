@@ -1,0 +1,3 @@
+"""Shared test configuration: float64 JAX (gnipy enables it on import)."""
+
+import gnipy  # noqa: F401

@@ -1,0 +1,74 @@
+"""The simulation driver: save stride, solver failures, the Solution object."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnipy
+from gnipy import GNI, Midpoint, System
+
+
+@pytest.fixture(scope="module")
+def particle():
+    return gnipy.make_system("nonholonomic-particle")
+
+
+def test_save_stride_keeps_nodes_and_last(particle):
+    full = gnipy.simulate(particle, "gni-trapezoid", h=0.05, steps=23)
+    strided = gnipy.simulate(particle, "gni-trapezoid", h=0.05, steps=23, save_every=5)
+    idx = [0, 5, 10, 15, 20, 23]
+    np.testing.assert_allclose(strided.t, 0.05 * np.array(idx), rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(np.asarray(strided.q), np.asarray(full.q)[idx])
+    np.testing.assert_array_equal(np.asarray(strided.v), np.asarray(full.v)[idx])
+    assert strided.steps == 23 and full.q.shape == (24, 3)
+
+
+def test_t_final_and_default_initial_condition(particle):
+    s = gnipy.simulate(particle, "gni-trapezoid", h=0.25, t_final=2.0)
+    assert s.t.shape == (9,) and float(s.t[-1]) == 2.0
+    np.testing.assert_array_equal(np.asarray(s.q[0]), gnipy.get_model("nonholonomic-particle").q0)
+    np.testing.assert_allclose(np.asarray(s.v[0]), gnipy.get_model("nonholonomic-particle").v0, atol=1e-15)
+
+
+def test_to_xarray(particle):
+    s = gnipy.simulate(particle, "gni-midpoint", h=0.1, steps=10)
+    ds = s.to_xarray()
+    assert ds["q"].dims == ("time", "coordinate")
+    assert ds["v"].dims == ("time", "velocity")
+    assert ds["constraint_residual"].dims == ("time", "constraint")
+    assert list(ds["coordinate"].values) == ["x", "y", "z"]
+    assert ds.attrs["method"] == "gni-midpoint" and ds.attrs["steps"] == 10
+    assert ds.attrs["param_k"] == 1.0
+    np.testing.assert_array_equal(ds["energy"].values, np.asarray(s.energy))
+
+
+def _wall_system():
+    # V = log(1 − x): undefined for x ≥ 1, and the force 1/(1 − x) pushes the particle there
+    return System(
+        lambda q, v: 0.5 * v @ v - jnp.log1p(-q[0]),
+        lambda q: jnp.array([[0.0, 0.0, 1.0]]),
+        n=3,
+        name="wall",
+    )
+
+
+def test_solver_failure_stops_with_step_and_residual():
+    s = _wall_system()
+    with pytest.raises(gnipy.SolverFailure, match=r"step \d+ \(t = .*residual") as exc:
+        gnipy.simulate(s, GNI(Midpoint()), [0.5, 0.0, 0.0], [1.0, 0.0, 0.0], h=0.1, steps=200, save_every=3)
+    err = exc.value
+    assert err.step > 0
+    part = err.solution
+    assert part.result == 1 and part.failed_step == err.step
+    assert np.all(np.isfinite(np.asarray(part.q)))
+    # no padding: every saved node lies at or before the last good step
+    assert float(part.t[-1]) <= 0.1 * err.step + 1e-12
+    assert np.all(np.asarray(part.q)[:, 0] < 1.0)
+
+
+def test_throw_false_returns_truncated_solution():
+    s = _wall_system()
+    part = gnipy.simulate(s, GNI(Midpoint()), [0.5, 0.0, 0.0], [1.0, 0.0, 0.0], h=0.1, steps=200, throw=False)
+    assert part.result == 1
+    assert len(part.t) == part.failed_step + 1
+    assert np.all(np.isfinite(np.asarray(part.energy)))

@@ -1,0 +1,145 @@
+"""System construction and validation: every bad input gets a clear error naming the argument."""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnipy
+from gnipy import System, SystemError
+
+
+def _particle(**kw):
+    return System(
+        lambda q, v: 0.5 * v @ v - 0.5 * (q[0] ** 2 + q[1] ** 2),
+        lambda q: jnp.array([[-q[1], 0.0, 1.0]]),
+        n=3,
+        **kw,
+    )
+
+
+def test_derived_quantities_match_hand_computation():
+    # l = ½(1+x²)ẋ² + ½ẏ² + ½ż² − V: metric diag(1+x², 1, 1), V = x y
+    sys_ = System(
+        lambda q, v: 0.5 * (1 + q[0] ** 2) * v[0] ** 2 + 0.5 * v[1] ** 2 + 0.5 * v[2] ** 2 - q[0] * q[1],
+        lambda q: jnp.array([[-q[1], 0.0, 1.0]]),
+        lambda q: jnp.array([q[1], 0.0, 0.0]),
+        n=3,
+    )
+    q = jnp.array([0.5, -2.0, 1.0])
+    v = jnp.array([1.0, 2.0, 3.0])
+    G = np.diag([1.25, 1.0, 1.0])
+    np.testing.assert_allclose(sys_.metric(q), G, rtol=0, atol=1e-15)
+    assert float(sys_.potential(q)) == pytest.approx(-1.0, abs=1e-15)
+    np.testing.assert_allclose(sys_.potential_gradient(q), [-2.0, 0.5, 0.0], atol=1e-15)
+    np.testing.assert_allclose(sys_.momentum(q, v), G @ np.asarray(v), atol=1e-15)
+    np.testing.assert_allclose(sys_.Pi(q), G @ np.array([-2.0, 0.0, 0.0]), atol=1e-15)
+    # μ(v − Y) = −y(ẋ − y) + ż = 2(1 + 2) + 3
+    np.testing.assert_allclose(sys_.constraint_residual(q, v), [9.0], atol=1e-14)
+    assert float(sys_.energy(q, v)) == pytest.approx(0.5 * 1.25 + 0.5 * 4 + 0.5 * 9 - 1.0, abs=1e-14)
+    assert not sys_.has_constant_metric(q)
+    assert _particle().has_constant_metric(q)
+
+
+def test_lagrangian_not_quadratic_in_v():
+    bad = System(lambda q, v: 0.25 * jnp.sum(v**4) + 0.5 * v @ v, lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3)
+    with pytest.raises(SystemError, match=r"lagrangian: not of mechanical type"):
+        bad.check(jnp.zeros(3), jnp.array([1.0, 1.0, 0.0]))
+
+
+def test_lagrangian_with_linear_term():
+    bad = System(lambda q, v: 0.5 * v @ v + q[0] * v[1], lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3)
+    with pytest.raises(SystemError, match=r"linear term"):
+        bad.check(jnp.array([1.0, 0.0, 0.0]), jnp.array([1.0, 1.0, 0.0]))
+
+
+def test_indefinite_and_singular_metric():
+    indefinite = System(lambda q, v: 0.5 * (v[0] ** 2 - v[1] ** 2 + v[2] ** 2), lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3)
+    with pytest.raises(SystemError, match=r"not positive definite"):
+        indefinite.check(jnp.zeros(3), jnp.zeros(3))
+    singular = System(lambda q, v: 0.5 * (v[0] ** 2 + v[2] ** 2), lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3)
+    with pytest.raises(SystemError, match=r"not positive definite"):
+        singular.check(jnp.zeros(3), jnp.zeros(3))
+
+
+def test_rank_deficient_constraints():
+    bad = System(lambda q, v: 0.5 * v @ v, lambda q: jnp.array([[1.0, q[1], 0.0], [2.0, 2 * q[1], 0.0]]), n=3)
+    with pytest.raises(SystemError, match=r"constraints: mu\(q0\) is rank deficient"):
+        bad.check(jnp.ones(3), jnp.zeros(3))
+
+
+def test_too_many_constraints_and_wrong_shape():
+    full = System(lambda q, v: 0.5 * v @ v, lambda q: jnp.eye(2), n=2)
+    with pytest.raises(SystemError, match=r"constraints:"):
+        full.check(jnp.zeros(2), jnp.zeros(2))
+    wrong = System(lambda q, v: 0.5 * v @ v, lambda q: jnp.ones((1, 2)), n=3)
+    with pytest.raises(SystemError, match=r"shape"):
+        wrong.check(jnp.zeros(3), jnp.zeros(3))
+
+
+def test_initial_velocity_off_constraints_reports_residual():
+    s = _particle()
+    with pytest.raises(SystemError, match=r"v0: .*residual 5\.000e-01"):
+        s.check(jnp.array([0.0, 1.0, 0.0]), jnp.array([1.0, 0.0, 0.5]))
+
+
+def test_project_v0_is_the_metric_orthogonal_projection():
+    # affine constraints with a non-identity metric; compare with the KKT solution of
+    # min (v − v0)ᵀG(v − v0) subject to μ v = μ Y (an independent formulation)
+    Gm = np.array([[2.0, 0.3, 0.0], [0.3, 1.0, 0.1], [0.0, 0.1, 1.5]])
+    s = System(
+        lambda q, v: 0.5 * v @ jnp.asarray(Gm) @ v,
+        lambda q: jnp.array([[1.0, q[1], 0.0]]),
+        lambda q: jnp.array([0.0, 0.0, q[0]]),
+        n=3,
+    )
+    q0 = np.array([0.7, 2.0, -1.0])
+    v0 = np.array([1.0, -0.5, 0.25])
+    _, vp = s.check(q0, v0, project_v0=True)
+    mu = np.array([[1.0, 2.0, 0.0]])
+    Y = np.array([0.0, 0.0, 0.7])
+    K = np.block([[Gm, mu.T], [mu, np.zeros((1, 1))]])
+    rhs = np.concatenate([Gm @ v0, mu @ Y])
+    expected = np.linalg.solve(K, rhs)[:3]
+    np.testing.assert_allclose(vp, expected, rtol=1e-13, atol=1e-14)
+    assert np.max(np.abs(mu @ (vp - Y))) < 1e-14
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "pattern"),
+    [
+        (dict(q0=[0.0, 1.0]), r"q0: expected a vector of length 3"),
+        (dict(q0=[0.0, np.nan, 0.0]), r"q0: contains NaN"),
+        (dict(v0=[np.inf, 0.0, 0.0]), r"v0: contains NaN or infinite"),
+        (dict(h=0.0), r"h: the step size must be a positive"),
+        (dict(h=-0.1), r"h: the step size must be a positive"),
+        (dict(h=float("nan")), r"h: the step size must be a positive"),
+        (dict(steps=0), r"steps: must be a positive integer"),
+        (dict(steps=2.5), r"steps: must be a positive integer"),
+        (dict(steps=None, t_final=0.105), r"t_final: .* not a whole number of steps"),
+        (dict(steps=None), r"give exactly one of steps and t_final"),
+        (dict(save_every=0), r"save_every: must be a positive integer"),
+    ],
+)
+def test_simulate_rejects_bad_arguments(kwargs, pattern):
+    args = dict(q0=[0.0, 1.0, 0.0], v0=[1.0, 0.0, 1.0], h=0.01, steps=10)
+    args.update(kwargs)
+    with pytest.raises(SystemError, match=pattern):
+        gnipy.simulate(_particle(), "gni-trapezoid", **args)
+
+
+def test_unknown_method_and_model():
+    with pytest.raises(gnipy.MethodError, match=r"method: unknown method 'nope'"):
+        gnipy.simulate(_particle(), "nope", [0.0, 1.0, 0.0], [1.0, 0.0, 1.0], h=0.1, steps=1)
+    with pytest.raises(SystemError, match=r"model: unknown model 'nope'"):
+        gnipy.make_system("nope")
+    with pytest.raises(SystemError, match=r"unknown parameter 'kk'"):
+        gnipy.make_system("nonholonomic-particle", kk=1.0)
+
+
+def test_constructor_errors():
+    with pytest.raises(SystemError, match=r"lagrangian: expected a callable"):
+        System(1.0, lambda q: q, n=2)
+    with pytest.raises(SystemError, match=r"n: give the dimension"):
+        System(lambda q, v: 0.0, lambda q: q)
+    with pytest.raises(SystemError, match=r"coordinates: expected 3 names"):
+        System(lambda q, v: 0.0, lambda q: q, n=3, coordinates=("x", "y"))
