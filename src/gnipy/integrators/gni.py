@@ -19,7 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ..discrete_lagrangians import DiscreteLagrangian, EulerA, EulerB, Midpoint, Trapezoid
+from ..discrete_lagrangians import CustomDiscreteLagrangian, DiscreteLagrangian, EulerA, EulerB, Midpoint, Trapezoid
 from ..projectors import reflect_momentum, reported_momentum
 from .base import Integrator, solve_step
 
@@ -68,8 +68,10 @@ class GNI(Integrator):
         if self.explicit is not None:
             return self
         ld = self.discrete_lagrangian
-        flat_ok = getattr(ld, "explicit", False) or type(ld).explicit_if_flat
-        explicit = bool(flat_ok and system.has_constant_metric(q0))
+        if isinstance(ld, CustomDiscreteLagrangian):
+            explicit = bool(ld.explicit)  # the user's declaration that FL⁻ is affine in q_{k+1}
+        else:
+            explicit = bool(type(ld).explicit_if_flat and system.has_constant_metric(q0))
         return dataclasses.replace(self, explicit=explicit)
 
     def init(self, system, q0, v0, h):

@@ -1,0 +1,415 @@
+"""The paper's explicit schemes, written separately as one-step maps (paper §5, §6.1).
+
+These are the GNI of DESIGN.md §2 written in the paper's variables for a mechanical Lagrangian
+$L = \\tfrac12 \\dot q^T M \\dot q - V(q)$ with a *constant* metric $M$. They do not call the GNI
+core: tests hold them equal to it, which checks both.
+
+Variables. The paper's one-step schemes act on $(q_k, \\tilde p_k, \\tilde\\lambda_k)$ with
+$\\tilde p_k = M(q_{k+1} - q_{k-1})/2h$, $p_{k+1/2} = M(q_{k+1} - q_k)/h$ and
+$\\tilde\\lambda_k = \\lambda_k / h$. All of them share the kick–drift–kick form
+
+    p_{k+1/2}   = p̃_k − (h/2)(V_q(q_k) + μ(q_k)ᵀ λ̃_k)
+    q_{k+1}     = q_k + h M⁻¹ p_{k+1/2}
+    p̃_{k+1}     = p_{k+1/2} − (h/2)(V_q(q_{k+1}) + μ(q_{k+1})ᵀ λ̃_{k+1})
+
+and differ only in the discrete constraint that fixes $\\tilde\\lambda_{k+1}$:
+
+    μ(q) M⁻¹ (p̃ + s (h/2) V_q(q) − Π(q)) = 0,   s = +1 (Euler A), −1 (Euler B), 0 (RATTLE).
+
+The constraint is linear in $\\tilde\\lambda_{k+1}$: substituting $\\tilde p_{k+1}$ gives the
+$m \\times m$ system $(h/2)\\, C\\, \\tilde\\lambda_{k+1} = \\mu M^{-1}(p_{k+1/2} + (s-1)(h/2) V_q - \\Pi)$
+at $q_{k+1}$, with $C = \\mu M^{-1} \\mu^T$.
+
+Affine constraints. The paper writes (EuAHam), (EuBHam) for linear constraints only. For affine
+ones, $\\mu(\\dot q - Y) = 0$ with $\\Pi = M Y$, the natural extension is the $-\\Pi$ term above: it
+follows from (GNIintAffb) exactly as (EuAHamc/e) follow from (GNIintb). With the Euler A discrete
+Lagrangian, $FL^- = p_{k+1/2} + h V_q(q_k)$ and $FL^+ = p_{k-1/2}$, so
+$(FL^- + FL^+)/2 = \\tilde p_k + (h/2) V_q(q_k)$ and (GNIintAffb) reads
+$\\mu M^{-1}(\\tilde p_k + (h/2)V_q - \\Pi) = 0$ (Euler B: $-(h/2)V_q$; trapezoid: none, which is
+the affine RATTLE of §6.1).
+
+Relation to the GNI state $(q_k, p^+_k)$ (DESIGN.md §2): the GNI's reported momentum is
+$\\bar p = (p^- + p^+)/2 = P^* p^+ + Q^* \\Pi$, and
+
+    λ̃ = (2/h) C⁻¹ μ M⁻¹ (p⁺ − Π),      p̃ = p̄ − s (h/2) V_q.
+
+Starting from $p^+_0 = M v_0$ with $v_0$ on the constraints gives $\\tilde\\lambda_0 = 0$ and
+$\\tilde p_0 = M v_0 - s (h/2) V_q(q_0)$. Every class reports (`observe`) the GNI's $\\bar p$ and
+$\\bar v = M^{-1}\\bar p$, so that solutions compare node by node.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, NamedTuple
+
+import jax
+import jax.numpy as jnp
+
+from .base import Integrator, StepInfo, require_constant_metric
+
+__all__ = [
+    "TildeState",
+    "ShakeState",
+    "euler_a_map",
+    "euler_b_map",
+    "rattle_map",
+    "shake_map",
+    "tilde_state_from_gni",
+    "NonholonomicEulerA",
+    "NonholonomicEulerB",
+    "Rattle",
+    "Shake",
+    "EulerABComposition",
+]
+
+# The sign s of the potential term in the discrete constraint μM⁻¹(p̃ + s(h/2)V_q − Π) = 0.
+_S_EULER_A = 1.0
+_S_EULER_B = -1.0
+_S_RATTLE = 0.0
+
+
+class TildeState(NamedTuple):
+    """The paper's one-step variables at node k: $(q_k, \\tilde p_k, \\tilde\\lambda_k)$.
+
+    Attributes:
+        q: configuration $q_k$, shape (n,).
+        p_tilde: momentum $\\tilde p_k$, shape (n,).
+        lambda_tilde: scaled multiplier $\\tilde\\lambda_k = \\lambda_k/h$, shape (m,).
+    """
+
+    q: jax.Array
+    p_tilde: jax.Array
+    lambda_tilde: jax.Array
+
+
+class ShakeState(NamedTuple):
+    """The two-step SHAKE state held at node k: $(q_{k-1}, q_k, q_{k+1})$.
+
+    Attributes:
+        q_prev: $q_{k-1}$.
+        q: $q_k$, the node reported.
+        q_next: $q_{k+1}$.
+    """
+
+    q_prev: jax.Array
+    q: jax.Array
+    q_next: jax.Array
+
+
+def _finite(*arrays) -> jax.Array:
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in arrays]))
+
+
+def _explicit_info(*arrays) -> StepInfo:
+    dtype = jnp.result_type(*arrays)
+    return StepInfo(_finite(*arrays), jnp.asarray(0, dtype=jnp.int32), jnp.asarray(0.0, dtype=dtype))
+
+
+def _kick_drift_kick(system, state: TildeState, h, s: float) -> TildeState:
+    """One step of the shared scheme with discrete constraint $\\mu M^{-1}(\\tilde p + s(h/2)V_q - \\Pi) = 0$.
+
+    Arguments:
+        system: a :class:`~gnipy.System` with a constant metric (evaluated once, at $q_k$).
+        state: $(q_k, \\tilde p_k, \\tilde\\lambda_k)$.
+        h: step size (any nonzero real, negative allowed).
+        s: +1 (Euler A), −1 (Euler B), 0 (RATTLE).
+
+    Returns:
+        $(q_{k+1}, \\tilde p_{k+1}, \\tilde\\lambda_{k+1})$.
+    """
+    q, p, lam = state
+    M = system.metric(q)  # constant metric: the same at q_k and q_{k+1}
+    p_half = p - 0.5 * h * (system.potential_gradient(q) + system.mu(q).T @ lam)  # (EuAHama)
+    q1 = q + h * jnp.linalg.solve(M, p_half)  # (EuAHamb)
+    mu1 = system.mu(q1)
+    Vq1 = system.potential_gradient(q1)
+    Pi1 = system.Pi(q1)
+    C1 = mu1 @ jnp.linalg.solve(M, mu1.T)
+    # (EuAHamd) substituted into (EuAHame): (h/2) C λ̃ = μ M⁻¹ (p_{k+1/2} + (s − 1)(h/2) V_q − Π)
+    rhs = mu1 @ jnp.linalg.solve(M, p_half + (s - 1.0) * 0.5 * h * Vq1 - Pi1)
+    lam1 = (2.0 / h) * jnp.linalg.solve(C1, rhs)
+    p1 = p_half - 0.5 * h * (Vq1 + mu1.T @ lam1)  # (EuAHamd)
+    return TildeState(q1, p1, lam1)
+
+
+def euler_a_map(system, state: TildeState, h) -> TildeState:
+    """One step of nonholonomic Euler A, (EuAHam), with the affine extension.
+
+    (EuAHama) $p_{k+1/2} = \\tilde p_k - \\tfrac h2(V_q(q_k) + \\mu^T(q_k)\\tilde\\lambda_k)$;
+    (EuAHamb) $q_{k+1} = q_k + h M^{-1} p_{k+1/2}$;
+    (EuAHamd) $\\tilde p_{k+1} = p_{k+1/2} - \\tfrac h2(V_q(q_{k+1}) + \\mu^T(q_{k+1})\\tilde\\lambda_{k+1})$;
+    (EuAHame) $\\mu(q_{k+1}) M^{-1}(\\tilde p_{k+1} + \\tfrac h2 V_q(q_{k+1}) - \\Pi(q_{k+1})) = 0$
+    ($\\Pi = 0$ for linear constraints), solved as an m×m linear system for $\\tilde\\lambda_{k+1}$.
+
+    The input constraint (EuAHamc) is not used by the map (it is what the previous step made
+    true), so the map is defined on all of $(q, \\tilde p, \\tilde\\lambda)$ and for negative `h`,
+    as Theorem 5.2 needs.
+
+    Arguments:
+        system: a :class:`~gnipy.System` with a constant metric $M$.
+        state: a :class:`TildeState` $(q_k, \\tilde p_k, \\tilde\\lambda_k)$.
+        h: step size, nonzero (negative allowed).
+
+    Returns:
+        The :class:`TildeState` $(q_{k+1}, \\tilde p_{k+1}, \\tilde\\lambda_{k+1})$.
+    """
+    return _kick_drift_kick(system, TildeState(*state), h, _S_EULER_A)
+
+
+def euler_b_map(system, state: TildeState, h) -> TildeState:
+    """One step of nonholonomic Euler B, (EuBHam), with the affine extension.
+
+    The same as :func:`euler_a_map` ((EuBHama), (EuBHamb), (EuBHamd)) except for the discrete
+    constraint (EuBHame): $\\mu(q_{k+1}) M^{-1}(\\tilde p_{k+1} - \\tfrac h2 V_q(q_{k+1}) - \\Pi(q_{k+1})) = 0$.
+
+    Arguments:
+        system: a :class:`~gnipy.System` with a constant metric $M$.
+        state: a :class:`TildeState` $(q_k, \\tilde p_k, \\tilde\\lambda_k)$.
+        h: step size, nonzero (negative allowed).
+
+    Returns:
+        The :class:`TildeState` $(q_{k+1}, \\tilde p_{k+1}, \\tilde\\lambda_{k+1})$.
+    """
+    return _kick_drift_kick(system, TildeState(*state), h, _S_EULER_B)
+
+
+def rattle_map(system, state: TildeState, h) -> TildeState:
+    """One step of nonholonomic RATTLE, (nonholonomicRATTLE), and its affine form of §6.1.
+
+    The same kicks and drift as :func:`euler_a_map`, with the discrete constraint
+    $\\mu(q_{k+1}) M^{-1}(\\tilde p_{k+1} - \\Pi(q_{k+1})) = 0$.
+
+    Arguments:
+        system: a :class:`~gnipy.System` with a constant metric $M$.
+        state: a :class:`TildeState` $(q_k, \\tilde p_k, \\tilde\\lambda_k)$.
+        h: step size, nonzero (negative allowed).
+
+    Returns:
+        The :class:`TildeState` $(q_{k+1}, \\tilde p_{k+1}, \\tilde\\lambda_{k+1})$.
+    """
+    return _kick_drift_kick(system, TildeState(*state), h, _S_RATTLE)
+
+
+def shake_map(system, state: ShakeState, h) -> ShakeState:
+    """One step of nonholonomic SHAKE in two-step form, (Afin) and Remark 5.1.
+
+    From $(q_{k-1}, q_k, q_{k+1})$ compute $q_{k+2}$ at node $k+1$:
+    (Afina) $q_{k+2} - 2q_{k+1} + q_k = -h^2 M^{-1}(V_q(q_{k+1}) + \\mu^T(q_{k+1})\\tilde\\lambda_{k+1})$
+    (Remark 5.1 prints $q_{k+1} - 2q_k + q_{k+1}$; the second $q_{k+1}$ is a misprint for $q_{k-1}$),
+    (Afinb) $\\mu(q_{k+1})\\big((q_{k+2} - q_k)/2h - Y(q_{k+1})\\big) = 0$,
+    linear in $\\tilde\\lambda_{k+1}$: $h^2 C \\tilde\\lambda = \\mu(a - q_k - 2hY)$ with
+    $a = 2q_{k+1} - q_k - h^2 M^{-1} V_q(q_{k+1})$.
+
+    Arguments:
+        system: a :class:`~gnipy.System` with a constant metric $M$.
+        state: a :class:`ShakeState` $(q_{k-1}, q_k, q_{k+1})$.
+        h: step size, nonzero.
+
+    Returns:
+        The :class:`ShakeState` $(q_k, q_{k+1}, q_{k+2})$.
+    """
+    # state = (q_{k-1}, q_k, q_{k+1}): the new node is k+1
+    q0, q1 = state[1], state[2]
+    M = system.metric(q1)
+    mu = system.mu(q1)
+    Minv_muT = jnp.linalg.solve(M, mu.T)
+    C = mu @ Minv_muT
+    a = 2.0 * q1 - q0 - h * h * jnp.linalg.solve(M, system.potential_gradient(q1))
+    lam = jnp.linalg.solve(C, mu @ (a - q0 - 2.0 * h * system.Y(q1))) / (h * h)  # (Afinb)
+    q2 = a - h * h * (Minv_muT @ lam)  # (Afina)
+    return ShakeState(q0, q1, q2)
+
+
+def tilde_state_from_gni(system, q, p_plus, h, s: float) -> TildeState:
+    """The paper's variables from the GNI state $(q_k, p^+_k)$.
+
+    $\\tilde\\lambda = (2/h) C^{-1}\\mu M^{-1}(p^+ - \\Pi)$ (from $p^- - p^+ = -h\\mu^T\\tilde\\lambda$ and
+    the reflection (Comb)), $\\tilde p = \\bar p - s(h/2)V_q$ with $\\bar p = P^* p^+ + Q^*\\Pi$.
+
+    Arguments:
+        system: a :class:`~gnipy.System` with a constant metric.
+        q: configuration $q_k$.
+        p_plus: the GNI post-momentum $p^+_k$ (at the start, $M v_0$).
+        h: the step size of the scheme.
+        s: +1 (Euler A), −1 (Euler B), 0 (RATTLE).
+
+    Returns:
+        The :class:`TildeState` $(q_k, \\tilde p_k, \\tilde\\lambda_k)$.
+    """
+    M = system.metric(q)
+    mu = system.mu(q)
+    Pi = system.Pi(q)
+    Minv_muT = jnp.linalg.solve(M, mu.T)
+    C = mu @ Minv_muT
+    w = jnp.linalg.solve(C, mu @ jnp.linalg.solve(M, p_plus - Pi))  # C⁻¹μM⁻¹(p⁺ − Π)
+    p_bar = p_plus - mu.T @ w  # P*p⁺ + Q*Π
+    lam = (2.0 / h) * w
+    p_tilde = p_bar - s * 0.5 * h * system.potential_gradient(q)
+    return TildeState(q, p_tilde, lam)
+
+
+class _TildeScheme(Integrator):
+    """Shared init/observe of the one-step schemes on $(q, \\tilde p, \\tilde\\lambda)$."""
+
+    # the sign s of the discrete constraint of the map whose output the state holds, and the
+    # step of that map as a fraction of h (the composition ends with Euler A at h/2)
+    _s: ClassVar[float] = 0.0
+    _fraction: ClassVar[float] = 1.0
+
+    def check(self, system, q0) -> None:
+        """Raise :class:`~gnipy.MethodError` unless the metric is constant (paper §5)."""
+        require_constant_metric(self.name, system, q0)
+
+    def init(self, system, q0, v0, h):
+        """$(q_0, \\tilde p_0, \\tilde\\lambda_0)$ from the GNI start $p^+_0 = M v_0$.
+
+        Arguments:
+            system: the system.
+            q0: initial configuration.
+            v0: initial velocity on the constraints.
+            h: step size.
+
+        Returns:
+            A :class:`TildeState` ($\\tilde\\lambda_0 = 0$ up to round-off).
+        """
+        return tilde_state_from_gni(system, q0, system.momentum(q0, v0), self._fraction * h, self._s)
+
+    def observe(self, system, state, h):
+        """The GNI's reported $(q, \\bar v, \\bar p)$ with $\\bar p = \\tilde p + s(h'/2)V_q$.
+
+        Arguments:
+            system: the system.
+            state: a :class:`TildeState`.
+            h: step size.
+
+        Returns:
+            `(q, v, p)`.
+        """
+        q, p_tilde, _ = state
+        p_bar = p_tilde + self._s * 0.5 * (self._fraction * h) * system.potential_gradient(q)
+        return q, jnp.linalg.solve(system.metric(q), p_bar), p_bar
+
+
+class NonholonomicEulerA(_TildeScheme):
+    """Nonholonomic Euler A, (EuAHam), explicit on $(q, \\tilde p, \\tilde\\lambda)$ (order 1, Thm 5.1).
+
+    Equal to the GNI with the Euler A discrete Lagrangian ("gni-euler-a"). Constant metric only.
+    Reports $\\bar p = \\tilde p + (h/2)V_q$ and $\\bar v = M^{-1}\\bar p$.
+    """
+
+    name: ClassVar[str] = "euler-a"
+    order: ClassVar[int | None] = 1
+    _s: ClassVar[float] = _S_EULER_A
+
+    def step(self, system, state, h):
+        """One step of :func:`euler_a_map`; returns `(state, StepInfo)` (no iterations)."""
+        new = euler_a_map(system, state, h)
+        return new, _explicit_info(*new)
+
+
+class NonholonomicEulerB(_TildeScheme):
+    """Nonholonomic Euler B, (EuBHam), explicit on $(q, \\tilde p, \\tilde\\lambda)$ (order 1, Thm 5.1).
+
+    Equal to the GNI with the Euler B discrete Lagrangian ("gni-euler-b"). Constant metric only.
+    Reports $\\bar p = \\tilde p - (h/2)V_q$ and $\\bar v = M^{-1}\\bar p$.
+    """
+
+    name: ClassVar[str] = "euler-b"
+    order: ClassVar[int | None] = 1
+    _s: ClassVar[float] = _S_EULER_B
+
+    def step(self, system, state, h):
+        """One step of :func:`euler_b_map`; returns `(state, StepInfo)` (no iterations)."""
+        new = euler_b_map(system, state, h)
+        return new, _explicit_info(*new)
+
+
+class Rattle(_TildeScheme):
+    """Nonholonomic RATTLE, (nonholonomicRATTLE), and affine RATTLE (§6.1) (order 2).
+
+    Equal to the GNI with the trapezoid discrete Lagrangian ("gni-trapezoid"). Constant metric
+    only. Reports $\\bar p = \\tilde p$ and $\\bar v = M^{-1}\\tilde p$.
+    """
+
+    name: ClassVar[str] = "rattle"
+    order: ClassVar[int | None] = 2
+    _s: ClassVar[float] = _S_RATTLE
+
+    def step(self, system, state, h):
+        """One step of :func:`rattle_map`; returns `(state, StepInfo)` (no iterations)."""
+        new = rattle_map(system, state, h)
+        return new, _explicit_info(*new)
+
+
+class EulerABComposition(_TildeScheme):
+    """The composition $F_A^{h/2} \\circ F_B^{h/2}$ (Remark after Theorem 5.2) (order 2).
+
+    Euler B with step h/2, then Euler A with step h/2, on $(q, \\tilde p, \\tilde\\lambda)$. The two
+    are each other's adjoint (Thm 5.2), so the composition is symmetric and of order 2; the paper
+    notes that, unlike the unconstrained case, it does *not* reproduce RATTLE. The state holds
+    the output of Euler A at step h/2: it starts from $\\tilde p_0 = M v_0 - (h/4)V_q(q_0)$ and
+    reports $\\bar p = \\tilde p + (h/4)V_q$. Constant metric only.
+    """
+
+    name: ClassVar[str] = "euler-ab"
+    order: ClassVar[int | None] = 2
+    _s: ClassVar[float] = _S_EULER_A
+    _fraction: ClassVar[float] = 0.5
+
+    def step(self, system, state, h):
+        """$F_A^{h/2}(F_B^{h/2}(\\text{state}))$; returns `(state, StepInfo)` (no iterations)."""
+        new = euler_a_map(system, euler_b_map(system, state, 0.5 * h), 0.5 * h)
+        return new, _explicit_info(*new)
+
+
+class Shake(Integrator):
+    """Nonholonomic SHAKE in two-step form, (Afin) / Remark 5.1, linear and affine (order 2).
+
+    The state at node k is $(q_{k-1}, q_k, q_{k+1})$, so that the reported velocity is
+    $v_k = (q_{k+1} - q_{k-1})/2h$ (which satisfies the discrete constraint (Afinb) exactly) and
+    $p_k = M v_k$ (RATTLE's $\\tilde p_k$). Start: $q_{\\pm 1} = q_0 \\pm h v_0 - (h^2/2) M^{-1} V_q(q_0)$,
+    which is RATTLE from $\\tilde p_0 = M v_0$, $\\tilde\\lambda_0 = 0$. Equal to "rattle" and
+    "gni-trapezoid" node by node. Constant metric only.
+    """
+
+    name: ClassVar[str] = "shake"
+    order: ClassVar[int | None] = 2
+
+    def check(self, system, q0) -> None:
+        """Raise :class:`~gnipy.MethodError` unless the metric is constant (paper §5)."""
+        require_constant_metric(self.name, system, q0)
+
+    def init(self, system, q0, v0, h):
+        """$(q_{-1}, q_0, q_1)$ with $q_{\\pm1} = q_0 \\pm h v_0 - (h^2/2)M^{-1}V_q(q_0)$.
+
+        Arguments:
+            system: the system.
+            q0: initial configuration.
+            v0: initial velocity on the constraints.
+            h: step size.
+
+        Returns:
+            A :class:`ShakeState`.
+        """
+        kick = 0.5 * h * h * jnp.linalg.solve(system.metric(q0), system.potential_gradient(q0))
+        return ShakeState(q0 - h * v0 - kick, q0, q0 + h * v0 - kick)
+
+    def step(self, system, state, h):
+        """One step of :func:`shake_map`; returns `(state, StepInfo)` (no iterations)."""
+        new = shake_map(system, state, h)
+        return new, _explicit_info(*new)
+
+    def observe(self, system, state, h):
+        """$(q_k, v_k, M v_k)$ with $v_k = (q_{k+1} - q_{k-1})/2h$.
+
+        Arguments:
+            system: the system.
+            state: a :class:`ShakeState`.
+            h: step size.
+
+        Returns:
+            `(q, v, p)`.
+        """
+        q_prev, q, q_next = state
+        v = (q_next - q_prev) / (2.0 * h)
+        return q, v, system.metric(q) @ v
