@@ -18,7 +18,19 @@ from .discrete_lagrangians import (  # noqa: E402
     Midpoint,
     Trapezoid,
 )
-from .integrators import GNI, Integrator, MethodError, StepInfo  # noqa: E402
+from .integrators import (  # noqa: E402
+    GNI,
+    DiscreteLagrangeDAlembert,
+    EulerABComposition,
+    Integrator,
+    McLachlanPerlmutter,
+    MethodError,
+    NonholonomicEulerA,
+    NonholonomicEulerB,
+    Rattle,
+    Shake,
+    StepInfo,
+)
 from .methods import get_method, method_names  # noqa: E402
 from .models import get_model, make_system, model_names  # noqa: E402
 from .projectors import projectors, reflect_momentum, reported_momentum  # noqa: E402
@@ -41,6 +53,13 @@ __all__ = [
     "StepInfo",
     "MethodError",
     "GNI",
+    "NonholonomicEulerA",
+    "NonholonomicEulerB",
+    "EulerABComposition",
+    "Rattle",
+    "Shake",
+    "DiscreteLagrangeDAlembert",
+    "McLachlanPerlmutter",
     "ContinuousReference",
     "simulate",
     "Solution",

@@ -1,6 +1,21 @@
 """One-step methods: the GNI core, the paper's explicit schemes, and comparators."""
 
 from .base import Integrator, MethodError, StepInfo
+from .comparators import DiscreteLagrangeDAlembert, McLachlanPerlmutter
 from .gni import GNI, GNIState
+from .paper_schemes import EulerABComposition, NonholonomicEulerA, NonholonomicEulerB, Rattle, Shake
 
-__all__ = ["Integrator", "MethodError", "StepInfo", "GNI", "GNIState"]
+__all__ = [
+    "Integrator",
+    "MethodError",
+    "StepInfo",
+    "GNI",
+    "GNIState",
+    "NonholonomicEulerA",
+    "NonholonomicEulerB",
+    "EulerABComposition",
+    "Rattle",
+    "Shake",
+    "DiscreteLagrangeDAlembert",
+    "McLachlanPerlmutter",
+]

@@ -48,9 +48,10 @@ class DiscreteLagrangeDAlembert(Integrator):
 
     What is reported at node k is $p = p^+_k$ and $v = \\mathbb{G}(q_k)^{-1}p^+_k$. Unlike the GNI's
     $\\bar v$, this velocity does **not** satisfy the continuous constraint $\\mu(q_k)(v - Y(q_k)) = 0$
-    exactly (its residual is $O(h)$ near the constraint force): what DLA preserves exactly is the
-    *discrete* constraint above, on consecutive configurations. The reported velocity is therefore only
-    first-order accurate, while the configurations are second order with the midpoint $l_d$.
+    exactly (its residual is $O(h)$, the size of the impulse $\\mu(q_k)^T\\lambda_k$ that separates
+    $p^+_k$ from $p^-_k$): what DLA preserves exactly is the *discrete* constraint above, on
+    consecutive configurations. The reported velocity is therefore only first-order accurate, while
+    the configurations are second order with the midpoint $l_d$.
 
     Works for position-dependent metrics and affine constraints (the Newton solve is always used).
 

@@ -36,6 +36,10 @@ $\\bar p = (p^- + p^+)/2 = P^* p^+ + Q^* \\Pi$, and
 Starting from $p^+_0 = M v_0$ with $v_0$ on the constraints gives $\\tilde\\lambda_0 = 0$ and
 $\\tilde p_0 = M v_0 - s (h/2) V_q(q_0)$. Every class reports (`observe`) the GNI's $\\bar p$ and
 $\\bar v = M^{-1}\\bar p$, so that solutions compare node by node.
+
+:class:`Shake` is the two-step form (Afin) on $(q_{k-1}, q_k, q_{k+1})$. :class:`EulerABComposition`
+re-reads $\\tilde p$ between its two half steps, because Euler A and Euler B relate $\\tilde p$ to
+$\\bar p$ differently (see its docstring: without that, the composition is only of order 1).
 """
 
 from __future__ import annotations
@@ -342,13 +346,27 @@ class Rattle(_TildeScheme):
 
 
 class EulerABComposition(_TildeScheme):
-    """The composition $F_A^{h/2} \\circ F_B^{h/2}$ (Remark after Theorem 5.2) (order 2).
+    """Euler B then Euler A, each with step h/2 (Remark after Theorem 5.2) (order 2).
 
-    Euler B with step h/2, then Euler A with step h/2, on $(q, \\tilde p, \\tilde\\lambda)$. The two
-    are each other's adjoint (Thm 5.2), so the composition is symmetric and of order 2; the paper
-    notes that, unlike the unconstrained case, it does *not* reproduce RATTLE. The state holds
-    the output of Euler A at step h/2: it starts from $\\tilde p_0 = M v_0 - (h/4)V_q(q_0)$ and
-    reports $\\bar p = \\tilde p + (h/4)V_q$. Constant metric only.
+    The composition $F_A^{h/2} \\circ F_B^{h/2}$ of the two discrete flows, i.e. of the GNI with the
+    Euler B and then the Euler A discrete Lagrangian at step h/2, written with the explicit maps
+    :func:`euler_b_map` and :func:`euler_a_map`. The two maps read the GNI's momentum differently,
+    $\\bar p = \\tilde p - (h'/2)V_q$ (B) and $\\bar p = \\tilde p + (h'/2)V_q$ (A), $h' = h/2$, so the
+    $\\tilde p$ handed from one map to the other is shifted by $\\mp (h/2) V_q$ at each junction:
+
+        p̃ ← p̃ + (h/2)V_q(q_k);  F_B^{h/2};  p̃ ← p̃ − (h/2)V_q(q_{k+1/2});  F_A^{h/2}.
+
+    Without the shifts (composing (EuBHam) and (EuAHam) literally on $(q, \\tilde p, \\tilde\\lambda)$)
+    the junctions add alternating tangential kicks of size $(h/2)P^*V_q$ and the method is only of
+    order 1 (measured in the tests). The symmetry argument of the Remark fails there because
+    Theorem 5.2's inverse $F_B^{h/2} = (F_A^{-h/2})^{-1}$ holds only on the states with
+    $\\mu M^{-1}(\\tilde p - (h/4)V_q - \\Pi) = 0$, while $F_A^{h/2}$ produces states with
+    $\\mu M^{-1}(\\tilde p + (h/4)V_q - \\Pi) = 0$.
+    As the paper notes, the method does *not* reproduce RATTLE in the nonholonomic case.
+
+    The state holds the output of Euler A at step h/2: it starts from $\\tilde p_0 = M v_0 - (h/4)V_q(q_0)$,
+    $\\tilde\\lambda_0 = 0$, and reports $\\bar p = \\tilde p + (h/4)V_q$, $\\bar v = M^{-1}\\bar p$.
+    Constant metric only.
     """
 
     name: ClassVar[str] = "euler-ab"
@@ -357,8 +375,23 @@ class EulerABComposition(_TildeScheme):
     _fraction: ClassVar[float] = 0.5
 
     def step(self, system, state, h):
-        """$F_A^{h/2}(F_B^{h/2}(\\text{state}))$; returns `(state, StepInfo)` (no iterations)."""
-        new = euler_a_map(system, euler_b_map(system, state, 0.5 * h), 0.5 * h)
+        """One composite step (Euler B at h/2, then Euler A at h/2); returns `(state, StepInfo)`.
+
+        Arguments:
+            system: the system (constant metric).
+            state: a :class:`TildeState` in Euler A's reading at step h/2.
+            h: the composite step size.
+
+        Returns:
+            `(TildeState, StepInfo)`, no iterations.
+        """
+        half = 0.5 * h
+        q, p_tilde, lam = state
+        # Euler A reads p̄ = p̃ + (h/4)V_q; Euler B reads p̄ = p̃_B − (h/4)V_q: p̃_B = p̃ + (h/2)V_q
+        mid = euler_b_map(system, TildeState(q, p_tilde + half * system.potential_gradient(q), lam), half)
+        # and back at the middle node: p̃_A = p̃_B − (h/2)V_q
+        mid = TildeState(mid.q, mid.p_tilde - half * system.potential_gradient(mid.q), mid.lambda_tilde)
+        new = euler_a_map(system, mid, half)
         return new, _explicit_info(*new)
 
 

@@ -21,18 +21,19 @@ $$z = z_0 + \\frac{\\dot z_0}{i\\kappa}(e^{i\\kappa t} - 1), \\qquad
   \\int_0^t z = z_0 t - \\frac{\\dot z_0}{\\kappa^2}(e^{i\\kappa t} - 1 - i\\kappa t):$$
 
 the contact point runs round a circle of radius $|\\dot z_0/\\kappa|$ centred at
-$z_0 + i\\dot z_0/\\kappa$, at angular rate $\\kappa$ (for the homogeneous ball, $I = \\tfrac25 m r^2$,
-$\\kappa = \\tfrac27\\Omega$). Then $\\omega_3$ is constant, $\\omega_1 = (\\Omega x - \\dot y)/r$,
-$\\omega_2 = (\\dot x + \\Omega y)/r$, and
+$z_0 + i\\dot z_0/\\kappa$, at angular rate $\\kappa$ ($\\kappa = \\tfrac25\\Omega$ for the default
+$I = \\tfrac23$, $m = r = 1$; $\\tfrac27\\Omega$ for a solid ball, $I = \\tfrac25 m r^2$). Then
+$\\omega_3$ is constant, $\\omega_1 = (\\Omega x - \\dot y)/r$, $\\omega_2 = (\\dot x + \\Omega y)/r$, and
 $\\theta_1 = \\theta_{1,0} + (\\Omega\\,\\mathrm{Re}\\!\\int_0^t z - (y - y_0))/r$,
 $\\theta_2 = \\theta_{2,0} + (x - x_0 + \\Omega\\,\\mathrm{Im}\\!\\int_0^t z)/r$,
 $\\theta_3 = \\theta_{3,0} + \\omega_3 t$. The closed forms are evaluated with small-argument-safe
 ratios, so they hold for $\\Omega = 0$ (fixed table: straight-line rolling) as well.
 
 **Invariants.** The energy is *not* conserved (the table does work on the ball):
-$\\frac{d}{dt}\\big(\\tfrac12 m|\\dot z|^2 + \\tfrac12 I|\\omega|^2\\big) = m\\Omega\\frac{d}{dt}(x\\dot y - y\\dot x)$.
-Conserved: the Jacobi-type integral $\\tfrac12 m|\\dot z|^2 + \\tfrac12 I|\\omega|^2 - m\\Omega(x\\dot y - y\\dot x)$,
-the squared speed $|\\dot z|^2$ of the contact point, and the spin $\\omega_3$.
+$\\frac{d}{dt}\\big(\\tfrac12 m|\\dot z|^2 + \\tfrac12 I|\\omega|^2\\big)
+= m\\Omega\\frac{d}{dt}(x\\dot y - y\\dot x)$. Conserved: the Jacobi-type integral
+$\\tfrac12 m|\\dot z|^2 + \\tfrac12 I|\\omega|^2 - m\\Omega(x\\dot y - y\\dot x)$, the squared speed
+$|\\dot z|^2$ of the contact point, and the spin $\\omega_3$.
 
 Default parameters are the paper's first example (m = r = Ω = 1, I = 2/3); default initial
 condition $(x_0, y_0, \\dot x_0, \\dot y_0) = (1, 1, 1, 1)$, $\\omega_3 = 0$ and $\\omega_1, \\omega_2$ from
@@ -131,7 +132,7 @@ def _spin(p, q, v):
 MODEL = register(
     ModelSpec(
         name="rotating-table-ball",
-        description="homogeneous ball on a table turning at rate Ω (paper §7.4, affine constraints); exact: circles",
+        description="homogeneous ball on a table turning at rate Ω (paper §7.4, affine constraints)",
         build=_build,
         params={"m": 1.0, "r": 1.0, "I": 2.0 / 3.0, "Omega": 1.0},
         coordinates=COORDINATES,

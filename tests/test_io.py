@@ -1,0 +1,154 @@
+"""netCDF output: contents, provenance, and atomic writes (no partial file, ever)."""
+
+import errno
+import json
+import os
+
+import numpy as np
+import pytest
+import xarray as xr
+
+import gnipy
+from gnipy.io import OutputError, read_netcdf, write_netcdf
+
+
+def _solution(scale=1.0, system="vertical-disk"):
+    """A small hand-made Solution (no integration, no compilation)."""
+    T, n, m = 5, 4, 2
+    t = np.linspace(0.0, 0.4, T)
+    q = scale * np.arange(T * n, dtype=float).reshape(T, n)
+    v = q + 0.5
+    return gnipy.Solution(
+        t, q, v, 2 * v, scale * np.ones(T), np.zeros((T, m)), np.array([3, 1], dtype=np.int32),
+        system=system, method="gni-trapezoid", h=0.1, coordinates=("x", "y", "phi", "theta"),
+        params=(("m", 1.0), ("r", 2.0)),
+    )
+
+
+def _leftovers(directory, keep):
+    return sorted(set(os.listdir(directory)) - set(keep))
+
+
+def test_round_trip_variables_and_provenance(tmp_path):
+    sol = _solution()
+    path = tmp_path / "out.nc"
+    assert write_netcdf(sol, path, attrs={"q0": (0, 0, 0, 1), "note": "hello", "flag": True}) == path
+    ds = read_netcdf(path)
+    assert isinstance(ds, xr.Dataset)
+    for name, dims in [("t", ("time",)), ("q", ("time", "coordinate")), ("v", ("time", "velocity")),
+                       ("energy", ("time",)), ("constraint_residual", ("time", "constraint"))]:
+        assert ds[name].dims == dims
+    np.testing.assert_array_equal(ds["q"].values, np.asarray(sol.q))
+    np.testing.assert_array_equal(ds["t"].values, np.asarray(sol.t))
+    assert list(ds["coordinate"].values) == ["x", "y", "phi", "theta"]
+    a = ds.attrs
+    assert a["gnipy_version"] == gnipy.__version__
+    assert a["model"] == "vertical-disk" and a["method"] == "gni-trapezoid"
+    assert a["h"] == 0.1 and a["steps"] == 4 and a["start"] and a["created"]
+    assert json.loads(a["params"]) == {"m": 1.0, "r": 2.0}
+    assert a["param_r"] == 2.0
+    np.testing.assert_array_equal(a["q0"], [0.0, 0.0, 0.0, 1.0])
+    assert a["note"] == "hello" and a["flag"] == 1
+    assert _leftovers(tmp_path, ["out.nc"]) == []
+
+
+def test_dataset_is_written_with_provenance_added(tmp_path):
+    ds = xr.Dataset({"a": (("i",), np.arange(3.0))}, attrs={"model": "mine"})
+    write_netcdf(ds, tmp_path / "d.nc", attrs={"extra": {"k": 1}})
+    back = read_netcdf(tmp_path / "d.nc")
+    assert back.attrs["model"] == "mine" and back.attrs["gnipy_version"] == gnipy.__version__
+    assert json.loads(back.attrs["extra"]) == {"k": 1.0}
+    assert "gnipy_version" not in ds.attrs  # the caller's dataset is not modified
+
+
+def test_missing_directory_is_a_clear_oserror(tmp_path):
+    path = tmp_path / "no" / "such" / "dir" / "out.nc"
+    with pytest.raises(OSError, match="does not exist") as info:
+        write_netcdf(_solution(), path)
+    assert isinstance(info.value, OutputError) and str(path) in str(info.value)
+    assert os.listdir(tmp_path) == []
+
+
+def test_parent_is_a_file(tmp_path):
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(OutputError, match="does not exist"):
+        write_netcdf(_solution(), tmp_path / "file" / "out.nc")
+
+
+def test_path_is_a_directory(tmp_path):
+    (tmp_path / "d.nc").mkdir()
+    with pytest.raises(OutputError, match="is a directory"):
+        write_netcdf(_solution(), tmp_path / "d.nc")
+
+
+def test_unwritable_directory(tmp_path, monkeypatch):
+    # (tests may run as root, for whom chmod does not deny writes: simulate the check instead)
+    monkeypatch.setattr(os, "access", lambda *a, **k: False)
+    with pytest.raises(OutputError, match="not writable") as info:
+        write_netcdf(_solution(), tmp_path / "out.nc")
+    assert str(tmp_path / "out.nc") in str(info.value)
+    assert os.listdir(tmp_path) == []
+
+
+def _failing_after_temp_written(monkeypatch, exc, seen):
+    """Make Dataset.to_netcdf write the temporary file completely, then raise `exc`."""
+    original = xr.Dataset.to_netcdf
+
+    def to_netcdf(self, path=None, *args, **kwargs):
+        original(self, path, *args, **kwargs)
+        seen["temp"] = str(path)
+        seen["temp_existed"] = os.path.exists(path)
+        raise exc
+
+    monkeypatch.setattr(xr.Dataset, "to_netcdf", to_netcdf)
+
+
+def test_failed_overwrite_keeps_the_old_file_and_leaves_no_temp(tmp_path, monkeypatch):
+    path = tmp_path / "out.nc"
+    write_netcdf(_solution(1.0), path)
+    old = read_netcdf(path)
+    seen = {}
+    _failing_after_temp_written(monkeypatch, RuntimeError("interrupted"), seen)
+    with pytest.raises(RuntimeError, match="interrupted"):
+        write_netcdf(_solution(7.0), path)
+    # the data went to a temporary file in the same directory, never to the destination
+    assert seen["temp_existed"] and os.path.dirname(seen["temp"]) == str(tmp_path)
+    assert seen["temp"] != str(path)
+    assert _leftovers(tmp_path, ["out.nc"]) == []
+    monkeypatch.undo()
+    xr.testing.assert_identical(read_netcdf(path), old)
+
+
+def test_oserror_during_write_is_named_and_cleaned_up(tmp_path, monkeypatch):
+    seen = {}
+    _failing_after_temp_written(monkeypatch, OSError(errno.ENOSPC, "No space left on device"), seen)
+    path = tmp_path / "new.nc"
+    with pytest.raises(OutputError, match="No space left") as info:
+        write_netcdf(_solution(), path)
+    assert str(path) in str(info.value)
+    assert os.listdir(tmp_path) == []  # neither the destination nor the temporary file
+
+
+def test_successful_overwrite_replaces_content_with_usual_permissions(tmp_path):
+    path = tmp_path / "out.nc"
+    write_netcdf(_solution(1.0), path)
+    write_netcdf(_solution(3.0), path)
+    np.testing.assert_array_equal(read_netcdf(path)["q"].values, np.asarray(_solution(3.0).q))
+    assert _leftovers(tmp_path, ["out.nc"]) == []
+    (tmp_path / "plain").write_text("")  # what the umask gives an ordinary new file
+    assert os.stat(path).st_mode & 0o777 == os.stat(tmp_path / "plain").st_mode & 0o777
+
+
+def test_read_errors_name_the_path(tmp_path):
+    with pytest.raises(OutputError, match="no such file") as info:
+        read_netcdf(tmp_path / "missing.nc")
+    assert "missing.nc" in str(info.value)
+    (tmp_path / "junk.nc").write_text("not netcdf")
+    with pytest.raises(OutputError, match="not a netCDF file"):
+        read_netcdf(tmp_path / "junk.nc")
+
+
+def test_rejects_other_objects(tmp_path):
+    with pytest.raises(TypeError):
+        write_netcdf({"q": 1}, tmp_path / "x.nc")
+    assert os.listdir(tmp_path) == []
