@@ -20,51 +20,12 @@ STEPS = 1000
 EPS = np.finfo(np.float64).eps
 VARIANTS = ["gni-euler-a", "gni-euler-b", "gni-trapezoid", "gni-midpoint"]
 
-# --------------------------------------------------------------------------------------------
-# Systems: linear constraints (registered model), affine constraints with a potential, and a
-# position-dependent metric (every GNI variant then takes the implicit Newton path).
-# --------------------------------------------------------------------------------------------
-PARTICLE = gnipy.make_system("nonholonomic-particle")  # l = ½|v|² − ½(x²+y²), ż = y ẋ
-
-# Ball on a table rotating at rate Ω, q = (x, y, θ1, θ2, θ3), θ̇ = ω:
-# l = ½m(ẋ²+ẏ²) + ½I|ω|² − ½k(x²+y²); ẋ − rω₂ + Ωy = 0, ẏ + rω₁ − Ωx = 0; Y = (−Ωy, Ωx, 0, 0, 0).
-B_M, B_I, B_R, B_OMEGA, B_K = 1.0, 0.4, 1.0, 0.7, 1.0
-
-
-def _ball_lagrangian(q, v):
-    return 0.5 * B_M * (v[0] ** 2 + v[1] ** 2) + 0.5 * B_I * (v[2:] @ v[2:]) - 0.5 * B_K * (q[0] ** 2 + q[1] ** 2)
-
-
-def _ball_mu(q):
-    return jnp.array([[1.0, 0.0, 0.0, -B_R, 0.0], [0.0, 1.0, B_R, 0.0, 0.0]], dtype=q.dtype)
-
-
-def _ball_Y(q):
-    z = jnp.zeros_like(q[0])
-    return jnp.stack([-B_OMEGA * q[1], B_OMEGA * q[0], z, z, z])
-
-
-BALL = gnipy.System(_ball_lagrangian, _ball_mu, _ball_Y, n=5, name="ball-on-rotating-table-test")
-_w = np.array([0.3, -0.2, 0.5])
-BALL_Q0 = np.array([1.0, 0.5, 0.0, 0.0, 0.0])
-BALL_V0 = np.array([B_R * _w[1] - B_OMEGA * BALL_Q0[1], -B_R * _w[0] + B_OMEGA * BALL_Q0[0], *_w])
-
-
-# l = ½(1+x²)ẋ² + ½ẏ² + ½ż² − ½(x²+y²), constraint ż = y ẋ
-def _curved_lagrangian(q, v):
-    return 0.5 * (1.0 + q[0] ** 2) * v[0] ** 2 + 0.5 * (v[1] ** 2 + v[2] ** 2) - 0.5 * (q[0] ** 2 + q[1] ** 2)
-
-
-def _curved_mu(q):
-    return jnp.stack([-q[1], jnp.zeros_like(q[1]), jnp.ones_like(q[1])])[None, :]
-
-
-CURVED = gnipy.System(_curved_lagrangian, _curved_mu, n=3, name="curved-particle-test")
+from shared_systems import BALL, BALL_Q0, BALL_V0, CURVED, CURVED_Q0, CURVED_V0, PARTICLE  # noqa: E402
 
 CASES = {
     "linear": (PARTICLE, np.array([1.0, 1.0, 0.0]), np.array([1.0, 0.5, 1.0])),
     "affine": (BALL, BALL_Q0, BALL_V0),
-    "curved-metric": (CURVED, np.array([0.5, 1.0, 0.0]), np.array([1.0, 0.3, 1.0])),
+    "curved-metric": (CURVED, CURVED_Q0, CURVED_V0),
 }
 
 

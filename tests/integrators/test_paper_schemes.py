@@ -23,49 +23,9 @@ H = 0.02
 STEPS = 1000  # one step count for every trajectory: one compile per (system, method)
 EPS = np.finfo(np.float64).eps
 
-# --------------------------------------------------------------------------------------------
-# Systems
-# --------------------------------------------------------------------------------------------
-# Linear constraints: the registered nonholonomic particle (k = 1), dz = y dx.
-PARTICLE = gnipy.make_system("nonholonomic-particle")
-PARTICLE_Q0 = np.array([1.0, 1.0, 0.0])
-PARTICLE_V0 = np.array([1.0, 0.5, 1.0])  # ż = y ẋ
-
-# Affine constraints with a potential: a ball on a table rotating at rate Ω about the vertical,
-# q = (x, y, θ1, θ2, θ3) with θ̇ = ω, l = ½m(ẋ²+ẏ²) + ½I|ω|² − ½k(x²+y²),
-# ẋ − rω₂ + Ωy = 0, ẏ + rω₁ − Ωx = 0, i.e. μ(q̇ − Y) = 0 with Y = (−Ωy, Ωx, 0, 0, 0).
-B_M, B_I, B_R, B_OMEGA, B_K = 1.0, 0.4, 1.0, 0.7, 1.0
-
-
-def _ball_lagrangian(q, v):
-    return 0.5 * B_M * (v[0] ** 2 + v[1] ** 2) + 0.5 * B_I * (v[2:] @ v[2:]) - 0.5 * B_K * (q[0] ** 2 + q[1] ** 2)
-
-
-def _ball_mu(q):
-    return jnp.array([[1.0, 0.0, 0.0, -B_R, 0.0], [0.0, 1.0, B_R, 0.0, 0.0]], dtype=q.dtype)
-
-
-def _ball_Y(q):
-    z = jnp.zeros_like(q[0])
-    return jnp.stack([-B_OMEGA * q[1], B_OMEGA * q[0], z, z, z])
-
-
-BALL = gnipy.System(_ball_lagrangian, _ball_mu, _ball_Y, n=5, name="ball-on-rotating-table-test")
-BALL_Q0 = np.array([1.0, 0.5, 0.0, 0.0, 0.0])
-_w = np.array([0.3, -0.2, 0.5])
-BALL_V0 = np.array([B_R * _w[1] - B_OMEGA * BALL_Q0[1], -B_R * _w[0] + B_OMEGA * BALL_Q0[0], *_w])
+from shared_systems import BALL, BALL_Q0, BALL_V0, CURVED, PARTICLE, PARTICLE_Q0, PARTICLE_V0  # noqa: E402
 
 CASES = {"linear": (PARTICLE, PARTICLE_Q0, PARTICLE_V0), "affine": (BALL, BALL_Q0, BALL_V0)}
-
-
-# A position-dependent metric (the schemes of §5 are for a constant M and must refuse it).
-def _curved_lagrangian(q, v):
-    return 0.5 * (1.0 + q[0] ** 2) * v[0] ** 2 + 0.5 * (v[1] ** 2 + v[2] ** 2) - 0.5 * (q[0] ** 2 + q[1] ** 2)
-
-
-CURVED = gnipy.System(
-    _curved_lagrangian, lambda q: jnp.stack([-q[1], jnp.zeros_like(q[1]), jnp.ones_like(q[1])])[None, :], n=3
-)
 
 
 @pytest.fixture(scope="module")
