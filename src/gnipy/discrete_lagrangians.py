@@ -45,7 +45,7 @@ class EulerA(DiscreteLagrangian):
 
     def __call__(self, system, b0, z, h):
         _, _, v = system.space.step_points(b0, z, h)
-        return h * system.lagrangian(b0, v)
+        return h * system.L(b0, v)
 
 
 class EulerB(DiscreteLagrangian):
@@ -56,7 +56,7 @@ class EulerB(DiscreteLagrangian):
 
     def __call__(self, system, b0, z, h):
         b1, _, v = system.space.step_points(b0, z, h)
-        return h * system.lagrangian(b1, v)
+        return h * system.L(b1, v)
 
 
 class Trapezoid(DiscreteLagrangian):
@@ -70,7 +70,7 @@ class Trapezoid(DiscreteLagrangian):
 
     def __call__(self, system, b0, z, h):
         b1, _, v = system.space.step_points(b0, z, h)
-        return 0.5 * h * (system.lagrangian(b0, v) + system.lagrangian(b1, v))
+        return 0.5 * h * (system.L(b0, v) + system.L(b1, v))
 
 
 class Midpoint(DiscreteLagrangian):
@@ -80,7 +80,7 @@ class Midpoint(DiscreteLagrangian):
 
     def __call__(self, system, b0, z, h):
         _, bm, v = system.space.step_points(b0, z, h)
-        return h * system.lagrangian(bm, v)
+        return h * system.L(bm, v)
 
 
 class CustomDiscreteLagrangian(DiscreteLagrangian):

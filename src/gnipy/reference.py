@@ -1,13 +1,17 @@
-"""The continuous reference: the Lagrange–d'Alembert equations with λ eliminated (DESIGN.md §2).
+"""The continuous reference: the Lagrange–d'Alembert(–Poincaré) equations with λ eliminated.
 
-For $l = \\tfrac12 v^T\\mathbb{G}(q)v - V(q)$ and constraints $\\mu(q)(v - Y(q)) = 0$:
+For $l = \\tfrac12 v^T\\mathbb{G}(b)v - V(b)$ and constraints $\\mu(b)(v - Y(b)) = 0$, with $D_v$ the
+derivative along the motion ($b \\mapsto (x + \\epsilon\\dot x, R\\exp(\\epsilon\\xi))$, DESIGN.md §2):
 
-$$\\mathbb{G}\\,\\ddot q = F + \\mu^T\\lambda, \\qquad F = \\partial_q l - (\\partial_q\\partial_v l)\\,\\dot q,$$
+$$\\mathbb{G}\\,\\dot v = F + \\mu^T\\lambda, \\qquad
+F = \\partial_b l - D_v(\\partial_v l) + (0, \\mathrm{ad}^*_\\xi\\,\\partial_\\xi l),$$
 
-and differentiating the constraints along the motion,
-$\\mu\\ddot q = \\mu\\,(\\partial_q Y)\\dot q - (\\partial_q\\mu\\cdot\\dot q)(\\dot q - Y) =: c$, so
-$\\lambda = C^{-1}(c - \\mu\\mathbb{G}^{-1}F)$ with $C = \\mu\\mathbb{G}^{-1}\\mu^T$ (paper (H) in Lagrangian form).
-Integrated with diffrax's 8th-order Dormand–Prince at tolerance ~1e-12.
+where $\\partial_b l = (\\partial_x l, \\nabla^L_R l)$. Differentiating the constraints along the
+motion, $\\mu\\dot v = \\mu\\,D_v Y - (D_v\\mu)(v - Y) =: c$, so
+$\\lambda = C^{-1}(c - \\mu\\mathbb{G}^{-1}F)$ with $C = \\mu\\mathbb{G}^{-1}\\mu^T$ (paper (H) in
+Lagrangian form; on SO(3), $\\mathrm{ad}^*_\\Omega M = M\\times\\Omega$ gives Euler's equations).
+With the reconstruction $\\dot R = R\\hat\\xi$, integrated with diffrax's 8th-order Dormand–Prince at
+tolerance ~1e-12.
 """
 
 from __future__ import annotations
@@ -25,15 +29,22 @@ from .solution import Solution, SolverFailure
 __all__ = ["ContinuousReference", "lagrange_dalembert_acceleration"]
 
 
-def lagrange_dalembert_acceleration(system, q, v):
-    """The constrained acceleration $\\ddot q$ and the multipliers λ at `(q, v)`."""
-    l = system.lagrangian
-    G = system.metric(q)
-    dl_dq = jax.grad(l, argnums=0)(q, v)
-    _, dp = jax.jvp(lambda x: jax.grad(l, argnums=1)(x, v), (q,), (v,))  # (∂q ∂v l) v
-    F = dl_dq - dp
-    mu, dmu = jax.jvp(system.mu, (q,), (v,))
-    Y, dY = jax.jvp(system.Y, (q,), (v,))
+def _along(f, space, b, v):
+    """`(f(b), D_v f(b))`: the value and the derivative along the motion with velocity v."""
+    zero = jnp.zeros((), dtype=v.dtype)
+    return jax.jvp(lambda s: f(space.move(b, s * v)), (zero,), (jnp.ones_like(zero),))
+
+
+def lagrange_dalembert_acceleration(system, b, v):
+    """The constrained acceleration $\\dot v$ and the multipliers λ at `(b, v)`."""
+    space = system.space
+    G = system.metric(b)
+    p = system.momentum(b, v)
+    dl_db = jax.grad(lambda w: system.L(space.move(b, w), v))(jnp.zeros_like(v))
+    _, dp = _along(lambda c: system.momentum(c, v), space, b, v)
+    F = dl_db - dp + space.lie_correction(v, p)
+    mu, dmu = _along(system.mu, space, b, v)
+    Y, dY = _along(system.Y, space, b, v)
     c = mu @ dY - dmu @ (v - Y)
     Ginv_F = jnp.linalg.solve(G, F)
     Ginv_muT = jnp.linalg.solve(G, mu.T)
@@ -55,10 +66,13 @@ class ContinuousReference(eqx.Module):
     name: ClassVar[str] = "reference"
     order: ClassVar[int | None] = None
 
-    def solve(self, system, q0, v0, times, *, h=float("nan")) -> Solution:
-        """Integrate from `times[0]` and save at `times` (host arrays); returns a Solution."""
+    def solve(self, system, b0, v0, times, *, h=float("nan")) -> Solution:
+        """Integrate from `times[0]` and save at `times` (host arrays); returns a Solution.
+
+        `b0` is the base point (`q0` on $\\mathbb{R}^n$, a :class:`~gnipy.spaces.Point` on
+        $\\mathbb{R}^n\\times G$), `v0` the velocity on the constraints."""
         times = np.asarray(times, dtype=np.float64)
-        ys, num_steps, ok = _solve(self, system, jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(times))
+        ys, num_steps, ok = _solve(self, system, b0, jnp.asarray(v0), jnp.asarray(times))
         meta = dict(system=system.name, method=self.name, h=float(h), coordinates=system.coordinates,
                     params=system.params, start="continuous")
         if not bool(ok):
@@ -66,23 +80,27 @@ class ContinuousReference(eqx.Module):
                 f"reference: the adaptive solver failed before t = {times[-1]:.6g} (step cap {self.max_steps} "
                 "or non-finite values)", step=-1, time=float(times[0]), residual=float("nan"),
             )
-        n = system.n
-        q, v = ys[:, :n], ys[:, n:]
-        p = jax.vmap(system.momentum)(q, v)
-        energy = jax.vmap(system.energy)(q, v)
-        res = jax.vmap(system.constraint_residual)(q, v)
+        N = system.dim
+        space = system.space
+        b = jax.vmap(space.unpack)(ys[:, :-N])
+        v = ys[:, -N:]
+        p = jax.vmap(system.momentum)(b, v)
+        energy = jax.vmap(system.energy)(b, v)
+        res = jax.vmap(system.constraint_residual)(b, v)
         its = jnp.asarray([int(num_steps), 0], dtype=jnp.int32)
-        return Solution(jnp.asarray(times), q, v, p, energy, res, its, **meta)
+        return Solution(jnp.asarray(times), space.coordinates(b), v, p, energy, res, its,
+                        R=space.orientation(b), velocities=system.velocities, **meta)
 
 
 @eqx.filter_jit
-def _solve(ref, system, q0, v0, times):
-    n = q0.shape[0]
+def _solve(ref, system, b0, v0, times):
+    space = system.space
+    N = v0.shape[0]
 
     def rhs(t, y, args):
-        q, v = y[:n], y[n:]
-        a, _ = lagrange_dalembert_acceleration(system, q, v)
-        return jnp.concatenate([v, a])
+        b, v = space.unpack(y[:-N]), y[-N:]
+        a, _ = lagrange_dalembert_acceleration(system, b, v)
+        return jnp.concatenate([space.pack_velocity(b, v), a])
 
     # Land a step on every save time: Dopri8's dense-output interpolant is far less accurate than
     # its steps (errors ~3e-10 at save points on the contact oscillator with rtol = atol = 1e-12).
@@ -97,7 +115,7 @@ def _solve(ref, system, q0, v0, times):
         t0=times[0],
         t1=times[-1],
         dt0=None,
-        y0=jnp.concatenate([q0, v0]),
+        y0=jnp.concatenate([space.pack(b0), v0]),
         saveat=diffrax.SaveAt(ts=times),
         stepsize_controller=controller,
         max_steps=ref.max_steps,

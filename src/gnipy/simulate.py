@@ -87,11 +87,11 @@ def _integrate(method, system, state0, h, n_blocks: int, block: int, remainder: 
         carry = block_scan(carry, remainder)
         last = observe(carry[0])
         obs = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]), obs, last)
-    q, v, p = obs
-    energy = jax.vmap(system.energy)(q, v)
-    residual = jax.vmap(system.constraint_residual)(q, v)
+    b, v, p = obs
+    energy = jax.vmap(system.energy)(b, v)
+    residual = jax.vmap(system.constraint_residual)(b, v)
     _, _, fail_k, fail_res, it_tot, it_max = carry
-    return q, v, p, energy, residual, fail_k, fail_res, jnp.stack([it_tot, it_max])
+    return b, v, p, energy, residual, fail_k, fail_res, jnp.stack([it_tot, it_max])
 
 
 def simulate(
@@ -100,6 +100,7 @@ def simulate(
     q0=None,
     v0=None,
     *,
+    R0=None,
     h,
     steps: int | None = None,
     t_final: float | None = None,
@@ -114,7 +115,9 @@ def simulate(
         system: the :class:`~gnipy.System`.
         method: an integrator object (e.g. `GNI(Midpoint())`) or a method name (see
             :func:`~gnipy.method_names`), including `"reference"` for the continuous reference.
-        q0, v0: the initial configuration and velocity (default: the system's documented ones).
+        q0, v0: the initial coordinates and velocity (default: the system's documented ones); on
+            $\\mathbb{R}^n \\times G$, `q0` holds x and `v0` the velocity $(\\dot x, \\xi)$.
+        R0: the initial orientation on $\\mathbb{R}^n \\times G$ (default: the system's, or the identity).
         h: step size (> 0); the reference saves at the same times.
         steps / t_final: the number of steps, or the final time (a whole number of steps).
         save_every: the save stride K: nodes 0, K, 2K, ... and always the last one are saved.
@@ -150,36 +153,41 @@ def simulate(
         raise SystemError(f"t0: expected a number, got {t0!r}") from e
     if not math.isfinite(t0):
         raise SystemError(f"t0: must be finite, got {t0!r}")
+    if q0 is None and system.n == 0:
+        q0 = ()
     if q0 is None or v0 is None:
         if system.defaults is None:
             raise SystemError(f"q0/v0: the system {system.name!r} has no default initial condition; give q0 and v0")
         q0 = system.defaults[0] if q0 is None else q0
         v0 = system.defaults[1] if v0 is None else v0
-    q0, v0 = system.check(q0, v0, project_v0=project_v0)
+        if R0 is None and len(system.defaults) > 2:
+            R0 = system.defaults[2]
+    b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
 
     n_blocks, remainder = divmod(steps, save_every)
     k_saved = np.concatenate([np.arange(n_blocks + 1) * save_every, [steps] if remainder else []]).astype(np.int64)
     times = t0 + h * k_saved
 
     if isinstance(method, ContinuousReference):
-        return method.solve(system, q0, v0, times, h=h)
+        return method.solve(system, b0, jnp.asarray(v0), times, h=h)
 
-    method.check(system, q0)
-    method = method.prepare(system, q0)
-    q0j, v0j = jnp.asarray(q0), jnp.asarray(v0)
+    method.check(system, b0)
+    method = method.prepare(system, b0)
     hj = jnp.asarray(h)
-    state0 = method.init(system, q0j, v0j, hj)
-    q, v, p, energy, residual, fail_k, fail_res, its = _integrate(
+    state0 = method.init(system, b0, jnp.asarray(v0), hj)
+    b, v, p, energy, residual, fail_k, fail_res, its = _integrate(
         method, system, state0, hj, n_blocks, save_every, remainder
     )
+    q, R = system.space.coordinates(b), system.space.orientation(b)
     fail_k = int(fail_k)
-    meta = dict(system=system.name, method=method.name, h=h, coordinates=system.coordinates, params=system.params)
+    meta = dict(system=system.name, method=method.name, h=h, coordinates=system.coordinates,
+                velocities=system.velocities, params=system.params)
     if fail_k < 0:
-        return Solution(jnp.asarray(times), q, v, p, energy, residual, its, **meta)
+        return Solution(jnp.asarray(times), q, v, p, energy, residual, its, R=R, **meta)
     good = int(np.searchsorted(k_saved, fail_k, side="right"))  # saved nodes with index <= fail_k
     partial = Solution(
         jnp.asarray(times[:good]), q[:good], v[:good], p[:good], energy[:good], residual[:good], its,
-        result=RESULT_SOLVER_FAILED, failed_step=fail_k, **meta,
+        R=None if R is None else R[:good], result=RESULT_SOLVER_FAILED, failed_step=fail_k, **meta,
     )
     msg = (
         f"{method.name}: step {fail_k} (t = {t0 + h * fail_k:.6g} -> {t0 + h * (fail_k + 1):.6g}) failed: "

@@ -35,12 +35,14 @@ class Solution(eqx.Module):
 
     Attributes:
         t: times, shape (T,).
-        q: configurations, (T, n).
+        q: coordinates, (T, n) (the Euclidean part x on $\\mathbb{R}^n \\times G$).
         v: reported velocities, (T, n) (for the GNI $\\bar v = \\mathbb{G}^{-1}\\bar p$, DESIGN §2).
         p: reported momenta, (T, n).
         energy: $\\tfrac12 v^T\\mathbb{G}v + V$, (T,).
         constraint_residual: $\\mu(q)(v - Y(q))$, (T, m).
         iterations: total and maximum Newton iterations per step, `(total, max)`.
+        R: orientations $R_k$ on $\\mathbb{R}^n \\times G$, (T, k, k) (reconstructed
+            $R_{k+1} = R_k\\tau(h\\xi_k)$, paper §7.2 Remark), else None.
         result: 0 on success, 1 if a step failed (then the arrays stop at the last good node).
         failed_step: index of the first failed step, or -1.
         system, method, h, coordinates: metadata.
@@ -53,12 +55,14 @@ class Solution(eqx.Module):
     energy: jax.Array
     constraint_residual: jax.Array
     iterations: jax.Array
+    R: jax.Array | None = None
     result: int = eqx.field(static=True, default=RESULT_SUCCESS)
     failed_step: int = eqx.field(static=True, default=-1)
     system: str = eqx.field(static=True, default="system")
     method: str = eqx.field(static=True, default="method")
     h: float = eqx.field(static=True, default=float("nan"))
     coordinates: tuple[str, ...] = eqx.field(static=True, default=())
+    velocities: tuple[str, ...] = eqx.field(static=True, default=())
     params: tuple[tuple[str, float], ...] = eqx.field(static=True, default=())
     start: str = eqx.field(static=True, default="p+ = G v0")
 
@@ -79,7 +83,8 @@ class Solution(eqx.Module):
 
         n = self.q.shape[-1]
         coords = list(self.coordinates) if len(self.coordinates) == n else [f"q{i}" for i in range(n)]
-        vel = [f"d{c}" for c in coords]
+        N = self.v.shape[-1]
+        vel = list(self.velocities) if len(self.velocities) == N else [f"v{i}" for i in range(N)]
         m = self.constraint_residual.shape[-1]
         ds = xr.Dataset(
             {
@@ -101,6 +106,8 @@ class Solution(eqx.Module):
                 "constraint": np.arange(m),
             },
         )
+        if self.R is not None:
+            ds["R"] = (("time", "i", "j"), np.asarray(self.R), {"long_name": "orientation R (group matrix)"})
         ds.attrs.update(
             {
                 "gnipy_version": __version__,

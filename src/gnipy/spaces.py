@@ -2,19 +2,28 @@
 
 The GNI core (DESIGN.md §2) solves for the step unknowns $z$ and advances the configuration with
 them. On $\\mathbb{R}^n$ the unknown is $z = x_{k+1}$ itself; on $\\mathbb{R}^n \\times G$ it is
-$(x_{k+1}, \\sigma_k)$ with $R_{k+1} = R_k \\tau(\\sigma_k)$. Every space offers the same small set of
-operations, so the core is written once against them.
+$z = (x_{k+1}, \\sigma_k)$ with $R_{k+1} = R_k \\tau(\\sigma_k)$. Both spaces offer the same small set
+of operations, so the core (integrators, discrete Lagrangians, the continuous reference) is written
+once against them:
+
+- `step_points(b0, z, h)`: the end point, the midpoint and the step velocity;
+- `advance`, `initial_guess`: the step map and a first guess of the unknowns;
+- `legendre_minus`, `legendre_plus`: the discrete Legendre transforms $FL^\\mp$ of DESIGN §2;
+- `move(b, w)`: the point reached from `b` along a velocity-space vector `w` (used to
+  differentiate along motions: $(x + w_x, R\\exp(w_\\xi))$);
+- `lie_correction(v, p)`: the $\\mathrm{ad}^*_\\xi$ term of the Lagrange–d'Alembert–Poincaré equations.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-__all__ = ["EuclideanSpace"]
+__all__ = ["EuclideanSpace", "GroupSpace", "Point"]
 
 
 class EuclideanSpace(eqx.Module):
@@ -24,6 +33,11 @@ class EuclideanSpace(eqx.Module):
     """
 
     n: int = eqx.field(static=True)
+
+    @property
+    def dim(self) -> int:
+        """Dimension N of the velocity space."""
+        return self.n
 
     def step_points(self, b0, z, h):
         """Return `(b1, b_mid, velocity)` of the step from `b0` with unknowns `z`.
@@ -48,6 +62,144 @@ class EuclideanSpace(eqx.Module):
         """$FL^+$: $\\partial l_d / \\partial q_{k+1}$ (a covector at $q_{k+1}$)."""
         return jax.grad(ld, argnums=1)(b0, z)
 
+    def move(self, b, w):
+        """$q + w$."""
+        return b + w
+
+    def lie_correction(self, v, p):
+        """Zero: $\\mathbb{R}^n$ is abelian."""
+        return jnp.zeros_like(p)
+
     def coordinates(self, b):
         """The coordinate vector that solutions report for the base point."""
-        return jnp.asarray(b)
+        return b
+
+    def orientation(self, b):
+        """None: there is no group part."""
+        return None
+
+    def pack(self, b):
+        """The base point as a flat vector (for ODE solvers)."""
+        return b
+
+    def unpack(self, y):
+        """Inverse of :meth:`pack`."""
+        return y
+
+    def pack_velocity(self, b, v):
+        """$d/dt$ of `pack(b)` along the velocity `v`."""
+        return v
+
+
+class Point(NamedTuple):
+    """A point $b = (x, R)$ of $\\mathbb{R}^n \\times G$ ($R$ a group matrix)."""
+
+    x: jax.Array
+    R: jax.Array
+
+
+class GroupSpace(eqx.Module):
+    """The configuration space $\\mathbb{R}^n \\times G$ with velocities in left trivialization.
+
+    A base point is a :class:`Point` $(x, R)$; a velocity is $v = (\\dot x, \\xi) \\in \\mathbb{R}^{n+d}$
+    with $\\xi = R^{-1}\\dot R$; the step unknowns are $z = (x_{k+1}, \\sigma_k)$ and
+    $R_{k+1} = R_k\\tau(\\sigma_k)$, $\\sigma_k = h\\xi_k$ (DESIGN §2).
+
+    Arguments:
+        n: dimension of the Euclidean factor (may be 0).
+        group: a :class:`~gnipy.lie_groups.MatrixLieGroup`.
+        retraction: a :class:`~gnipy.retractions.Retraction` (Cayley or exp).
+    """
+
+    n: int = eqx.field(static=True)
+    group: object
+    retraction: object
+
+    @property
+    def dim(self) -> int:
+        """Dimension N = n + dim 𝔤 of the velocity space."""
+        return self.n + self.group.dim
+
+    def _split(self, w):
+        return w[: self.n], w[self.n :]
+
+    def tau(self, sigma):
+        """The retraction $\\tau(\\sigma)$."""
+        return self.retraction.tau(self.group, sigma)
+
+    def step_points(self, b0, z, h):
+        """`(b1, b_mid, velocity)`: $b_1 = (x_1, R_0\\tau(\\sigma))$, the midpoint
+        $((x_0 + x_1)/2, R_0\\tau(\\sigma/2))$ and the step velocity $((x_1 - x_0)/h, \\sigma/h)$."""
+        x1, sigma = self._split(z)
+        b1 = Point(x1, b0.R @ self.tau(sigma))
+        bm = Point(0.5 * (b0.x + x1), b0.R @ self.tau(0.5 * sigma))
+        return b1, bm, jnp.concatenate([(x1 - b0.x) / h, sigma / h])
+
+    def advance(self, b0, z):
+        """$(x_{k+1}, R_k\\tau(\\sigma_k))$."""
+        x1, sigma = self._split(z)
+        return Point(x1, b0.R @ self.tau(sigma))
+
+    def initial_guess(self, b0, v, h):
+        """$(x_k + h\\dot x, h\\xi)$."""
+        xd, xi = self._split(v)
+        return jnp.concatenate([b0.x + h * xd, h * xi])
+
+    def _grads(self, ld, b0, z):
+        """Gradients of $l_d$ with respect to $x_k$, the left-trivialized $R_k$ (at fixed z) and z."""
+        d = self.group.dim
+
+        def f(x0, eta, z_):
+            return ld(Point(x0, b0.R @ self.group.exp(eta)), z_)
+
+        return jax.grad(f, argnums=(0, 1, 2))(b0.x, jnp.zeros(d, dtype=z.dtype), z)
+
+    def legendre_minus(self, ld: Callable, b0, z):
+        """$FL^- = (-\\partial l_d/\\partial x_k,\\ (d\\tau^{-1}_{\\sigma})^T \\partial l_d/\\partial\\sigma - \\nabla^L_{R_k} l_d)$
+        ((RedLegTr), DESIGN §2)."""
+        gx0, gR, gz = self._grads(ld, b0, z)
+        _, sigma = self._split(z)
+        _, gs = self._split(gz)
+        dtinv = self.retraction.dtau_inv(self.group, sigma)
+        return jnp.concatenate([-gx0, dtinv.T @ gs - gR])
+
+    def legendre_plus(self, ld: Callable, b0, z):
+        """$FL^+ = (\\partial l_d/\\partial x_{k+1},\\ (d\\tau^{-1}_{-\\sigma})^T \\partial l_d/\\partial\\sigma)$ ((RedLegTr))."""
+        gz = jax.grad(ld, argnums=1)(b0, z)
+        _, sigma = self._split(z)
+        gx1, gs = self._split(gz)
+        dtinv = self.retraction.dtau_inv(self.group, -sigma)
+        return jnp.concatenate([gx1, dtinv.T @ gs])
+
+    def move(self, b, w):
+        """$(x + w_x, R\\exp(w_\\xi))$."""
+        wx, wxi = self._split(w)
+        return Point(b.x + wx, b.R @ self.group.exp(wxi))
+
+    def lie_correction(self, v, p):
+        """$(0, \\mathrm{ad}^*_\\xi p_{\\mathfrak g})$: the term of $\\frac{d}{dt}\\partial l/\\partial\\xi - \\mathrm{ad}^*_\\xi\\partial l/\\partial\\xi$."""
+        _, xi = self._split(v)
+        _, pg = self._split(p)
+        return jnp.concatenate([jnp.zeros(self.n, dtype=p.dtype), self.group.ad_star(xi, pg)])
+
+    def coordinates(self, b):
+        """The Euclidean coordinates x."""
+        return b.x
+
+    def orientation(self, b):
+        """The group element R (a matrix)."""
+        return b.R
+
+    def pack(self, b):
+        """$(x, \\mathrm{vec}\\,R)$ as one flat vector."""
+        return jnp.concatenate([b.x, b.R.reshape(-1)])
+
+    def unpack(self, y):
+        """Inverse of :meth:`pack`."""
+        k = self.group.matrix_size
+        return Point(y[: self.n], y[self.n :].reshape(k, k))
+
+    def pack_velocity(self, b, v):
+        """$d/dt\\,(x, \\mathrm{vec}\\,R) = (\\dot x, \\mathrm{vec}(R\\hat\\xi))$ (reconstruction $\\dot R = R\\hat\\xi$)."""
+        xd, xi = self._split(v)
+        return jnp.concatenate([xd, (b.R @ self.group.hat(xi)).reshape(-1)])

@@ -1,10 +1,15 @@
 """Nonholonomic mechanical systems: a Lagrangian, constraint one-forms and an affine part.
 
-A :class:`System` holds the user's data (DESIGN.md §2):
+A :class:`System` holds the user's data (DESIGN.md §2), on $Q = \\mathbb{R}^n$ or on
+$Q = \\mathbb{R}^n \\times G$ with velocities $v = (\\dot x, \\xi)$ in left trivialization:
 
-- a Lagrangian of mechanical type $l(q, v) = \\tfrac12 v^T \\mathbb{G}(q) v - V(q)$,
-- constraint one-forms $\\mu(q)$ ($m \\times n$, full row rank),
-- an optional affine vector field $Y(q)$; the constraints are $\\mu(q)(v - Y(q)) = 0$.
+- a Lagrangian of mechanical type $l(b, v) = \\tfrac12 v^T \\mathbb{G}(b) v - V(b)$,
+- constraint one-forms $\\mu(b)$ ($m \\times N$, full row rank),
+- an optional affine vector field $Y(b)$; the constraints are $\\mu(b)(v - Y(b)) = 0$.
+
+On $\\mathbb{R}^n \\times G$ the system is *reduced* (paper §7) when l, μ, Y do not depend on the
+orientation R (the user's functions take `(x, v)`, `(x)`), and of *Lie groupoid* type (paper §9)
+when they do (`depends_on_orientation=True`; the functions take `(x, R, v)`, `(x, R)`).
 
 Everything else (metric, potential, momenta, projectors, $\\Pi = \\mathbb{G} Y$) is derived by
 automatic differentiation.
@@ -20,7 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .spaces import EuclideanSpace
+from .spaces import EuclideanSpace, GroupSpace, Point
 
 __all__ = ["System", "SystemError"]
 
@@ -34,17 +39,25 @@ def _fmt(x: float) -> str:
 
 
 class System(eqx.Module):
-    """A nonholonomic mechanical system on $\\mathbb{R}^n$.
+    """A nonholonomic mechanical system on $\\mathbb{R}^n$ or on $\\mathbb{R}^n \\times G$.
 
     Arguments:
-        lagrangian: `l(q, v) -> scalar`, of mechanical type (quadratic in `v`, no linear term).
-        constraints: `mu(q) -> (m, n)` array, the constraint one-forms as rows.
-        affine: optional `Y(q) -> (n,)`; the constraints are then `mu(q) @ (v - Y(q)) = 0`.
-        n: dimension of the configuration space (inferred from `coordinates` if omitted).
-        coordinates: names of the coordinates (default `q0, q1, ...`).
+        lagrangian: the Lagrangian, of mechanical type (quadratic in `v`, no linear term):
+            `l(q, v)` on $\\mathbb{R}^n$; `l(x, v)` for a reduced system on $\\mathbb{R}^n \\times G$;
+            `l(x, R, v)` when `depends_on_orientation=True`. On $\\mathbb{R}^n \\times G$,
+            $v = (\\dot x, \\xi)$ with $\\xi = R^{-1}\\dot R$ in the group's `vee` coordinates.
+        constraints: the constraint one-forms as rows, `mu(q)` / `mu(x)` / `mu(x, R)` -> (m, N).
+        affine: optional `Y(q)` / `Y(x)` / `Y(x, R)` -> (N,); the constraints are $\\mu(v - Y) = 0$.
+        n: dimension of the Euclidean factor (inferred from `coordinates` if omitted; may be 0
+            when a group is given).
+        group: a Lie group from :mod:`gnipy.lie_groups` (e.g. `SO3()`), or None for $\\mathbb{R}^n$.
+        retraction: `"cayley"` (default) or `"exp"`, or a retraction object: how steps move on G.
+        depends_on_orientation: the functions take R (the Lie groupoid case of paper §9).
+        coordinates: names of the coordinates x (default `q0, q1, ...`).
+        velocities: names of the N velocity components (default `d<coordinate>` then the group's).
         name: a short name used in reports and files.
         params: parameters of the system, for provenance (a dict of floats).
-        defaults: optional default initial condition `(q0, v0)`.
+        defaults: optional default initial condition `(q0, v0)` or `(q0, v0, R0)`.
 
     Raises:
         SystemError: on inconsistent dimensions or names.
@@ -53,11 +66,13 @@ class System(eqx.Module):
     lagrangian: Callable[..., Any]
     constraints: Callable[..., Any]
     affine: Callable[..., Any] | None
-    space: EuclideanSpace
+    space: Any
+    depends_on_orientation: bool = eqx.field(static=True)
     coordinates: tuple[str, ...] = eqx.field(static=True)
+    velocities: tuple[str, ...] = eqx.field(static=True)
     name: str = eqx.field(static=True)
     params: tuple[tuple[str, float], ...] = eqx.field(static=True)
-    defaults: tuple[tuple[float, ...], tuple[float, ...]] | None = eqx.field(static=True)
+    defaults: tuple | None = eqx.field(static=True)
 
     def __init__(
         self,
@@ -66,10 +81,14 @@ class System(eqx.Module):
         affine: Callable[..., Any] | None = None,
         *,
         n: int | None = None,
+        group=None,
+        retraction="cayley",
+        depends_on_orientation: bool = False,
         coordinates: Sequence[str] | None = None,
+        velocities: Sequence[str] | None = None,
         name: str = "system",
         params: dict[str, float] | None = None,
-        defaults: tuple[Sequence[float], Sequence[float]] | None = None,
+        defaults: tuple | None = None,
     ):
         if not callable(lagrangian):
             raise SystemError(f"lagrangian: expected a callable l(q, v), got {type(lagrangian).__name__}")
@@ -78,83 +97,132 @@ class System(eqx.Module):
         if affine is not None and not callable(affine):
             raise SystemError(f"affine: expected a callable Y(q) or None, got {type(affine).__name__}")
         if n is None and coordinates is None:
-            raise SystemError("n: give the dimension n of the configuration space (or coordinates=...)")
+            if group is None:
+                raise SystemError("n: give the dimension n of the configuration space (or coordinates=...)")
+            n = 0
         if n is None:
             n = len(tuple(coordinates))
-        if int(n) != n or n < 1:
-            raise SystemError(f"n: expected a positive integer, got {n!r}")
+        if isinstance(n, bool) or int(n) != n or n < (1 if group is None else 0):
+            raise SystemError(f"n: expected a {'positive' if group is None else 'non-negative'} integer, got {n!r}")
         n = int(n)
         if coordinates is None:
             coordinates = tuple(f"q{i}" for i in range(n))
         coordinates = tuple(str(c) for c in coordinates)
         if len(coordinates) != n:
             raise SystemError(f"coordinates: expected {n} names, got {len(coordinates)}")
+        if group is None:
+            if depends_on_orientation:
+                raise SystemError("depends_on_orientation: only meaningful with a group")
+            space = EuclideanSpace(n)
+            group_names: tuple[str, ...] = ()
+        else:
+            from .lie_groups import MatrixLieGroup
+            from .retractions import Retraction, get_retraction
+
+            if not isinstance(group, MatrixLieGroup):
+                raise SystemError(f"group: expected a gnipy.lie_groups group (e.g. SO3()), got {type(group).__name__}")
+            if isinstance(retraction, str):
+                try:
+                    retraction = get_retraction(retraction)
+                except ValueError as e:
+                    raise SystemError(str(e)) from e
+            if not isinstance(retraction, Retraction):
+                raise SystemError(f"retraction: expected 'cayley', 'exp' or a Retraction, got {retraction!r}")
+            space = GroupSpace(n, group, retraction)
+            group_names = tuple(getattr(group, "velocity_names", None) or (f"xi{i}" for i in range(group.dim)))
+        if velocities is None:
+            velocities = tuple(f"d{c}" for c in coordinates) + tuple(group_names)
+        velocities = tuple(str(c) for c in velocities)
+        if len(velocities) != space.dim:
+            raise SystemError(f"velocities: expected {space.dim} names, got {len(velocities)}")
         self.lagrangian = lagrangian
         self.constraints = constraints
         self.affine = affine
-        self.space = EuclideanSpace(n)
+        self.space = space
+        self.depends_on_orientation = bool(depends_on_orientation)
         self.coordinates = coordinates
+        self.velocities = velocities
         self.name = str(name)
         self.params = tuple((str(k), float(v)) for k, v in (params or {}).items())
         if defaults is not None:
-            dq, dv = defaults
-            defaults = (tuple(float(x) for x in dq), tuple(float(x) for x in dv))
+            defaults = tuple(None if d is None else tuple(float(x) for x in np.ravel(d)) for d in defaults)
         self.defaults = defaults
 
     # ----------------------------------------------------------------------------------------
-    # Derived quantities (all traceable)
+    # Evaluating the user's functions at a base point b (q on R^n, Point(x, R) on R^n x G)
     # ----------------------------------------------------------------------------------------
     @property
     def n(self) -> int:
-        """Dimension of the configuration space."""
+        """Dimension of the Euclidean factor (of the whole configuration space on $\\mathbb{R}^n$)."""
         return self.space.n
+
+    @property
+    def dim(self) -> int:
+        """Dimension N of the velocity space ($n$ plus the dimension of the Lie algebra)."""
+        return self.space.dim
+
+    @property
+    def group(self):
+        """The Lie group G, or None on $\\mathbb{R}^n$."""
+        return getattr(self.space, "group", None)
 
     @property
     def parameters(self) -> dict[str, float]:
         """The system's parameters as a dict (for provenance)."""
         return dict(self.params)
 
-    def metric(self, q):
-        """The kinetic-energy metric $\\mathbb{G}(q) = \\partial^2 l / \\partial v^2$ (n×n)."""
-        return jax.hessian(lambda v: self.lagrangian(q, v))(jnp.zeros(self.n))
+    def _args(self, b):
+        if self.group is None:
+            return (b,)
+        return (b.x, b.R) if self.depends_on_orientation else (b.x,)
 
-    def potential(self, q):
-        """The potential $V(q) = -l(q, 0)$."""
-        return -self.lagrangian(q, jnp.zeros(self.n))
+    def L(self, b, v):
+        """The Lagrangian $l(b, v)$ at a base point."""
+        return self.lagrangian(*self._args(b), v)
 
-    def potential_gradient(self, q):
-        """$\\partial V / \\partial q$."""
-        return jax.grad(self.potential)(q)
+    def metric(self, b):
+        """The kinetic-energy metric $\\mathbb{G}(b) = \\partial^2 l / \\partial v^2$ (N×N)."""
+        return jax.hessian(lambda v: self.L(b, v))(jnp.zeros(self.dim))
 
-    def momentum(self, q, v):
-        """The Legendre transform $p = \\partial l / \\partial v = \\mathbb{G}(q) v$."""
-        return jax.grad(lambda w: self.lagrangian(q, w))(v)
+    def potential(self, b):
+        """The potential $V(b) = -l(b, 0)$."""
+        return -self.L(b, jnp.zeros(self.dim))
 
-    def velocity(self, q, p):
-        """Inverse Legendre transform $v = \\mathbb{G}(q)^{-1} p$."""
-        return jnp.linalg.solve(self.metric(q), p)
+    def potential_gradient(self, b):
+        """$\\partial V / \\partial q$ on $\\mathbb{R}^n$; on $\\mathbb{R}^n\\times G$ the
+        $(\\partial V/\\partial x, \\nabla^L_R V)$ (left-trivialized)."""
+        return jax.grad(lambda w: self.potential(self.space.move(b, w)))(jnp.zeros(self.dim))
 
-    def mu(self, q):
-        """Constraint one-forms $\\mu(q)$ as an (m, n) array."""
-        return jnp.atleast_2d(jnp.asarray(self.constraints(q)))
+    def momentum(self, b, v):
+        """The Legendre transform $p = \\partial l / \\partial v = \\mathbb{G}(b) v$."""
+        return jax.grad(lambda w: self.L(b, w))(v)
 
-    def Y(self, q):
-        """Affine part $Y(q)$ (zero for linear constraints)."""
+    def velocity(self, b, p):
+        """Inverse Legendre transform $v = \\mathbb{G}(b)^{-1} p$."""
+        return jnp.linalg.solve(self.metric(b), p)
+
+    def mu(self, b):
+        """Constraint one-forms $\\mu(b)$ as an (m, N) array."""
+        return jnp.atleast_2d(jnp.asarray(self.constraints(*self._args(b))))
+
+    def Y(self, b):
+        """Affine part $Y(b)$ (zero for linear constraints)."""
         if self.affine is None:
-            return jnp.zeros(self.n, dtype=jnp.result_type(q))
-        return jnp.asarray(self.affine(q)).reshape(self.n)
+            dtype = jnp.result_type(self.space.coordinates(b)) if self.n else jnp.float64
+            return jnp.zeros(self.dim, dtype=dtype)
+        return jnp.asarray(self.affine(*self._args(b))).reshape(self.dim)
 
-    def Pi(self, q):
+    def Pi(self, b):
         """The one-form $\\Pi = \\mathbb{G} Y$ of paper §6."""
-        return self.metric(q) @ self.Y(q)
+        return self.metric(b) @ self.Y(b)
 
-    def energy(self, q, v):
+    def energy(self, b, v):
         """Energy $\\tfrac12 v^T \\mathbb{G} v + V$."""
-        return 0.5 * v @ self.metric(q) @ v + self.potential(q)
+        return 0.5 * v @ self.metric(b) @ v + self.potential(b)
 
-    def constraint_residual(self, q, v):
-        """$\\mu(q)(v - Y(q))$, one entry per constraint."""
-        return self.mu(q) @ (v - self.Y(q))
+    def constraint_residual(self, b, v):
+        """$\\mu(b)(v - Y(b))$, one entry per constraint."""
+        return self.mu(b) @ (v - self.Y(b))
 
     @property
     def is_affine(self) -> bool:
@@ -164,20 +232,52 @@ class System(eqx.Module):
     # ----------------------------------------------------------------------------------------
     # Validation (host side, outside jit)
     # ----------------------------------------------------------------------------------------
-    def num_constraints(self, q) -> int:
-        """Number of constraints m, evaluated at q."""
-        return int(np.asarray(self.mu(jnp.asarray(q, dtype=jnp.float64))).shape[0])
+    def num_constraints(self, b) -> int:
+        """Number of constraints m, evaluated at the base point b."""
+        return int(np.asarray(self.mu(b)).shape[0])
 
-    def check(self, q0, v0=None, *, project_v0: bool = False, tol: float = 1e-10):
-        """Validate the system at the initial point and return `(q0, v0)` as float64 arrays.
+    def initial_point(self, q0, R0=None):
+        """The validated base point from coordinates `q0` and (on $\\mathbb{R}^n\\times G$) an
+        orientation `R0` (default: the identity)."""
+        x0 = _as_vector("q0", q0, self.n)
+        if self.group is None:
+            if R0 is not None:
+                raise SystemError("R0: this system has no group part")
+            return jnp.asarray(x0)
+        k = self.group.matrix_size
+        if R0 is None:
+            R = np.asarray(self.group.identity(), dtype=np.float64)
+        else:
+            try:
+                R = np.asarray(R0, dtype=np.float64)
+            except (TypeError, ValueError) as e:
+                raise SystemError(f"R0: expected a {k}x{k} group matrix, got {R0!r}") from e
+            if R.size == k * k:
+                R = R.reshape(k, k)
+            if R.shape != (k, k):
+                raise SystemError(f"R0: expected a {k}x{k} group matrix, got shape {R.shape}")
+            if not np.all(np.isfinite(R)):
+                raise SystemError("R0: contains NaN or infinite values")
+            from .lie_groups import SO3
 
+            if isinstance(self.group, SO3):
+                err = np.max(np.abs(R.T @ R - np.eye(3)))
+                if err > 1e-10 or np.linalg.det(R) <= 0:
+                    raise SystemError(f"R0: not a rotation matrix (|RᵀR − I| = {_fmt(err)}, det = {np.linalg.det(R):.3g})")
+        return Point(jnp.asarray(x0), jnp.asarray(R))
+
+    def check(self, q0, v0=None, *, R0=None, project_v0: bool = False, tol: float = 1e-10):
+        """Validate the system at the initial point and return `(b0, v0)` (float64).
+
+        `b0` is `q0` on $\\mathbb{R}^n$ and `Point(q0, R0)` on $\\mathbb{R}^n\\times G$.
         Checks: shapes and finiteness; that `l` is of mechanical type (quadratic in `v` with no
-        linear term, at `q0` and nearby points); that the metric is symmetric positive definite;
+        linear term, at `b0` and nearby points); that the metric is symmetric positive definite;
         that the constraints have full row rank; that `v0` satisfies the constraints.
 
         Arguments:
-            q0: initial configuration, length n.
-            v0: initial velocity, length n (optional).
+            q0: initial coordinates, length n.
+            v0: initial velocity, length N (optional).
+            R0: initial orientation on $\\mathbb{R}^n\\times G$ (default the identity).
             project_v0: project `v0` onto the constraint space ($\\mathbb{G}$-orthogonally)
                 instead of raising when it violates the constraints.
             tol: tolerance of the checks.
@@ -185,11 +285,11 @@ class System(eqx.Module):
         Raises:
             SystemError: naming the argument and the problem.
         """
-        q0 = _as_vector("q0", q0, self.n)
+        b0 = self.initial_point(q0, R0)
         if v0 is not None:
-            v0 = _as_vector("v0", v0, self.n)
-        self.check_mechanical(q0, tol=tol)
-        G = np.asarray(self.metric(jnp.asarray(q0)))
+            v0 = _as_vector("v0", v0, self.dim)
+        self.check_mechanical(b0, tol=tol)
+        G = np.asarray(self.metric(b0))
         if not np.all(np.isfinite(G)):
             raise SystemError("lagrangian: the metric d²l/dv² is not finite at q0")
         if np.max(np.abs(G - G.T)) > tol * max(1.0, np.max(np.abs(G))):
@@ -200,25 +300,26 @@ class System(eqx.Module):
                 "lagrangian: the metric d²l/dv² is not positive definite at q0 "
                 f"(smallest eigenvalue {_fmt(eig[0])})"
             )
-        mu = np.asarray(self.mu(jnp.asarray(q0)))
-        if mu.ndim != 2 or mu.shape[1] != self.n:
-            raise SystemError(f"constraints: mu(q) must have shape (m, {self.n}), got {mu.shape}")
+        mu = np.asarray(self.mu(b0))
+        N = self.dim
+        if mu.ndim != 2 or mu.shape[1] != N:
+            raise SystemError(f"constraints: mu(q) must have shape (m, {N}), got {mu.shape}")
         if not np.all(np.isfinite(mu)):
             raise SystemError("constraints: mu(q0) is not finite")
         m = mu.shape[0]
-        if m >= self.n:
-            raise SystemError(f"constraints: {m} constraints on a {self.n}-dimensional space leave no motion")
+        if m >= N:
+            raise SystemError(f"constraints: {m} constraints on a {N}-dimensional velocity space leave no motion")
         sv = np.linalg.svd(mu, compute_uv=False)
         if sv[-1] <= 1e-10 * max(1.0, sv[0]):
             raise SystemError(
                 f"constraints: mu(q0) is rank deficient (rank {int(np.sum(sv > 1e-10 * max(1.0, sv[0])))} "
                 f"< {m} constraints; smallest singular value {_fmt(sv[-1])})"
             )
-        Y = np.asarray(self.Y(jnp.asarray(q0)))
+        Y = np.asarray(self.Y(b0))
         if not np.all(np.isfinite(Y)):
             raise SystemError("affine: Y(q0) is not finite")
         if v0 is None:
-            return q0, None
+            return b0, None
         res = mu @ (v0 - Y)
         scale = max(1.0, float(np.max(np.abs(v0))), float(np.max(np.abs(Y))))
         if np.max(np.abs(res)) > tol * scale:
@@ -227,24 +328,24 @@ class System(eqx.Module):
                     "v0: the initial velocity violates the constraints mu(q0)(v0 - Y(q0)) = 0 "
                     f"(residual {_fmt(np.max(np.abs(res)))}); pass project_v0=True to project it"
                 )
-            v0 = np.asarray(project_velocity(self, jnp.asarray(q0), jnp.asarray(v0)))
-        return q0, v0
+            v0 = np.asarray(project_velocity(self, b0, jnp.asarray(v0)))
+        return b0, v0
 
-    def check_mechanical(self, q0, *, tol: float = 1e-9, samples: int = 3):
-        """Raise :class:`SystemError` unless `l(q, v) = ½vᵀG(q)v − V(q)` near `q0`."""
+    def check_mechanical(self, b0, *, tol: float = 1e-9, samples: int = 3):
+        """Raise :class:`SystemError` unless `l(b, v) = ½vᵀG(b)v − V(b)` at and near `b0`."""
         rng = np.random.default_rng(0)
-        n = self.n
+        N = self.dim
         for i in range(samples):
-            q = np.asarray(q0) + (0.0 if i == 0 else 0.1) * rng.standard_normal(n)
-            v = rng.standard_normal(n)
-            q_, v_ = jnp.asarray(q), jnp.asarray(v)
+            b = self.space.move(b0, jnp.asarray((0.0 if i == 0 else 0.1) * rng.standard_normal(N)))
+            v = rng.standard_normal(N)
+            v_ = jnp.asarray(v)
             try:
-                lv = float(self.lagrangian(q_, v_))
+                lv = float(self.L(b, v_))
             except Exception as e:  # the user's function failed: say where
                 raise SystemError(f"lagrangian: evaluating l(q, v) failed: {e}") from e
-            G = np.asarray(self.metric(q_))
-            V = float(self.potential(q_))
-            lin = np.asarray(jax.grad(lambda w: self.lagrangian(q_, w))(jnp.zeros(n)))
+            G = np.asarray(self.metric(b))
+            V = float(self.potential(b))
+            lin = np.asarray(jax.grad(lambda w: self.L(b, w))(jnp.zeros(N)))
             quad = 0.5 * v @ G @ v - V
             scale = max(1.0, abs(lv), abs(quad))
             if not np.isfinite(lv):
@@ -256,16 +357,16 @@ class System(eqx.Module):
                     f"mismatch with the quadratic part {_fmt(abs(lv - quad))})"
                 )
 
-    def has_constant_metric(self, q0) -> bool:
-        """Whether the metric does not depend on q (exact zero derivative at sample points).
+    def has_constant_metric(self, b0) -> bool:
+        """Whether the metric does not depend on the base point (exact zero derivative at samples).
 
-        Automatic differentiation returns an exact zero for a metric that does not depend on q,
-        and a nonzero value almost surely at random points otherwise.
+        Automatic differentiation returns an exact zero for a metric that does not depend on the
+        base point, and a nonzero value almost surely at random points otherwise.
         """
         rng = np.random.default_rng(1)
         for _ in range(2):
-            q = jnp.asarray(np.asarray(q0) + 0.3 * rng.standard_normal(self.n))
-            dG = np.asarray(jax.jacfwd(self.metric)(q))
+            b = self.space.move(b0, jnp.asarray(0.3 * rng.standard_normal(self.dim)))
+            dG = np.asarray(jax.jacfwd(lambda w: self.metric(self.space.move(b, w)))(jnp.zeros(self.dim)))
             if np.any(dG != 0.0):
                 return False
         return True
@@ -283,9 +384,9 @@ def _as_vector(name: str, x, n: int) -> np.ndarray:
     return a
 
 
-def project_velocity(system: System, q, v):
+def project_velocity(system: System, b, v):
     """$\\mathbb{G}$-orthogonal projection of v onto the affine constraint space: $P v + Q Y$."""
     from .projectors import projectors
 
-    P, Q = projectors(system.metric(q), system.mu(q))
-    return P @ v + Q @ system.Y(q)
+    P, Q = projectors(system.metric(b), system.mu(b))
+    return P @ v + Q @ system.Y(b)

@@ -1,8 +1,9 @@
 """The integrator interface: a small object with an initial state and a one-step map.
 
 Modelled on diffrax's solvers: `init(system, q0, v0, h) -> state`,
-`step(system, state, h) -> (state, StepInfo)`, and `observe(system, state, h) -> (q, v, p)`, the
-configuration, velocity and momentum that a solution reports at the node held by `state`.
+`step(system, state, h) -> (state, StepInfo)`, and `observe(system, state, h) -> (b, v, p)`, the
+base point (q on R^n, `Point(x, R)` on R^n x G), velocity and momentum that a solution reports at
+the node held by `state`.
 """
 
 from __future__ import annotations
@@ -94,12 +95,17 @@ class Integrator(eqx.Module):
         raise NotImplementedError
 
     def observe(self, system, state, h):
-        """The `(q, v, p)` reported at the node that `state` holds."""
+        """The `(b, v, p)` reported at the node that `state` holds (b: the base point)."""
         raise NotImplementedError
 
 
 def require_constant_metric(method: str, system, q0) -> None:
-    """Raise :class:`MethodError` unless the system's metric is constant."""
+    """Raise :class:`MethodError` unless the system lives on R^n and its metric is constant."""
+    if system.group is not None:
+        raise MethodError(
+            f"method {method!r} is written for systems on R^n (paper §5); {system.name!r} has a group "
+            "part: use a gni-* method"
+        )
     if not system.has_constant_metric(q0):
         raise MethodError(
             f"method {method!r} is written for a constant metric M (paper §5); "

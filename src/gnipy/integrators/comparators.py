@@ -111,7 +111,7 @@ class DiscreteLagrangeDAlembert(Integrator):
     def observe(self, system, state, h):
         """$(q_k,\\ \\mathbb{G}^{-1}p^+_k,\\ p^+_k)$ (see the class docstring on the velocity)."""
         b, p_plus = state
-        return system.space.coordinates(b), system.velocity(b, p_plus), p_plus
+        return b, system.velocity(b, p_plus), p_plus
 
 
 class MPState(NamedTuple):

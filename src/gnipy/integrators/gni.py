@@ -71,7 +71,10 @@ class GNI(Integrator):
         if isinstance(ld, CustomDiscreteLagrangian):
             explicit = bool(ld.explicit)  # the user's declaration that FL⁻ is affine in q_{k+1}
         else:
-            explicit = bool(type(ld).explicit_if_flat and system.has_constant_metric(q0))
+            # on R^n x G, FL⁻ contains dτ⁻¹_σ and is never affine in σ: Newton
+            explicit = bool(
+                type(ld).explicit_if_flat and system.group is None and system.has_constant_metric(q0)
+            )
         return dataclasses.replace(self, explicit=explicit)
 
     def init(self, system, q0, v0, h):
@@ -105,4 +108,4 @@ class GNI(Integrator):
         b, p_plus = state
         G, mu, Pi = self._node(system, b)
         p_bar = reported_momentum(G, mu, Pi, p_plus)
-        return system.space.coordinates(b), jnp.linalg.solve(G, p_bar), p_bar
+        return b, jnp.linalg.solve(G, p_bar), p_bar
