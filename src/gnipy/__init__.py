@@ -31,12 +31,15 @@ from .integrators import (  # noqa: E402
     Shake,
     StepInfo,
 )
+from .lie_groups import SE2, SO3, MatrixLieGroup, ProductGroup, Rn, TrivialGroup  # noqa: E402
 from .methods import get_method, method_names  # noqa: E402
 from .models import get_model, make_system, model_names  # noqa: E402
 from .projectors import projectors, reflect_momentum, reported_momentum  # noqa: E402
 from .reference import ContinuousReference  # noqa: E402
+from .retractions import Cayley, Exp, Retraction, get_retraction  # noqa: E402
 from .simulate import simulate  # noqa: E402
 from .solution import Solution, SolverFailure  # noqa: E402
+from .spaces import EuclideanSpace, GroupSpace, Point  # noqa: E402
 from .system import System, SystemError  # noqa: E402
 
 __all__ = [
@@ -73,4 +76,17 @@ __all__ = [
     "make_system",
     "model_names",
     "models",
+    "MatrixLieGroup",
+    "SO3",
+    "SE2",
+    "Rn",
+    "ProductGroup",
+    "TrivialGroup",
+    "Retraction",
+    "Cayley",
+    "Exp",
+    "get_retraction",
+    "Point",
+    "EuclideanSpace",
+    "GroupSpace",
 ]

@@ -22,7 +22,9 @@ class ModelSpec:
         build: `build(params: dict[str, float]) -> System`.
         params: parameter names and default values.
         coordinates: the names of q.
-        q0, v0: the documented initial condition for the default parameters.
+        q0, v0: the documented initial condition for the default parameters (on R^n × G, `q0`
+            holds x and `v0` the velocity (ẋ, ξ) with ξ in the group's vee coordinates).
+        R0: the documented initial orientation on R^n × G, flattened row-major (None: identity).
         default_ic: optional `default_ic(params) -> (q0, v0)` when the default initial condition
             depends on the parameters (it must satisfy the constraints).
         exact: optional `exact(params, q0, v0, t) -> (q, v)` (t an array; returns arrays (T, n)).
@@ -37,6 +39,7 @@ class ModelSpec:
     coordinates: tuple[str, ...]
     q0: tuple[float, ...]
     v0: tuple[float, ...]
+    R0: tuple[float, ...] | None = None
     default_ic: Callable[[dict[str, float]], tuple[Any, Any]] | None = None
     exact: Callable[..., Any] | None = None
     invariants: Mapping[str, Callable[..., Any]] = dataclasses.field(default_factory=dict)
