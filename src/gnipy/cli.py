@@ -1,7 +1,7 @@
 """The `gni` command line: run a model with any method and write netCDF; the demo; listings.
 
     gni run MODEL --method METHOD --h H (--steps N | --t-final T) [--set NAME=VALUE ...]
-            [--x0 a,b,...] [--v0 a,b,...] [--project-v0] [--save-every K] --out FILE.nc
+            [--x0 a,b,...] [--v0 a,b,...] [--R0 r11,...,r33] [--project-v0] [--save-every K] --out FILE.nc
     gni demo [--out FILE.nc]
     gni models
     gni methods
@@ -43,6 +43,7 @@ _OPTION_OF = {
     "q0": "--x0",
     "v0": "--v0",
     "q0/v0": "--x0/--v0",
+    "R0": "--R0",
     "t0": "--t0",
     "--set/params": "--set",
     "model": "MODEL",
@@ -164,12 +165,17 @@ def _check_output(path: Path) -> None:
 # --------------------------------------------------------------------------------------------
 # Running and reporting
 # --------------------------------------------------------------------------------------------
-def _invariant_drifts(spec, params, q, v) -> dict[str, float]:
+def _invariant_drifts(spec, params, q, v, R=None) -> dict[str, float]:
+    import inspect
+
     import numpy as np
 
     out = {}
     for name, f in spec.invariants.items():
-        vals = np.array([float(f(params, qi, vi)) for qi, vi in zip(q, v)])
+        # on R^n × G an invariant may also take the orientation: f(params, q, v, R)
+        with_R = R is not None and len(inspect.signature(f).parameters) >= 4
+        args = zip(q, v, R) if with_R else zip(q, v)
+        vals = np.array([float(f(params, *a)) for a in args])
         out[name] = float(np.max(np.abs(vals - vals[0])))
     return out
 
@@ -181,9 +187,13 @@ def _exact_errors(spec, params, sol, q0, v0):
     if spec.exact is None:
         return None
     t = np.asarray(sol.t) - float(sol.t[0])
-    qe, ve = spec.exact(params, q0, v0, t)
+    result = spec.exact(params, q0, v0, t)
+    if result is None:  # no closed form for these parameters (e.g. rolling-ball, unequal moments)
+        return None
+    qe, ve = result
     q, v = np.asarray(sol.q), np.asarray(sol.v)
-    return qe, ve, float(np.max(np.abs(q - qe))), float(np.max(np.abs(v - ve)))
+    # initial=0: on R^0 × G there are no coordinates q
+    return qe, ve, float(np.max(np.abs(q - qe), initial=0.0)), float(np.max(np.abs(v - ve), initial=0.0))
 
 
 def _prepare(model: str, method: str, h, steps, t_final, set_items, x0_text, v0_text, save_every):
@@ -208,22 +218,37 @@ def _prepare(model: str, method: str, h, steps, t_final, set_items, x0_text, v0_
         raise _UsageError("--set", str(e).partition(":")[2].strip()) from None
     names = spec.coordinates
     x0 = _parse_vector("--x0", x0_text, len(names), names)
-    v0 = _parse_vector("--v0", v0_text, len(names), [f"d{c}" for c in names])
+    vnames = spec.build(params).velocities  # (ẋ, ξ) on R^n × G: longer than x
+    v0 = _parse_vector("--v0", v0_text, len(vnames), vnames)
     dq, dv = spec.initial_condition(params)
     return spec, params, tuple(dq if x0 is None else x0), tuple(dv if v0 is None else v0)
 
 
-def _simulate(spec, params, method, q0, v0, h, steps, t_final, project_v0, save_every):
+def _parse_R0(spec, params, text: str | None):
+    """The initial orientation (flattened row-major) for a model on R^n × G: `--R0`, else the
+    model's documented one (None: the identity); None for models without a group part."""
+    group = spec.build(params).group
+    if group is None:
+        if text is not None:
+            raise _UsageError("--R0", f"model {spec.name!r} has no orientation (no group part)")
+        return None
+    k = group.matrix_size
+    if text is None:
+        return tuple(spec.R0) if spec.R0 is not None else tuple(float(x) for x in group.identity().reshape(-1))
+    return _parse_vector("--R0", text, k * k, [f"r{i + 1}{j + 1}" for i in range(k) for j in range(k)])
+
+
+def _simulate(spec, params, method, q0, v0, h, steps, t_final, project_v0, save_every, R0=None):
     """Run; returns `(sol, v0_used, seconds)` (v0_used is the projected v0 with --project-v0)."""
     import gnipy
 
     system = spec.build(params)
     # the initial velocity actually used: G-orthogonally projected onto the constraints if asked
-    _, v0_used = system.check(q0, v0, project_v0=project_v0)
+    _, v0_used = system.check(q0, v0, R0=R0, project_v0=project_v0)
     v0_used = tuple(float(x) for x in v0_used)
     t0 = time.perf_counter()
     sol = gnipy.simulate(
-        system, method, q0, v0_used, h=h, steps=steps, t_final=t_final, save_every=save_every
+        system, method, q0, v0_used, R0=R0, h=h, steps=steps, t_final=t_final, save_every=save_every
     )
     sol.q.block_until_ready()
     seconds = time.perf_counter() - t0
@@ -245,7 +270,8 @@ def _report(
     span = f"t = {float(sol.t[0]):g} .. {float(sol.t[-1]):g}"
     table.add_row("method", f"{sol.method}, h = {sol.h:g}, {sol.steps} steps, {span}")
     table.add_row("final q", ", ".join(f"{c} = {x:.10g}" for c, x in zip(spec.coordinates, np.asarray(sol.q[-1]))))
-    table.add_row("final v", ", ".join(f"d{c} = {x:.10g}" for c, x in zip(spec.coordinates, np.asarray(sol.v[-1]))))
+    vnames = sol.velocities or tuple(f"d{c}" for c in spec.coordinates)
+    table.add_row("final v", ", ".join(f"{c} = {x:.10g}" for c, x in zip(vnames, np.asarray(sol.v[-1]))))
     table.add_row("energy", f"initial {e[0]:.12g}, max |E - E0| = {np.max(np.abs(e - e[0])):.3e}")
     table.add_row("constraint residual", f"max |mu(q)(v - Y)| = {np.max(np.abs(r)) if r.size else 0.0:.3e}")
     for name, d in drifts.items():
@@ -325,6 +351,9 @@ def run(
     ),
     x0: str | None = typer.Option(None, "--x0", help="Initial configuration a,b,... (default: the model's)."),
     v0: str | None = typer.Option(None, "--v0", help="Initial velocity a,b,... (default: the model's)."),
+    R0: str | None = typer.Option(
+        None, "--R0", help="Initial orientation on R^n x G, row-major r11,...,r33 (default: the model's, or identity)."
+    ),
     project_v0: bool = typer.Option(
         False, "--project-v0", help="Project v0 onto the constraints instead of rejecting it."
     ),
@@ -334,21 +363,25 @@ def run(
     """Integrate MODEL with METHOD and write the trajectory to a netCDF file.
 
     The file holds t(time), q(time, coordinate), v(time, velocity), p(time, velocity),
-    energy(time) and constraint_residual(time, constraint), with provenance attributes.
+    energy(time) and constraint_residual(time, constraint), and R(time, i, j) on R^n x G, with
+    provenance attributes.
     """
 
     def go():
         from gnipy.io import write_netcdf
 
         spec, params, q0, v0_ = _prepare(model, method, h, steps, t_final, set_, x0, v0, save_every)
+        R0_ = _parse_R0(spec, params, R0)
         _check_output(out)
-        sol, v0_used, seconds = _simulate(spec, params, method, q0, v0_, h, steps, t_final, project_v0, save_every)
-        exact = _exact_errors(spec, params, sol, q0, v0_used)
-        drifts = _invariant_drifts(spec, params, sol.q, sol.v)
-        attrs = _attrs_for(
-            spec, params, sol, q0, v0_used, exact, drifts,
-            {"save_every": int(save_every), "project_v0": int(project_v0), "command": "gni run"},
+        sol, v0_used, seconds = _simulate(
+            spec, params, method, q0, v0_, h, steps, t_final, project_v0, save_every, R0=R0_
         )
+        exact = _exact_errors(spec, params, sol, q0, v0_used)
+        drifts = _invariant_drifts(spec, params, sol.q, sol.v, sol.R)
+        extra = {"save_every": int(save_every), "project_v0": int(project_v0), "command": "gni run"}
+        if R0_ is not None:
+            extra["R0"] = list(R0_)
+        attrs = _attrs_for(spec, params, sol, q0, v0_used, exact, drifts, extra)
         write_netcdf(sol, out, attrs=attrs)
         _report("gni run", spec, params, sol, exact, drifts, seconds, out)
 

@@ -43,6 +43,7 @@ _METHODS: dict[str, tuple[str, Callable[[], object]]] = {
               _lazy(".integrators.paper_schemes", "Shake")),
     "rattle": ("nonholonomic RATTLE, explicit (nonholonomicRATTLE), affine §6.1 (order 2)",
                _lazy(".integrators.paper_schemes", "Rattle")),
+    "rat": ("reduced RATTLE algorithm (RAT) of §7.2 on R^n × G, constant metric (order 2)", _lazy(".integrators.reduced_rattle", "ReducedRattle")),
     "dla": ("discrete Lagrange–d'Alembert (Cortés–Martínez), midpoint constraint",
             _lazy(".integrators.comparators", "DiscreteLagrangeDAlembert")),
     "mp": ("McLachlan–Perlmutter reversible scheme (4.18)",

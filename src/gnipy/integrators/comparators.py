@@ -46,6 +46,16 @@ class DiscreteLagrangeDAlembert(Integrator):
     the second is the continuous constraint evaluated at the step's velocity and the step's midpoint
     (the documented base point of the discrete constraint). It starts from $p^+_0 = \\mathbb{G}(q_0)v_0$.
 
+    On $\\mathbb{R}^n \\times G$ (IMMM) the unknowns are $(x_{k+1}, \\sigma_k)$ with
+    $R_{k+1} = R_k\\tau(\\sigma_k)$, $FL^\\mp$ are the (RedLegTr) transforms of DESIGN.md §2, and the
+    discrete constraint is imposed at the step velocity $(\\Delta_k, \\sigma_k/h)$,
+    $\\Delta_k = (x_{k+1} - x_k)/h$, and the base point
+    $b_{k+1/2} = \\big(\\tfrac12(x_k + x_{k+1}),\\ R_k\\tau(\\sigma_k/2)\\big)$:
+
+    $$\\mu(b_{k+1/2})\\Big(\\big(\\Delta_k, \\sigma_k/h\\big) - Y(b_{k+1/2})\\Big) = 0$$
+
+    (for a reduced system only $\\tfrac12(x_k + x_{k+1})$ matters; $\\sigma_k = \\tau^{-1}(R_k^{-1}R_{k+1})$).
+
     What is reported at node k is $p = p^+_k$ and $v = \\mathbb{G}(q_k)^{-1}p^+_k$. Unlike the GNI's
     $\\bar v$, this velocity does **not** satisfy the continuous constraint $\\mu(q_k)(v - Y(q_k)) = 0$
     exactly (its residual is $O(h)$, the size of the impulse $\\mu(q_k)^T\\lambda_k$ that separates

@@ -2,10 +2,16 @@
 
 from . import (  # noqa: F401  (registration)
     chaplygin_sleigh,
+    chaplygin_sleigh_se2,
+    chaplygin_sphere,
+    chaplygin_top,
     contact_oscillator,
     knife_edge,
     nonholonomic_particle,
+    rolling_ball,
     rotating_table_ball,
+    suslov,
+    veselova,
     vertical_disk,
 )
 from .registry import ModelSpec, get_model, make_system, model_names, register

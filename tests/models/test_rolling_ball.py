@@ -1,0 +1,398 @@
+"""The rolling ball of paper §7.4 on R² × SO(3) (model `rolling-ball`).
+
+Every number here comes from the paper's explicit equations, the exact circular motion of the
+homogeneous ball, the conserved Jacobi integral, the continuous reference or the constraints. Compile
+time dominates: runs share one compilation wherever the number of steps (the only static size) and
+the system agree; h is traced, so e.g. (h = 0.1, 200 steps) and (h = 0.0125, 200 steps) share one.
+"""
+
+import jax.numpy as jnp
+import jax.tree_util as jtu
+import numpy as np
+import pytest
+import xarray as xr
+from typer.testing import CliRunner
+
+import gnipy
+from gnipy.cli import app
+from gnipy.lie_groups import SO3
+from gnipy.models import rolling_ball as rb
+from gnipy.retractions import Cayley
+from gnipy.spaces import Point
+
+T_CONV = 2.5
+HS = [0.1, 0.05, 0.025, 0.0125]  # 25, 50, 100, 200 steps
+H_EQ, N_EQ = 0.1, 200  # the five equations: 200 steps of h = 0.1 (shares the 200-step compile)
+
+
+def _np(x):
+    return np.asarray(x, dtype=np.float64)
+
+
+def fitted_order(hs, errors):
+    """Least-squares slope of log(error) against log(h)."""
+    return float(np.polyfit(np.log(hs), np.log(errors), 1)[0])
+
+
+def ex1():
+    s = gnipy.make_system("rolling-ball")
+    q0, v0 = gnipy.get_model("rolling-ball").initial_condition(s.parameters)
+    return s, q0, v0
+
+
+# --------------------------------------------------------------------------------------------
+# Independent numpy formulas: the Cayley map (Appendix) and the five equations of §7.4
+# --------------------------------------------------------------------------------------------
+def hat(w):
+    return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+
+
+def cay_inv(Q):
+    """σ with cay(σ) = Q: σ̂ = 2(Q − I)(Q + I)⁻¹."""
+    S = 2.0 * (Q - np.eye(3)) @ np.linalg.inv(Q + np.eye(3))
+    return np.array([S[2, 1] - S[1, 2], S[0, 2] - S[2, 0], S[1, 0] - S[0, 1]]) / 2.0
+
+
+def step_angular_velocities(R, h):
+    """ω_k = σ_k/h with σ_k = cay⁻¹(R_kᵀR_{k+1})."""
+    return np.array([cay_inv(R[k].T @ R[k + 1]) for k in range(len(R) - 1)]) / h
+
+
+def five_equations(p, x, y, w, h, *, order2=True, order1=True):
+    """The five explicit equations of §7.4 at the nodes k = 1 .. K-1 (rows), with their O(h) and
+    O(h²) terms, as printed (eqs 4 and 5 carry +Ωy_k and −Ωx_k: the correct sign of Π)."""
+    m, r, I1, I2, I3, W = (p[k] for k in ("m", "r", "I1", "I2", "I3", "Omega"))
+    I = np.array([I1, I2, I3])
+    a, b = w[1:], w[:-1]  # ω^k, ω^{k-1}
+    na, nb = (I * a**2).sum(1), (I * b**2).sum(1)  # ||ω||²_I
+    x1, x0, xm = x[2:], x[1:-1], x[:-2]
+    y1, y0, ym = y[2:], y[1:-1], y[:-2]
+    c1, c2 = float(order1), float(order2)
+    e1 = (m * r * (x1 - 2 * x0 + xm) / h + I2 * (a[:, 1] - b[:, 1])
+          + c1 * h / 2 * (I1 - I3) * (a[:, 0] * a[:, 2] + b[:, 0] * b[:, 2])
+          + c2 * h**2 / 4 * (a[:, 1] * na - b[:, 1] * nb))
+    e2 = (m * r * (y1 - 2 * y0 + ym) / h - I1 * (a[:, 0] - b[:, 0])
+          - c1 * h / 2 * (I3 - I2) * (a[:, 1] * a[:, 2] + b[:, 1] * b[:, 2])
+          - c2 * h**2 / 4 * (a[:, 0] * na - b[:, 0] * nb))
+    e3 = (I3 * (a[:, 2] - b[:, 2]) + c1 * h / 2 * (I2 - I1) * (a[:, 0] * a[:, 1] + b[:, 0] * b[:, 1])
+          + c2 * h**2 / 4 * (a[:, 2] * na - b[:, 2] * nb))
+    e4 = ((x1 - xm) / (2 * h) + W * y0 - r * (a[:, 1] + b[:, 1]) / 2
+          - c1 * r * h / 4 * (I1 - I3) / I2 * (a[:, 0] * a[:, 2] - b[:, 0] * b[:, 2])
+          - c2 * h**2 / (8 * I2) * r * (a[:, 1] * na + b[:, 1] * nb))
+    e5 = ((y1 - ym) / (2 * h) - W * x0 + r * (a[:, 0] + b[:, 0]) / 2
+          + c1 * r * h / 4 * (I3 - I2) / I1 * (a[:, 1] * a[:, 2] - b[:, 1] * b[:, 2])
+          + c2 * h**2 / (8 * I1) * r * (a[:, 0] * na + b[:, 0] * nb))
+    return np.stack([e1, e2, e3, e4, e5], axis=1)
+
+
+def relative_residuals(p, sol, h, **kw):
+    """Max |residual| of each equation: eqs 1–3 relative to the momentum scale max|p̄|, eqs 4–5
+    relative to the velocity scale max|v̄|."""
+    x, R = _np(sol.q), _np(sol.R)
+    w = step_angular_velocities(R, h)
+    res = np.max(np.abs(five_equations(p, x[:, 0], x[:, 1], w, h, **kw)), axis=0)
+    return res / np.array([np.max(np.abs(_np(sol.p)))] * 3 + [np.max(np.abs(_np(sol.v)))] * 2)
+
+
+# --------------------------------------------------------------------------------------------
+# Shared runs
+# --------------------------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def ex1_runs():
+    """GNI (Euler A, the paper's l_d) on example 1 for the h of HS up to T_CONV, plus the 200-step run."""
+    s, q0, v0 = ex1()
+    runs = {h: gnipy.simulate(s, "gni-euler-a", q0, v0, h=h, t_final=T_CONV) for h in HS}
+    runs["eq"] = gnipy.simulate(s, "gni-euler-a", q0, v0, h=H_EQ, steps=N_EQ)
+    return runs
+
+
+@pytest.fixture(scope="module")
+def ex2_runs():
+    s, q0, v0 = rb.example_2()
+    runs = {h: gnipy.simulate(s, "gni-euler-a", q0, v0, h=h, t_final=T_CONV) for h in HS}
+    runs["eq"] = gnipy.simulate(s, "gni-euler-a", q0, v0, h=H_EQ, steps=N_EQ)
+    runs["ref"] = gnipy.simulate(s, "reference", q0, v0, h=HS[-1], t_final=T_CONV)
+    return runs
+
+
+# --------------------------------------------------------------------------------------------
+# The model
+# --------------------------------------------------------------------------------------------
+def test_registered_with_documented_defaults():
+    assert "rolling-ball" in gnipy.model_names()
+    spec = gnipy.get_model("rolling-ball")
+    assert dict(spec.params) == pytest.approx({"m": 1, "r": 1, "I1": 2 / 3, "I2": 2 / 3, "I3": 2 / 3, "Omega": 1})
+    assert spec.initial_condition(spec.params) == ((1.0, 1.0), (1.0, 1.0, 0.0, 2.0, 0.0))
+    assert (spec.q0, spec.v0) == ((1.0, 1.0), (1.0, 1.0, 0.0, 2.0, 0.0))
+    assert np.array_equal(np.reshape(spec.R0, (3, 3)), np.eye(3))
+    assert spec.coordinates == ("x", "y") and set(spec.invariants) == {"jacobi", "spin"}
+    s = spec.system()
+    assert isinstance(s.group, SO3) and isinstance(s.space.retraction, Cayley) and s.n == 2 and s.dim == 5
+    assert not s.depends_on_orientation and s.velocities == ("dx", "dy", "omega1", "omega2", "omega3")
+    # the docstring says which ball this is
+    notes = " ".join(spec.notes.split())
+    assert "chaplygin-sphere" in notes and "not** the physical Chaplygin sphere" in notes
+    assert "simplified" in notes and "Cayley" in notes
+
+
+@pytest.mark.parametrize("example", [1, 2])
+def test_metric_constraints_and_initial_conditions(example):
+    if example == 1:
+        s, q0, v0 = ex1()
+    else:
+        s, q0, v0 = rb.example_2()
+        assert rb.EXAMPLE_2["params"] == {"m": 3.0, "r": 1.0, "I1": 1.0, "I2": 1.1, "I3": 1.2, "Omega": 0.2}
+        assert tuple(q0) == (1.0, 0.0) and tuple(v0[2:]) == (-0.2, 0.0, 0.4)
+        # (ẋ₀, ẏ₀) = (rω₂ − Ωy₀, Ωx₀ − rω₁) = (0, 0.2 + 0.2)
+        assert v0[:2] == pytest.approx((0.0, 0.4), abs=1e-15)
+    p = s.parameters
+    m, r, W = p["m"], p["r"], p["Omega"]
+    b0, _ = s.check(q0, v0)  # mechanical type, rank, constraints
+    assert np.array_equal(_np(b0.R), np.eye(3))
+    b = Point(jnp.asarray([0.3, -0.7]), jnp.asarray(SO3().exp(jnp.array([0.4, -0.2, 1.0]))))
+    np.testing.assert_allclose(_np(s.metric(b)), np.diag([m, m, p["I1"], p["I2"], p["I3"]]), atol=1e-15)
+    np.testing.assert_allclose(_np(s.mu(b)), [[1, 0, 0, -r, 0], [0, 1, r, 0, 0]], atol=0)
+    np.testing.assert_allclose(_np(s.Pi(b)), [m * W * 0.7, m * W * 0.3, 0, 0, 0], atol=1e-15)  # (−mΩy, mΩx)
+    assert s.has_constant_metric(b0)
+
+
+def test_exact_solution_circle_and_invariants():
+    spec = gnipy.get_model("rolling-ball")
+    p = dict(spec.params)
+    q0, v0 = spec.initial_condition(p)
+    t = np.linspace(0.0, 7.0, 29)
+    q, v = rb.exact(p, q0, v0, t)
+    assert q.shape == (29, 2) and v.shape == (29, 5)
+    assert q[0] == pytest.approx(q0, abs=1e-15) and v[0] == pytest.approx(v0, abs=1e-15)
+    d = 1e-5
+    qp, _ = rb.exact(p, q0, v0, t + d)
+    qm, _ = rb.exact(p, q0, v0, t - d)
+    assert (qp - qm) / (2 * d) == pytest.approx(v[:, :2], abs=1e-8)
+    # the contact point runs round a circle at rate κ = IΩ/(I + mr²) (2/5 here)
+    kappa = p["I1"] * p["Omega"] / (p["I1"] + p["m"] * p["r"] ** 2)
+    assert kappa == pytest.approx(0.4)
+    z, dz = q[:, 0] + 1j * q[:, 1], v[:, 0] + 1j * v[:, 1]
+    centre = complex(*q0) + 1j * complex(*v0[:2]) / kappa
+    assert np.abs(z - centre) == pytest.approx(abs(complex(*v0[:2])) / kappa, rel=1e-13)
+    assert dz == pytest.approx(complex(*v0[:2]) * np.exp(1j * kappa * t), abs=1e-14)
+    # ω₁, ω₂ from the constraints; ω₃ constant; J conserved
+    s = spec.system()
+    for qi, vi in zip(q, v):
+        assert np.max(np.abs(_np(s.constraint_residual(Point(jnp.asarray(qi), jnp.eye(3)), jnp.asarray(vi))))) < 1e-13
+    assert v[:, 4] == pytest.approx(v0[4], abs=0)
+    J = rb.jacobi_integral(p, q, v)
+    assert np.max(np.abs(J - J[0])) < 1e-13
+    # the Jacobi-type integral is the physical one: E − mΩ(xẏ − yẋ), E = ½m|ż|² + ½Σ Iᵢωᵢ²
+    E = 0.5 * p["m"] * np.abs(dz) ** 2 + 0.5 * np.sum(np.array([p["I1"], p["I2"], p["I3"]]) * v[:, 2:] ** 2, axis=1)
+    assert J == pytest.approx(E - p["m"] * p["Omega"] * (q[:, 0] * v[:, 1] - q[:, 1] * v[:, 0]), rel=1e-15)
+    # no closed form (None) and no spin invariant (NaN) for unequal moments
+    p2 = rb.EXAMPLE_2["params"]
+    assert rb.exact(p2, (1.0, 0.0), (0.0, 0.4, -0.2, 0.0, 0.4), t) is None
+    assert np.isnan(spec.invariants["spin"](p2, q[0], v[0]))
+    assert spec.invariants["spin"](dict(p2, I2=1.0), q[0], v[0]) == v[0, 4]
+
+
+# --------------------------------------------------------------------------------------------
+# The five explicit equations of §7.4
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("example", [1, 2])
+def test_gni_satisfies_the_five_equations_of_section_7_4(example, ex1_runs, ex2_runs):
+    """The GNI with the paper's l_d = h l(q_k, Δ, ω_k) (Euler A) and Cayley: the five equations of
+    §7.4, with their O(h) and O(h²) terms, hold to round-off at every node."""
+    sol = (ex1_runs if example == 1 else ex2_runs)["eq"]
+    p = gnipy.get_model("rolling-ball").params if example == 1 else rb.EXAMPLE_2["params"]
+    R = _np(sol.R)
+    assert len(R) == N_EQ + 1 and np.max(np.abs(np.einsum("kji,kjl->kil", R, R) - np.eye(3))) < 1e-13
+    res = relative_residuals(p, sol, H_EQ)
+    assert np.max(res) <= 1e-12, res
+    # the check is sensitive: without the O(h²) terms the equations fail by far more
+    res2 = relative_residuals(p, sol, H_EQ, order2=False)
+    nonzero = [0, 1, 3, 4] if example == 1 else [0, 1, 2, 3, 4]  # ω₃ = 0 in example 1
+    assert np.min(res2[nonzero]) > 1e-6, res2
+    if example == 2:  # unequal moments: the O(h) gyroscopic terms matter too
+        res1 = relative_residuals(p, sol, H_EQ, order1=False)
+        assert np.min(res1[[0, 1, 3, 4]]) > 1e-5, res1
+
+
+def _negated_affine(Omega, x):
+    return -rb._affine(Omega, x)
+
+
+def test_printed_sign_of_RBb_violates_the_constraint_equations():
+    """(RBb) as printed, Q*(FL⁻ + FL⁺) + 2Q*Π = 0, is the GNI with Π → −Π (a System with Y negated):
+    its trajectory still satisfies equations 1–3 (the P* part) but fails the constraint equations
+    4 and 5 by O(1)."""
+    s, q0, v0 = rb.example_2()
+    p = rb.EXAMPLE_2["params"]
+    flipped = gnipy.System(s.lagrangian, s.constraints, jtu.Partial(_negated_affine, jnp.asarray(p["Omega"])),
+                           n=2, group=SO3(), retraction="cayley", name="rolling-ball-printed-RBb")
+    sol = gnipy.simulate(flipped, "gni-euler-a", q0, v0, h=H_EQ, steps=40, project_v0=True)
+    res = relative_residuals(p, sol, H_EQ)
+    assert np.max(res[:3]) <= 1e-12, res
+    assert np.min(res[3:]) > 0.1, res  # e.g. eq 4 is off by 2Ωy_k
+
+
+def test_the_four_discrete_lagrangian_families_coincide(ex2_runs):
+    """With V = 0 and a constant metric, Euler A, Euler B, trapezoid and midpoint are one l_d:
+    equal values and Legendre transforms at random steps, and equal GNI trajectories."""
+    s, q0, v0 = rb.example_2()
+    space = s.space
+    families = [gnipy.EulerA(), gnipy.EulerB(), gnipy.Trapezoid(), gnipy.Midpoint()]
+    rng = np.random.default_rng(3)
+    h = 0.1
+    for _ in range(3):
+        b0 = Point(jnp.asarray(rng.standard_normal(2)), SO3().exp(jnp.asarray(rng.standard_normal(3))))
+        z = jnp.asarray(rng.standard_normal(5))
+        vals = [float(ld(s, b0, z, h)) for ld in families]
+        fm = [_np(space.legendre_minus(lambda b, zz, ld=ld: ld(s, b, zz, h), b0, z)) for ld in families]
+        fp = [_np(space.legendre_plus(lambda b, zz, ld=ld: ld(s, b, zz, h), b0, z)) for ld in families]
+        for i in range(1, 4):
+            assert vals[i] == pytest.approx(vals[0], rel=1e-14)
+            np.testing.assert_allclose(fm[i], fm[0], rtol=0, atol=1e-14)
+            np.testing.assert_allclose(fp[i], fp[0], rtol=0, atol=1e-14)
+    # trajectories: the midpoint (the family evaluated furthest from b_k) against Euler A
+    # (the trapezoid is held equal to the reduced RATTLE in tests/integrators/test_reduced_rattle.py)
+    ref = ex2_runs["eq"]
+    sol = gnipy.simulate(s, gnipy.GNI(gnipy.Midpoint()), q0, v0, h=H_EQ, steps=N_EQ)
+    assert np.max(np.abs(_np(sol.q) - _np(ref.q))) <= 1e-12
+    assert np.max(np.abs(_np(sol.v) - _np(ref.v))) <= 1e-12
+    assert np.max(np.abs(_np(sol.R) - _np(ref.R))) <= 1e-12
+
+
+# --------------------------------------------------------------------------------------------
+# Convergence
+# --------------------------------------------------------------------------------------------
+def test_example_1_converges_to_the_exact_circular_motion(ex1_runs):
+    """Order 2 in position, angular velocity and energy: with V = 0 and a constant metric the
+    paper's Euler A l_d is the trapezoid l_d (symmetric, and τ(σ)τ(−σ) = e), so this GNI is the
+    reduced RATTLE, a symmetric method, and its order is even."""
+    s, q0, v0 = ex1()
+    p = s.parameters
+    eq, ew, eE = [], [], []
+    for h in HS:
+        sol = ex1_runs[h]
+        qe, ve = rb.exact(p, q0, v0, _np(sol.t))
+        eq.append(np.max(np.abs(_np(sol.q) - qe)))
+        ew.append(np.max(np.abs(_np(sol.v)[:, 2:] - ve[:, 2:])))
+        E = 0.5 * p["m"] * (ve[:, 0] ** 2 + ve[:, 1] ** 2) + 0.5 * p["I1"] * np.sum(ve[:, 2:] ** 2, axis=1)
+        eE.append(np.max(np.abs(_np(sol.energy) - E)))
+        assert np.max(np.abs(_np(sol.constraint_residual))) < 1e-13
+    assert eq[-1] < 1e-4
+    for errors in (eq, ew, eE):
+        assert fitted_order(HS, errors) == pytest.approx(2.0, abs=0.15), (eq, ew, eE)
+
+
+def test_example_2_converges_to_the_reference_and_J(ex2_runs):
+    s, q0, v0 = rb.example_2()
+    p = s.parameters
+    ref = ex2_runs["ref"]
+    J_ref = rb.jacobi_integral(p, ref.q, ref.v)
+    assert np.max(np.abs(J_ref - J_ref[0])) <= 1e-10  # the reference conserves J
+    assert np.max(np.abs(_np(ref.constraint_residual))) <= 1e-12
+    J0 = rb.jacobi_integral(p, q0, v0)
+    assert J_ref[0] == pytest.approx(J0, rel=1e-15)
+    eq, ev, eR, eJ = [], [], [], []
+    for h in HS:
+        sol = ex2_runs[h]
+        every = round(h / HS[-1])  # the reference is saved on the finest grid
+        eq.append(np.max(np.abs(_np(sol.q) - _np(ref.q)[::every])))
+        ev.append(np.max(np.abs(_np(sol.v) - _np(ref.v)[::every])))
+        eR.append(np.max(np.abs(_np(sol.R) - _np(ref.R)[::every])))
+        eJ.append(np.max(np.abs(rb.jacobi_integral(p, sol.q, sol.v) - J0)))
+    for errors in (eq, ev, eR, eJ):
+        assert fitted_order(HS, errors) == pytest.approx(2.0, abs=0.15), (eq, ev, eR, eJ)
+    assert all(np.diff(eJ) < 0)
+
+
+# --------------------------------------------------------------------------------------------
+# Discrete Lagrange–d'Alembert on R² × SO(3)
+# --------------------------------------------------------------------------------------------
+def test_dla_discrete_constraint_and_convergence():
+    """DLA (midpoint l_d) holds its discrete constraint μ(b_{k+½})((Δ, σ/h) − Y(b_{k+½})) = 0 at
+    every step to round-off and converges to the exact motion of example 1 (order 2 in position)."""
+    s, q0, v0 = ex1()
+    p = s.parameters
+    hs = HS[:3]
+    errors = []
+    for h in hs:
+        sol = gnipy.simulate(s, "dla", q0, v0, h=h, t_final=T_CONV)
+        x, R = _np(sol.q), _np(sol.R)
+        sigma = np.array([cay_inv(R[k].T @ R[k + 1]) for k in range(len(R) - 1)])
+        vel = np.concatenate([np.diff(x, axis=0) / h, sigma / h], axis=1)
+        xm = 0.5 * (x[1:] + x[:-1])
+        mu = np.array([[1.0, 0, 0, -p["r"], 0], [0, 1.0, p["r"], 0, 0]])
+        Y = np.stack([-p["Omega"] * xm[:, 1], p["Omega"] * xm[:, 0]] + [np.zeros(len(xm))] * 3, axis=1)
+        assert np.max(np.abs((vel - Y) @ mu.T)) <= 1e-12 * np.max(np.abs(vel))
+        qe, _ = rb.exact(p, q0, v0, _np(sol.t))
+        errors.append(np.max(np.abs(x - qe)))
+    assert fitted_order(hs, errors) == pytest.approx(2.0, abs=0.15), errors
+    assert errors[-1] < 5e-3
+
+
+# --------------------------------------------------------------------------------------------
+# The command line
+# --------------------------------------------------------------------------------------------
+runner = CliRunner()
+
+
+def _invoke(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def test_cli_run_writes_orientations(tmp_path):
+    out = tmp_path / "f.nc"
+    # 50 steps: shares the compilation of the h = 0.05 convergence run
+    res = _invoke("run", "rolling-ball", "--method", "gni-euler-a", "--h", "0.1", "--steps", "50", "--out", out)
+    assert res.exit_code == 0, res.output
+    assert "error vs exact" in res.output and "omega3" in res.output
+    ds = xr.load_dataset(out)
+    R = ds["R"]
+    assert R.dims == ("time", "i", "j") and R.shape == (51, 3, 3)
+    R = R.values
+    assert np.max(np.abs(np.einsum("kji,kjl->kil", R, R) - np.eye(3))) < 1e-13
+    assert np.linalg.det(R) == pytest.approx(np.ones(51), abs=1e-13)
+    assert list(ds["coordinate"].values) == ["x", "y"] and ds.sizes["velocity"] == 5
+    np.testing.assert_array_equal(ds.attrs["R0"], np.eye(3).ravel())
+    assert ds.attrs["max_error_q_vs_exact"] < 1e-2 and ds.attrs["invariant_drift_spin"] < 1e-13
+
+    # --x0 (2 values), --v0 (5 values) and --R0 (9 values): on the constraints at x0
+    out2 = tmp_path / "g.nc"
+    Rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    res = _invoke("run", "rolling-ball", "--method", "gni-euler-a", "--h", "0.05", "--steps", "50",
+                  "--x0", "0.5,-1", "--v0", "0.5,1.5,-1,-0.5,0.3", "--R0", ",".join(map(str, Rz.ravel())),
+                  "--out", out2)
+    assert res.exit_code == 0, res.output
+    ds = xr.load_dataset(out2)
+    np.testing.assert_array_equal(ds["q"].values[0], [0.5, -1.0])
+    np.testing.assert_array_equal(ds["v"].values[0], [0.5, 1.5, -1.0, -0.5, 0.3])
+    np.testing.assert_array_equal(ds["R"].values[0], Rz)
+    assert np.max(np.abs(ds["constraint_residual"].values)) < 1e-13
+
+
+@pytest.mark.parametrize(
+    "args, option",
+    [
+        (["--x0", "1,1,0"], "--x0"),
+        (["--x0", "1"], "--x0"),
+        (["--v0", "1,1"], "--v0"),
+        (["--v0", "1,1,0,2"], "--v0"),
+        (["--v0", "1,1,0,2,0,0"], "--v0"),
+        (["--v0", "1,1,0,0,0"], "--v0"),  # off the constraints
+        (["--R0", "1,0,0,0,1,0,0,0"], "--R0"),
+        (["--R0", "1,0,0,0,1,0,0,0,2"], "--R0"),  # not a rotation
+        (["--R0", "1,0,0,0,-1,0,0,0,-1,0"], "--R0"),
+    ],
+)
+def test_cli_wrong_lengths_give_a_clean_error(args, option, tmp_path):
+    res = _invoke("run", "rolling-ball", "--h", "0.1", "--steps", "5", *args, "--out", tmp_path / "x.nc")
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output
+    errors = [line for line in res.output.splitlines() if line.startswith("Error")]
+    assert len(errors) == 1 and errors[0].startswith(f"Error: {option}:"), res.output
+    assert not (tmp_path / "x.nc").exists()
+
+
+def test_cli_R0_on_a_model_without_orientation(tmp_path):
+    res = _invoke("run", "vertical-disk", "--h", "0.1", "--steps", "5", "--R0", "1,0,0,0,1,0,0,0,1",
+                  "--out", tmp_path / "x.nc")
+    assert res.exit_code == 2 and "Error: --R0:" in res.output and "Traceback" not in res.output
