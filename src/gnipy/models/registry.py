@@ -27,8 +27,10 @@ class ModelSpec:
         R0: the documented initial orientation on R^n × G, flattened row-major (None: identity).
         default_ic: optional `default_ic(params) -> (q0, v0)` when the default initial condition
             depends on the parameters (it must satisfy the constraints).
-        exact: optional `exact(params, q0, v0, t) -> (q, v)` (t an array; returns arrays (T, n)).
-        invariants: conserved quantities `f(params, q, v) -> scalar` by name.
+        exact: optional `exact(params, q0, v0, t) -> (q, v)` (t an array; returns arrays (T, n)
+            and (T, N)); it may return None for parameters without a closed form.
+        invariants: conserved quantities by name: `f(params, q, v) -> scalar`, or
+            `f(params, q, v, R) -> scalar` for models whose functions depend on the orientation.
         notes: longer documentation.
     """
 
