@@ -118,10 +118,12 @@ def test_listings_version_and_help():
         assert name in res.output
     res = invoke("--version")
     assert res.exit_code == 0 and gnipy.__version__ in res.output
-    for cmd in [[], ["run"], ["demo"], ["models"], ["methods"]]:
+    for cmd in [[], ["run"], ["demo"], ["models"], ["methods"], ["convergence"], ["info"]]:
         res = invoke(*cmd, "--help")
         assert res.exit_code == 0 and "Usage" in res.output, cmd
     assert "--t-final" in invoke("run", "--help").output
+    assert "--config" in invoke("run", "--help").output and "--plot" in invoke("run", "--help").output
+    assert "--h-max" in invoke("convergence", "--help").output
 
 
 # --------------------------------------------------------------------------------------------
@@ -158,11 +160,17 @@ BAD = [
     ([*BASE, "--v0", "0,1,1,1"], "--v0"),  # off the constraints (without --project-v0)
     ([*BASE, "--x0", "0,0,1.5,0"], "--v0"),  # default v0 is off the constraints at this heading
     ([*BASE, "--save-every", "0"], "--save-every"),
+    ([*BASE, "--plot", "{tmp}/figure.unknown-format"], "--plot"),
+    ([*BASE, "--plot", "{tmp}/no-such-dir/figure.png"], "--plot"),
+    ([*BASE, "--config", "{tmp}/no-such-config.toml"], "--config"),
+    (["run", "--h", "0.1", "--steps", "10"], "MODEL"),
+    (["run", MODEL, "--steps", "10"], "--h"),
 ]
 
 
 @pytest.mark.parametrize("args, option", BAD, ids=[" ".join(a[1:]) for a, _ in BAD])
 def test_bad_input(args, option, tmp_path):
+    args = [str(a).replace("{tmp}", str(tmp_path)) for a in args]
     res = invoke(*args, "--out", tmp_path / "bad.nc")
     assert res.exit_code == 2, res.output
     assert "Traceback" not in res.output
@@ -231,3 +239,231 @@ def test_solver_and_method_errors(exc, code, option, tmp_path, monkeypatch):
     errors = _error_lines(res.output)
     assert len(errors) == 1 and option in errors[0]
     assert os.listdir(tmp_path) == []
+
+
+# --------------------------------------------------------------------------------------------
+# gni run --plot and --config
+# --------------------------------------------------------------------------------------------
+def _same_run(a: xr.Dataset, b: xr.Dataset):
+    """The same data and the same run attributes (not the creation time or the config file)."""
+    for name in a.data_vars:
+        np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+    skip = {"created", "config_file"}
+    assert {k for k in a.attrs if k not in skip} == {k for k in b.attrs if k not in skip}
+    for k in a.attrs:
+        if k not in skip:
+            np.testing.assert_array_equal(a.attrs[k], b.attrs[k], err_msg=k)
+
+
+def test_run_plot_writes_png(tmp_path):
+    out, png = tmp_path / "run.nc", tmp_path / "run.png"
+    res = invoke(*BASE, "--out", out, "--plot", png)
+    assert res.exit_code == 0, res.output
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
+    assert f"written: {out}, {png}" in res.output
+
+
+def test_config_file_gives_the_same_run_as_options(tmp_path):
+    x0, v0 = "0.5,-1,0,0", "1,0,0,1"
+    res = invoke(*BASE, "--method", "gni-trapezoid", "--set", "r=1", "--x0", x0, "--v0", v0, "--save-every", "2",
+                 "--out", tmp_path / "options.nc")
+    assert res.exit_code == 0, res.output
+    (tmp_path / "run.toml").write_text(
+        '# a run of the vertical disk\n'
+        'model = "vertical-disk"\nmethod = "gni-trapezoid"\nh = 0.1\nsteps = 10\n'
+        'set = { r = 1 }\nx0 = [0.5, -1, 0, 0]\nv0 = "1,0,0,1"\nsave-every = 2\n'
+        'out = "config.nc"\nplot = "config.png"\n'
+    )
+    res = invoke("run", "--config", tmp_path / "run.toml")
+    assert res.exit_code == 0, res.output
+    # relative paths in the file are relative to the file's directory
+    assert (tmp_path / "config.png").is_file()
+    a, b = xr.load_dataset(tmp_path / "options.nc"), xr.load_dataset(tmp_path / "config.nc")
+    _same_run(a, b)
+    assert b.attrs["config_file"] == str(tmp_path / "run.toml")
+    # keys with underscores and `set` as a list of strings work the same
+    (tmp_path / "run2.toml").write_text(
+        'model = "vertical-disk"\nh = 0.1\nt_final = 1.0\nset = ["r=1"]\nx0 = [0.5, -1, 0, 0]\n'
+        'v0 = [1, 0, 0, 1]\nsave_every = 2\nproject_v0 = false\nout = "config2.nc"\n'
+    )
+    res = invoke("run", "--config", tmp_path / "run2.toml")
+    assert res.exit_code == 0, res.output
+    _same_run(a, xr.load_dataset(tmp_path / "config2.nc"))
+
+
+def test_command_line_overrides_config(tmp_path):
+    (tmp_path / "run.toml").write_text(
+        'model = "vertical-disk"\nmethod = "no-such-method"\nh = 0.1\nsteps = 3\n'
+        'x0 = [9, 9, 0, 0]\nset = { r = 1, m = 2 }\nout = "from-config.nc"\n'
+    )
+    out = tmp_path / "from-cli.nc"
+    res = invoke("run", "--config", tmp_path / "run.toml", "--method", "gni-trapezoid", "--t-final", "1",
+                 "--x0", "1,2,0,0", "--set", "m=1", "--out", out)
+    assert res.exit_code == 0, res.output
+    assert out.is_file() and not (tmp_path / "from-config.nc").exists()
+    ds = xr.load_dataset(out)
+    assert ds.attrs["method"] == "gni-trapezoid" and ds.attrs["steps"] == 10  # --t-final beats steps
+    np.testing.assert_array_equal(ds.attrs["q0"], [1.0, 2.0, 0.0, 0.0])
+    assert ds.attrs["param_m"] == 1.0 and ds.attrs["param_r"] == 1.0  # --set wins per name
+
+
+CONFIG_ERRORS = [
+    ('model = "vertical-disk"\nh = [0.1\n', ["run.toml", "not valid TOML"]),
+    ('model = "vertical-disk"\nh = 0.1 0.2\n', ["run.toml", "not valid TOML", "line 2"]),
+    ('model = "vertical-disk"\nh = 0.1\nsteps = 10\nstep-size = 0.1\n', ["run.toml", "'step-size'", "unknown key"]),
+    ('model = "vertical-disk"\nh = "fast"\nsteps = 10\n', ["run.toml", "'h'", "must be a number"]),
+    ('model = "vertical-disk"\nh = 0.1\nsteps = 10.5\n', ["run.toml", "'steps'", "must be an integer"]),
+    ('model = "vertical-disk"\nh = 0.1\nsteps = 10\nproject-v0 = 1\n', ["'project-v0'", "true or false"]),
+    ('model = "vertical-disk"\nh = 0.1\nsteps = 10\nx0 = [1, "a", 0, 0]\n', ["'x0'", "list of numbers"]),
+    ('model = "vertical-disk"\nh = 0.1\nsteps = 10\nset = { r = "big" }\n', ["'set.r'", "must be a number"]),
+    ('model = "vertical-disk"\nh = 0.1\nsteps = 10\nx0 = [1, 2]\n', ["--x0", "'x0' in", "run.toml"]),
+    ('model = "vertical-disk"\nh = -1\nsteps = 10\n', ["--h", "'h' in", "run.toml"]),
+    ('model = "no-such-model"\nh = 0.1\nsteps = 10\n', ["MODEL", "'model' in", "run.toml"]),
+    ('[model]\nname = "vertical-disk"\n', ["'model'", "must be a string"]),
+    (b'model = "\xff"\n', ["run.toml", "not valid TOML"]),
+]
+
+
+@pytest.mark.parametrize("text, words", CONFIG_ERRORS, ids=[f"config-{i}" for i in range(len(CONFIG_ERRORS))])
+def test_bad_config_file(text, words, tmp_path):
+    path = tmp_path / "run.toml"
+    path.write_bytes(text if isinstance(text, bytes) else text.encode())
+    res = invoke("run", "--config", path, "--out", tmp_path / "x.nc")
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output
+    errors = _error_lines(res.output)
+    assert len(errors) == 1, res.output
+    for word in words:
+        assert word in errors[0], errors[0]
+    assert sorted(os.listdir(tmp_path)) == ["run.toml"]
+
+
+# --------------------------------------------------------------------------------------------
+# gni info
+# --------------------------------------------------------------------------------------------
+def test_info_summarizes_a_run_file(tmp_path):
+    out = tmp_path / "run.nc"
+    assert invoke(*BASE, "--out", out).exit_code == 0
+    res = invoke("info", out)
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    for word in ["vertical-disk", "I_rot=1", "gni-trapezoid", "h = 0.1", "10 steps", "t = 0 .. 1", "11 saved nodes",
+                 "variable q", "time=11, coordinate=4", "x, y, phi, theta", "max |E - E0|",
+                 "max |mu(q)(v - Y)|", gnipy.__version__, "created", "gni run", "p+ = G v0"]:
+        assert word in text, word
+    ds = xr.load_dataset(out)
+    drift = np.max(np.abs(ds["energy"].values - ds["energy"].values[0]))
+    assert f"{drift:.3e}" in text
+
+
+@pytest.mark.parametrize("what", ["missing", "junk", "directory"])
+def test_info_on_unreadable_file(what, tmp_path):
+    path = tmp_path / "f.nc"
+    if what == "junk":
+        path.write_text("not a netCDF file")
+    elif what == "directory":
+        path.mkdir()
+    res = invoke("info", path)
+    assert res.exit_code == 2 and "Traceback" not in res.output
+    errors = _error_lines(res.output)
+    assert len(errors) == 1 and str(path) in errors[0]
+
+
+def test_files_carry_units_and_plot_from_the_file(tmp_path):
+    from gnipy import plots
+
+    out = tmp_path / "run.nc"
+    assert invoke(*BASE, "--out", out).exit_code == 0
+    with xr.open_dataset(out) as ds:
+        assert ds["t"].attrs["units"] == "time units" and ds["energy"].attrs["units"] == "energy units"
+        assert "nondimensional" in ds.attrs["units_convention"] and ds.attrs["jax_version"]
+        plots.plot_solution(ds, tmp_path / "again.png")
+    assert (tmp_path / "again.png").stat().st_size > 10_000
+
+
+# --------------------------------------------------------------------------------------------
+# gni convergence
+# --------------------------------------------------------------------------------------------
+def _orders(output):
+    """`{method: order}` from the lines `order METHOD: VALUE`."""
+    out = {}
+    for line in output.splitlines():
+        if line.startswith("order ") and ":" in line:
+            name, _, value = line[len("order "):].partition(":")
+            out[name.strip()] = float(value) if value.strip() != "n/a" else float("nan")
+    return out
+
+
+def test_convergence_against_the_exact_solution(tmp_path):
+    """Vertical disk (V = 0, constant metric): every discrete Lagrangian family gives the same
+    discrete Lagrangian ½ΔᵀMΔ, so the GNI with Euler A is the GNI with the trapezoid: order 2."""
+    res = invoke("convergence", MODEL, "--methods", "gni-trapezoid,gni-euler-a", "--h-max", "0.1",
+                 "--h-min", "0.0125", "--count", "4", "--t-final", "1", "--out", tmp_path / "study")
+    assert res.exit_code == 0, res.output
+    assert "exact solution" in res.output
+    orders = _orders(res.output)
+    assert set(orders) == {"gni-trapezoid", "gni-euler-a"}
+    for name, order in orders.items():
+        assert abs(order - 2.0) < 0.15, (name, order)
+    import csv
+
+    with open(tmp_path / "study" / "convergence.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 8 and {r["yardstick"] for r in rows} == {"exact"}
+    assert sorted({int(r["steps"]) for r in rows}) == [10, 20, 40, 80]
+    for r in rows:  # h adjusted to a whole number of steps
+        assert float(r["h"]) * int(r["steps"]) == pytest.approx(1.0, rel=1e-14)
+    assert (tmp_path / "study" / "convergence.png").read_bytes()[:4] == b"\x89PNG"
+    # the study's error at h = 0.1 is the error of `gni run` at h = 0.1
+    out = tmp_path / "run.nc"
+    assert invoke(*BASE, "--out", out).exit_code == 0
+    ds = xr.load_dataset(out)
+    spec = gnipy.get_model(MODEL)
+    qe, _ = spec.exact(dict(spec.params), ds.attrs["q0"], ds.attrs["v0"], ds["t"].values)
+    err = np.max(np.abs(ds["q"].values[-1] - qe[-1]))
+    row = next(r for r in rows if r["method"] == "gni-trapezoid" and r["steps"] == "10")
+    assert float(row["error"]) == pytest.approx(err, rel=1e-10, abs=1e-15)
+
+
+def test_convergence_against_the_reference(tmp_path):
+    res = invoke("convergence", "nonholonomic-particle", "--methods", "gni-euler-b", "--h-max", "0.1",
+                 "--h-min", "0.025", "--count", "3", "--t-final", "1", "--out", tmp_path)
+    assert res.exit_code == 0, res.output
+    assert "continuous reference" in res.output
+    order = _orders(res.output)["gni-euler-b"]
+    assert abs(order - 1.0) < 0.15, order
+    assert (tmp_path / "convergence.csv").is_file() and (tmp_path / "convergence.png").is_file()
+
+
+CONVERGENCE_BAD = [
+    (["--count", "1"], "--count"),
+    (["--h-min", "0.2", "--h-max", "0.1"], "--h-min"),
+    (["--h-max", "0"], "--h-max"),
+    (["--h-max", "nan"], "--h-max"),
+    (["--h-max", "2", "--t-final", "1"], "--h-max"),
+    (["--h-max", "0.1", "--h-min", "0.099", "--count", "3"], "--count"),
+    (["--t-final", "-1"], "--t-final"),
+    (["--methods", "gni-trapezoid,nope"], "--methods"),
+    (["--methods", "reference"], "--methods"),
+    (["--methods", ","], "--methods"),
+    (["--methods", "rat"], "--methods"),  # needs a group part
+    (["--error", "energy"], "--error"),
+    (["--set", "r=abc"], "--set"),
+    (["--x0", "1,2"], "--x0"),
+]
+
+
+@pytest.mark.parametrize("args, option", CONVERGENCE_BAD, ids=[" ".join(a) for a, _ in CONVERGENCE_BAD])
+def test_convergence_bad_input(args, option, tmp_path):
+    res = invoke("convergence", MODEL, *args, "--out", tmp_path / "study")
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output
+    errors = _error_lines(res.output)
+    assert len(errors) == 1 and option in errors[0], res.output
+    assert not (tmp_path / "study").exists()
+
+
+def test_convergence_out_is_a_file(tmp_path):
+    (tmp_path / "f").write_text("")
+    res = invoke("convergence", MODEL, "--out", tmp_path / "f")
+    assert res.exit_code == 2 and "--out" in _error_lines(res.output)[0]

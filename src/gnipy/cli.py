@@ -1,7 +1,12 @@
-"""The `gni` command line: run a model with any method and write netCDF; the demo; listings.
+"""The `gni` command line: run a model with any method and write netCDF; convergence studies;
+summaries of result files; the demo; listings.
 
     gni run MODEL --method METHOD --h H (--steps N | --t-final T) [--set NAME=VALUE ...]
-            [--x0 a,b,...] [--v0 a,b,...] [--R0 r11,...,r33] [--project-v0] [--save-every K] --out FILE.nc
+            [--x0 a,b,...] [--v0 a,b,...] [--R0 r11,...,r33] [--project-v0] [--save-every K]
+            [--plot FILE.png] [--config RUN.toml] --out FILE.nc
+    gni convergence MODEL --methods M1,M2 --h-max A --h-min B --count N [--t-final T]
+            [--set NAME=VALUE ...] [--x0 ...] [--v0 ...] [--R0 ...] [--error state|q|v] --out DIR
+    gni info FILE.nc
     gni demo [--out FILE.nc]
     gni models
     gni methods
@@ -100,6 +105,33 @@ def _console():
     return Console(highlight=False, soft_wrap=True)
 
 
+def _progress(*columns):
+    """A rich progress display on stderr that disappears when done (and shows nothing at all when
+    stderr is not a terminal, e.g. in scripts and tests)."""
+    from rich.console import Console
+    from rich.progress import Progress, SpinnerColumn, TextColumn, TimeElapsedColumn
+
+    cols = columns or (SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn())
+    console = Console(stderr=True)
+    return Progress(*cols, console=console, transient=True, disable=not console.is_terminal)
+
+
+class _busy:
+    """`with _busy("what"):` a spinner with elapsed time while a long call runs."""
+
+    def __init__(self, text: str):
+        self.text = text
+
+    def __enter__(self):
+        self.progress = _progress()
+        self.progress.__enter__()
+        self.progress.add_task(self.text, total=None)
+        return self.progress
+
+    def __exit__(self, *exc):
+        return self.progress.__exit__(*exc)
+
+
 # --------------------------------------------------------------------------------------------
 # Parsing helpers
 # --------------------------------------------------------------------------------------------
@@ -150,16 +182,162 @@ def _check_positive(option: str, value, kind: str = "number"):
         raise _UsageError(option, f"must be a positive {kind}, got {value!r}")
 
 
-def _check_output(path: Path) -> None:
+def _check_output(path: Path, option: str = "--out") -> None:
     import os
 
     directory = path.parent if str(path.parent) else Path(".")
     if path.is_dir():
-        raise _UsageError("--out", f"{str(path)!r} is a directory")
+        raise _UsageError(option, f"{str(path)!r} is a directory")
     if not directory.is_dir():
-        raise _UsageError("--out", f"cannot write {str(path)!r}: directory {str(directory)!r} does not exist")
+        raise _UsageError(option, f"cannot write {str(path)!r}: directory {str(directory)!r} does not exist")
     if not os.access(directory, os.W_OK | os.X_OK):
-        raise _UsageError("--out", f"cannot write {str(path)!r}: directory {str(directory)!r} is not writable")
+        raise _UsageError(option, f"cannot write {str(path)!r}: directory {str(directory)!r} is not writable")
+
+
+def _check_plot(path: Path) -> None:
+    """`--plot`: a writable path whose suffix is an image format matplotlib writes."""
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    formats = FigureCanvasBase.get_supported_filetypes()
+    suffix = path.suffix.lower().lstrip(".")
+    if suffix not in formats:
+        raise _UsageError(
+            "--plot", f"cannot tell the image format of {str(path)!r}: use one of the suffixes "
+            + ", ".join(f".{k}" for k in sorted(formats))
+        )
+    _check_output(path, "--plot")
+
+
+def _check_output_dir(path: Path) -> None:
+    """`--out DIR` of `gni convergence`: an existing directory, or one that can be created."""
+    import os
+
+    if path.exists() and not path.is_dir():
+        raise _UsageError("--out", f"{str(path)!r} exists and is not a directory")
+    if not path.exists():
+        parent = path.parent if str(path.parent) else Path(".")
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        if not parent.is_dir():
+            raise _UsageError("--out", f"cannot create directory {str(path)!r}: {str(parent)!r} is not a directory")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise _UsageError("--out", f"cannot create directory {str(path)!r}: {str(parent)!r} is not writable")
+    elif not os.access(path, os.W_OK | os.X_OK):
+        raise _UsageError("--out", f"directory {str(path)!r} is not writable")
+
+
+# --------------------------------------------------------------------------------------------
+# Configuration files (gni run --config RUN.toml)
+# --------------------------------------------------------------------------------------------
+# key (dashes read as underscores) -> (the CLI option it stands for, what it must hold)
+_CONFIG_KEYS: dict[str, tuple[str, str]] = {
+    "model": ("MODEL", "string"),
+    "method": ("--method", "string"),
+    "h": ("--h", "number"),
+    "steps": ("--steps", "integer"),
+    "t_final": ("--t-final", "number"),
+    "set": ("--set", "set"),
+    "x0": ("--x0", "vector"),
+    "v0": ("--v0", "vector"),
+    "R0": ("--R0", "vector"),
+    "save_every": ("--save-every", "integer"),
+    "out": ("--out", "path"),
+    "plot": ("--plot", "path"),
+    "project_v0": ("--project-v0", "boolean"),
+}
+
+_KIND_TEXT = {
+    "string": "a string",
+    "number": "a number",
+    "integer": "an integer",
+    "set": "a table NAME = VALUE, or a list of \"NAME=VALUE\" strings",
+    "vector": "a list of numbers, or a string \"a,b,...\"",
+    "path": "a string (a path, relative to the config file)",
+    "boolean": "true or false",
+}
+
+
+def _config_value(where: str, key: str, kind: str, value, base: Path):
+    """Check one config value's type and turn it into what the CLI option would hold."""
+
+    def bad():
+        return _UsageError("--config", f"{where}: key {key!r} must be {_KIND_TEXT[kind]}, got {value!r}")
+
+    if kind == "string":
+        if not isinstance(value, str):
+            raise bad()
+        return value
+    if kind == "number":
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise bad()
+        return float(value)
+    if kind == "integer":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad()
+        return int(value)
+    if kind == "boolean":
+        if not isinstance(value, bool):
+            raise bad()
+        return value
+    if kind == "path":
+        if not isinstance(value, str) or not value:
+            raise bad()
+        path = Path(value).expanduser()
+        return path if path.is_absolute() else base / path
+    if kind == "vector":
+        if isinstance(value, str):
+            return value
+        if isinstance(value, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
+            return ",".join(repr(float(x)) for x in value)
+        raise bad()
+    if kind == "set":
+        if isinstance(value, str):
+            return [value]
+        if isinstance(value, list) and all(isinstance(x, str) for x in value):
+            return list(value)
+        if isinstance(value, dict):
+            items = []
+            for name, x in value.items():
+                if isinstance(x, bool) or not isinstance(x, (int, float)):
+                    raise _UsageError("--config", f"{where}: key 'set.{name}' must be a number, got {x!r}")
+                items.append(f"{name}={float(x)!r}")
+            return items
+        raise bad()
+    raise AssertionError(kind)  # pragma: no cover
+
+
+def _load_config(path: Path) -> dict[str, Any]:
+    """Read a run configuration (TOML): `{key: value}` with keys normalized (dashes → underscores)
+    and values in the form the CLI options take; raises `_UsageError` naming the file and key."""
+    import tomllib
+
+    where = str(path)
+    if not path.exists():
+        raise _UsageError("--config", f"cannot read {where!r}: no such file")
+    if not path.is_file():
+        raise _UsageError("--config", f"cannot read {where!r}: not a file")
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise _UsageError("--config", f"{where}: not valid TOML: {e}") from None
+    except UnicodeDecodeError:
+        raise _UsageError("--config", f"{where}: not valid TOML: the file is not UTF-8 text") from None
+    except OSError as e:
+        raise _UsageError("--config", f"cannot read {where!r}: {e.strerror or e}") from None
+    base = path.resolve().parent
+    out: dict[str, Any] = {}
+    for raw_key, value in data.items():
+        key = raw_key.replace("-", "_")
+        if key == "r0":
+            key = "R0"
+        if key not in _CONFIG_KEYS:
+            known = ", ".join(k.replace("_", "-") for k in _CONFIG_KEYS)
+            raise _UsageError("--config", f"{where}: unknown key {raw_key!r} (known: {known})")
+        if key in out:
+            raise _UsageError("--config", f"{where}: key {raw_key!r} given twice (with dashes and underscores)")
+        out[key] = _config_value(where, raw_key, _CONFIG_KEYS[key][1], value, base)
+    return out
 
 
 # --------------------------------------------------------------------------------------------
@@ -196,22 +374,15 @@ def _exact_errors(spec, params, sol, q0, v0):
     return qe, ve, float(np.max(np.abs(q - qe), initial=0.0)), float(np.max(np.abs(v - ve), initial=0.0))
 
 
-def _prepare(model: str, method: str, h, steps, t_final, set_items, x0_text, v0_text, save_every):
-    """Validate the input (raising `_UsageError` naming the option); returns `(spec, params, q0, v0)`."""
+def _prepare_model(model: str, set_items, x0_text, v0_text):
+    """The model, its parameters and the initial condition (`--set`, `--x0`, `--v0` or the
+    model's defaults), raising `_UsageError` naming the option; returns `(spec, params, q0, v0)`."""
     import gnipy
 
     try:
         spec = gnipy.get_model(model)
     except gnipy.SystemError as e:
         raise _UsageError("MODEL", str(e).partition(":")[2].strip()) from None
-    if method not in gnipy.method_names():
-        raise _UsageError("--method", f"unknown method {method!r} (known: {', '.join(gnipy.method_names())})")
-    _check_positive("--h", h)
-    if (steps is None) == (t_final is None):
-        raise _UsageError("--steps/--t-final", "give exactly one of --steps and --t-final")
-    _check_positive("--steps", steps, "integer")
-    _check_positive("--t-final", t_final)
-    _check_positive("--save-every", save_every, "integer")
     try:
         params = spec.resolve_params(_parse_set(set_items))
     except gnipy.SystemError as e:
@@ -222,6 +393,25 @@ def _prepare(model: str, method: str, h, steps, t_final, set_items, x0_text, v0_
     v0 = _parse_vector("--v0", v0_text, len(vnames), vnames)
     dq, dv = spec.initial_condition(params)
     return spec, params, tuple(dq if x0 is None else x0), tuple(dv if v0 is None else v0)
+
+
+def _prepare(model: str, method: str, h, steps, t_final, set_items, x0_text, v0_text, save_every):
+    """Validate the input (raising `_UsageError` naming the option); returns `(spec, params, q0, v0)`."""
+    import gnipy
+
+    try:
+        gnipy.get_model(model)
+    except gnipy.SystemError as e:
+        raise _UsageError("MODEL", str(e).partition(":")[2].strip()) from None
+    if method not in gnipy.method_names():
+        raise _UsageError("--method", f"unknown method {method!r} (known: {', '.join(gnipy.method_names())})")
+    _check_positive("--h", h)
+    if (steps is None) == (t_final is None):
+        raise _UsageError("--steps/--t-final", "give exactly one of --steps and --t-final")
+    _check_positive("--steps", steps, "integer")
+    _check_positive("--t-final", t_final)
+    _check_positive("--save-every", save_every, "integer")
+    return _prepare_model(model, set_items, x0_text, v0_text)
 
 
 def _parse_R0(spec, params, text: str | None):
@@ -247,16 +437,17 @@ def _simulate(spec, params, method, q0, v0, h, steps, t_final, project_v0, save_
     _, v0_used = system.check(q0, v0, R0=R0, project_v0=project_v0)
     v0_used = tuple(float(x) for x in v0_used)
     t0 = time.perf_counter()
-    sol = gnipy.simulate(
-        system, method, q0, v0_used, R0=R0, h=h, steps=steps, t_final=t_final, save_every=save_every
-    )
-    sol.q.block_until_ready()
+    with _busy(f"{spec.name}: compiling and integrating with {method}"):
+        sol = gnipy.simulate(
+            system, method, q0, v0_used, R0=R0, h=h, steps=steps, t_final=t_final, save_every=save_every
+        )
+        sol.q.block_until_ready()
     seconds = time.perf_counter() - t0
     return sol, v0_used, seconds
 
 
 def _report(
-    title: str, spec, params, sol, exact, drifts, seconds: float, out: Path | None, note: str | None = None
+    title: str, spec, params, sol, exact, drifts, seconds: float, out: Path | str | None, note: str | None = None
 ) -> None:
     import numpy as np
     from rich.table import Table
@@ -265,7 +456,7 @@ def _report(
     r = np.asarray(sol.constraint_residual)
     table = Table(title=title, show_header=False, title_justify="left")
     table.add_column(style="bold")
-    table.add_column()
+    table.add_column(overflow="fold")
     table.add_row("model", f"{spec.name} ({', '.join(f'{k}={v:g}' for k, v in params.items())})")
     span = f"t = {float(sol.t[0]):g} .. {float(sol.t[-1]):g}"
     table.add_row("method", f"{sol.method}, h = {sol.h:g}, {sol.steps} steps, {span}")
@@ -279,11 +470,12 @@ def _report(
     if exact is not None:
         table.add_row("error vs exact", f"max |q - q_exact| = {exact[2]:.3e}, max |v - v_exact| = {exact[3]:.3e}")
     table.add_row("time", f"{seconds:.2f} s (including compilation)")
-    if out is not None:
-        table.add_row("written", str(out))
     if note:
         table.add_row("note", note)
-    _console().print(table)
+    con = _console()
+    con.print(table)
+    if out is not None:
+        con.print(f"written: {out}", markup=False)
 
 
 def _attrs_for(spec, params, sol, q0, v0, exact, drifts, extra: dict[str, Any]) -> dict[str, Any]:
@@ -302,20 +494,32 @@ def _attrs_for(spec, params, sol, q0, v0, exact, drifts, extra: dict[str, Any]) 
     return attrs
 
 
-def _guarded(fn):
-    """Run `fn()` turning gnipy's errors into one-line messages and exit codes."""
+def _guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--method"):
+    """Run `fn()` turning gnipy's errors into one-line messages and exit codes.
+
+    `origins` maps an option to where its value came from (e.g. `"--h"` → `"key 'h' in run.toml"`):
+    a message about that option says so."""
     import gnipy
     from gnipy.io import OutputError
+
+    def usage(message: str):
+        head, sep, rest = message.partition(":")
+        if sep and origins:
+            for option in head.split("/"):
+                if option in origins:
+                    message = f"{head} (from {origins[option]}):{rest}"
+                    break
+        _fail(message, EXIT_USAGE)
 
     try:
         return fn()
     except _UsageError as e:
-        _fail(str(e), EXIT_USAGE)
+        usage(str(e))
     except gnipy.SystemError as e:
-        _fail(_rename(str(e)), EXIT_USAGE)
+        usage(_rename(str(e)))
     except gnipy.MethodError as e:
         msg = _rename(str(e))
-        _fail(msg if msg.startswith("--method") else f"--method: {msg}", EXIT_USAGE)
+        usage(msg if msg.startswith(method_option) else f"{method_option}: {msg}")
     except gnipy.SolverFailure as e:
         _fail(f"solver failure: {e}", EXIT_FAILURE)
     except OutputError as e:
@@ -339,51 +543,517 @@ def main(
 
 @app.command()
 def run(
-    model: str = typer.Argument(..., help="Model name (see `gni models`).", show_default=False, metavar="MODEL"),
-    method: str = typer.Option("gni-trapezoid", "--method", "-m", help="Method name (see `gni methods`)."),
-    h: float = typer.Option(..., "--h", help="Step size (> 0).", show_default=False),
-    steps: int | None = typer.Option(None, "--steps", help="Number of steps (give this or --t-final)."),
+    model: str | None = typer.Argument(
+        None, help="Model name (see `gni models`); or `model` in --config.", show_default=False, metavar="MODEL"
+    ),
+    method: str | None = typer.Option(
+        None, "--method", "-m", help="Method name (see `gni methods`). [default: gni-trapezoid]", show_default=False
+    ),
+    h: float | None = typer.Option(None, "--h", help="Step size (> 0).", show_default=False),
+    steps: int | None = typer.Option(
+        None, "--steps", help="Number of steps (give this or --t-final).", show_default=False
+    ),
     t_final: float | None = typer.Option(
-        None, "--t-final", help="Final time, a whole number of steps (give this or --steps)."
+        None, "--t-final", help="Final time, a whole number of steps (give this or --steps).", show_default=False
     ),
     set_: list[str] | None = typer.Option(
-        None, "--set", help="Parameter override NAME=VALUE (repeatable, or comma-separated)."
+        None, "--set", help="Parameter override NAME=VALUE (repeatable, or comma-separated).", show_default=False
     ),
-    x0: str | None = typer.Option(None, "--x0", help="Initial configuration a,b,... (default: the model's)."),
-    v0: str | None = typer.Option(None, "--v0", help="Initial velocity a,b,... (default: the model's)."),
+    x0: str | None = typer.Option(
+        None, "--x0", help="Initial configuration a,b,... (default: the model's).", show_default=False
+    ),
+    v0: str | None = typer.Option(
+        None, "--v0", help="Initial velocity a,b,... (default: the model's).", show_default=False
+    ),
     R0: str | None = typer.Option(
-        None, "--R0", help="Initial orientation on R^n x G, row-major r11,...,r33 (default: the model's, or identity)."
+        None, "--R0", help="Initial orientation on R^n x G, row-major r11,...,r33 (default: the model's, or identity).",
+        show_default=False,
     ),
-    project_v0: bool = typer.Option(
-        False, "--project-v0", help="Project v0 onto the constraints instead of rejecting it."
+    project_v0: bool | None = typer.Option(
+        None, "--project-v0/--no-project-v0",
+        help="Project v0 onto the constraints instead of rejecting it. [default: no]", show_default=False,
     ),
-    save_every: int = typer.Option(1, "--save-every", help="Save every K-th node (and always the last)."),
-    out: Path = typer.Option(..., "--out", "-o", help="Output netCDF file.", show_default=False),
+    save_every: int | None = typer.Option(
+        None, "--save-every", help="Save every K-th node (and always the last). [default: 1]", show_default=False
+    ),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Output netCDF file.", show_default=False),
+    plot: Path | None = typer.Option(
+        None, "--plot", help="Also write a figure (configuration path, energy error, constraint residual), "
+        "e.g. run.png.", show_default=False,
+    ),
+    config: Path | None = typer.Option(
+        None, "--config", "-c", help="A TOML file with any of these options (keys as the option names, "
+        "dashes or underscores); options given on the command line override it.", show_default=False,
+    ),
 ):
     """Integrate MODEL with METHOD and write the trajectory to a netCDF file.
 
     The file holds t(time), q(time, coordinate), v(time, velocity), p(time, velocity),
     energy(time) and constraint_residual(time, constraint), and R(time, i, j) on R^n x G, with
-    provenance attributes.
+    provenance attributes. With --plot, also a figure of the run.
+
+    A config file holds the same options, e.g.
+
+    \b
+        model = "vertical-disk"
+        method = "gni-midpoint"
+        h = 0.05
+        t-final = 10
+        x0 = [0, 0, 0, 0]
+        set = { I_rot = 2 }
+        out = "disk.nc"
+
+    (`set` may also be a list of "NAME=VALUE" strings, `x0`/`v0`/`R0` strings "a,b,...").
+    Relative paths in the file are relative to the file's directory.
     """
+    origins: dict[str, str] = {}
 
     def go():
         from gnipy.io import write_netcdf
 
-        spec, params, q0, v0_ = _prepare(model, method, h, steps, t_final, set_, x0, v0, save_every)
-        R0_ = _parse_R0(spec, params, R0)
-        _check_output(out)
+        cfg: dict[str, Any] = {}
+        if config is not None:
+            cfg = _load_config(config)
+            for key in cfg:
+                origins[_CONFIG_KEYS[key][0]] = f"key {key.replace('_', '-')!r} in {str(config)}"
+
+        def pick(key: str, given, default=None):
+            if given is not None:
+                origins.pop(_CONFIG_KEYS[key][0], None)
+                return given
+            return cfg.get(key, default)
+
+        model_ = pick("model", model)
+        if model_ is None:
+            raise _UsageError("MODEL", "missing: give MODEL (or `model` in --config)")
+        method_ = pick("method", method, "gni-trapezoid")
+        h_ = pick("h", h)
+        if h_ is None:
+            raise _UsageError("--h", "missing: give --h (or `h` in --config)")
+        if steps is not None or t_final is not None:  # the command line decides the length
+            steps_, t_final_ = steps, t_final
+            origins.pop("--steps", None)
+            origins.pop("--t-final", None)
+        else:
+            steps_, t_final_ = cfg.get("steps"), cfg.get("t_final")
+        set_items = list(cfg.get("set", [])) + list(set_ or [])  # the command line wins per name
+        if set_:
+            origins.pop("--set", None)
+        x0_, v0_text, R0_text = pick("x0", x0), pick("v0", v0), pick("R0", R0)
+        project = bool(pick("project_v0", project_v0, False))
+        save_every_ = pick("save_every", save_every, 1)
+        out_ = pick("out", out)
+        plot_ = pick("plot", plot)
+        if out_ is None:
+            raise _UsageError("--out", "missing: give --out FILE.nc (or `out` in --config)")
+
+        spec, params, q0, v0_ = _prepare(model_, method_, h_, steps_, t_final_, set_items, x0_, v0_text, save_every_)
+        R0_ = _parse_R0(spec, params, R0_text)
+        _check_output(out_)
+        if plot_ is not None:
+            _check_plot(plot_)
         sol, v0_used, seconds = _simulate(
-            spec, params, method, q0, v0_, h, steps, t_final, project_v0, save_every, R0=R0_
+            spec, params, method_, q0, v0_, h_, steps_, t_final_, project, save_every_, R0=R0_
         )
         exact = _exact_errors(spec, params, sol, q0, v0_used)
         drifts = _invariant_drifts(spec, params, sol.q, sol.v, sol.R)
-        extra = {"save_every": int(save_every), "project_v0": int(project_v0), "command": "gni run"}
+        extra = {"save_every": int(save_every_), "project_v0": int(project), "command": "gni run"}
+        if config is not None:
+            extra["config_file"] = str(config)
         if R0_ is not None:
             extra["R0"] = list(R0_)
         attrs = _attrs_for(spec, params, sol, q0, v0_used, exact, drifts, extra)
-        write_netcdf(sol, out, attrs=attrs)
-        _report("gni run", spec, params, sol, exact, drifts, seconds, out)
+        write_netcdf(sol, out_, attrs=attrs)
+        written = str(out_)
+        if plot_ is not None:
+            _write_plot(sol, plot_)
+            written += f", {plot_}"
+        _report("gni run", spec, params, sol, exact, drifts, seconds, written)
+
+    _guarded(go, origins)
+
+
+def _write_plot(sol, path: Path) -> None:
+    """The three-panel figure of a run (configuration path, energy error, constraint residual)."""
+    from gnipy.plots import plot_solution
+
+    try:
+        plot_solution(sol, path)
+    except OSError as e:
+        _fail(f"--plot: cannot write {path}: {e.strerror or e}", EXIT_FAILURE)
+
+
+# --------------------------------------------------------------------------------------------
+# gni convergence
+# --------------------------------------------------------------------------------------------
+_FINAL_NODE = None
+
+
+def _final_node_fn():
+    """A jit-compiled map `(method, system, state0, h, steps) -> (q, v, R, ok)` at the last node.
+
+    The step count is a traced value (a `fori_loop` with a dynamic trip count), so a convergence
+    study compiles once per method rather than once per step size, as `gnipy.simulate` (a
+    `lax.scan` of static length) would. It runs the same one-step map as `simulate`, and gives
+    the same numbers."""
+    global _FINAL_NODE
+    if _FINAL_NODE is None:
+        import equinox as eqx
+        import jax
+        import jax.numpy as jnp
+
+        @eqx.filter_jit
+        def final_node(method, system, state0, h, steps):
+            def body(_, carry):
+                state, ok = carry
+                new, info = method.step(system, state, h)
+                finite = [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(new) if eqx.is_inexact_array(x)]
+                ok = ok & info.ok & (jnp.all(jnp.stack(finite)) if finite else True)
+                state = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, state)
+                return state, ok
+
+            state, ok = jax.lax.fori_loop(0, steps, body, (state0, jnp.asarray(True)))
+            b, v, _ = method.observe(system, state, h)
+            return system.space.coordinates(b), v, ok
+
+        _FINAL_NODE = final_node
+    return _FINAL_NODE
+
+
+def _parse_methods(text: str) -> list[str]:
+    import gnipy
+
+    names = []
+    for part in text.split(","):
+        name = part.strip()
+        if not name:
+            continue
+        if name not in gnipy.method_names():
+            raise _UsageError("--methods", f"unknown method {name!r} (known: {', '.join(gnipy.method_names())})")
+        if name == "reference":
+            raise _UsageError("--methods", "'reference' is the yardstick of the study, not a method to study")
+        if name not in names:
+            names.append(name)
+    if not names:
+        raise _UsageError("--methods", f"give at least one method name, got {text!r}")
+    return names
+
+
+def _step_counts(h_max: float, h_min: float, count: int, t_final: float) -> list[int]:
+    """Whole numbers of steps for `count` log-spaced h from h_max down to h_min (distinct)."""
+    import numpy as np
+
+    for option, value in (("--h-max", h_max), ("--h-min", h_min), ("--t-final", t_final)):
+        _check_positive(option, value)
+    if isinstance(count, bool) or count < 2:
+        raise _UsageError("--count", f"need at least 2 step sizes to fit an order, got {count!r}")
+    if h_min >= h_max:
+        raise _UsageError("--h-min/--h-max", f"need h-min < h-max, got {h_min!r} and {h_max!r}")
+    if h_max > t_final:
+        raise _UsageError("--h-max", f"larger than the final time {t_final!r}")
+    counts = sorted({max(1, round(t_final / h)) for h in np.geomspace(h_max, h_min, count)})
+    if len(counts) < 2:
+        raise _UsageError(
+            "--count", f"the step sizes give only {len(counts)} distinct step count(s) on [0, {t_final:g}]; "
+            "widen --h-max/--h-min"
+        )
+    return counts
+
+
+def _expected_order(method) -> int | None:
+    order = getattr(method, "expected_order", None)
+    if order is None:
+        order = getattr(method, "order", None)
+    return order if isinstance(order, int) else None
+
+
+@app.command()
+def convergence(
+    model: str = typer.Argument(..., help="Model name (see `gni models`).", show_default=False, metavar="MODEL"),
+    methods_: str = typer.Option(
+        "gni-trapezoid", "--methods", "-m", help="Comma-separated method names (see `gni methods`)."
+    ),
+    h_max: float = typer.Option(0.1, "--h-max", help="Largest step size."),
+    h_min: float = typer.Option(0.01, "--h-min", help="Smallest step size."),
+    count: int = typer.Option(5, "--count", help="Number of step sizes (log-spaced, at least 2)."),
+    t_final: float = typer.Option(1.0, "--t-final", help="Final time: each h is adjusted to T / round(T / h)."),
+    set_: list[str] | None = typer.Option(
+        None, "--set", help="Parameter override NAME=VALUE (repeatable, or comma-separated).", show_default=False
+    ),
+    x0: str | None = typer.Option(None, "--x0", help="Initial configuration (default: the model's).", show_default=False),
+    v0: str | None = typer.Option(None, "--v0", help="Initial velocity (default: the model's).", show_default=False),
+    R0: str | None = typer.Option(
+        None, "--R0", help="Initial orientation on R^n x G, row-major (default: the model's).", show_default=False
+    ),
+    project_v0: bool = typer.Option(False, "--project-v0", help="Project v0 onto the constraints."),
+    error: str = typer.Option(
+        "auto", "--error", help="What to measure at the final time: q (the configuration), v (the reported "
+        "velocity), state (the larger of the two), or auto (q; v on models without coordinates q)."
+    ),
+    out: Path = typer.Option(..., "--out", "-o", help="Output directory (created if missing).", show_default=False),
+):
+    """Measure the order of convergence of methods on MODEL.
+
+    For each method and each of COUNT log-spaced step sizes from H-MAX to H-MIN (each adjusted so
+    that T is a whole number of steps), the error at the final time T (max-norm; of the
+    configuration q by default, see --error) is measured against the model's exact solution when
+    it has one, else against the continuous reference (Dopri8 at tolerance 1e-12). The order is
+    the least-squares slope of log(error) against log(h) over the points above round-off (1e-11
+    against an exact solution, 1e-10 against the reference, times max(1, |state|)). Writes
+    OUT/convergence.csv and OUT/convergence.png and prints the table and the fitted orders.
+    """
+
+    def go():
+        import csv
+
+        import jax.numpy as jnp
+        import numpy as np
+
+        import gnipy
+        from gnipy.plots import fitted_order, plot_convergence
+
+        if error not in ("auto", "state", "q", "v"):
+            raise _UsageError("--error", f"expected auto, state, q or v, got {error!r}")
+        spec, params, q0, v0_ = _prepare_model(model, set_, x0, v0)
+        measure = ("q" if spec.coordinates else "v") if error == "auto" else error
+        names = _parse_methods(methods_)
+        counts = _step_counts(h_max, h_min, count, t_final)
+        R0_ = _parse_R0(spec, params, R0)
+        if measure == "q" and not spec.coordinates:
+            raise _UsageError("--error", f"model {spec.name!r} has no coordinates q (it lives on a group): use v or state")
+        _check_output_dir(out)
+
+        system = spec.build(params)
+        b0, v0_used = system.check(q0, v0_, R0=R0_, project_v0=project_v0)
+        v0_used = tuple(float(x) for x in v0_used)
+        T = float(t_final)
+
+        # the yardstick at the final time
+        truth = spec.exact(params, q0, v0_used, np.array([0.0, T])) if spec.exact is not None else None
+        if truth is not None:
+            q_true, v_true = np.asarray(truth[0])[-1], np.asarray(truth[1])[-1]
+            yardstick, floor_rel = f"exact solution of {spec.name}", 1e-11
+        else:
+            with _busy(f"{spec.name}: continuous reference (Dopri8, tolerance 1e-12)"):
+                ref = gnipy.simulate(system, "reference", q0, v0_used, R0=R0_, h=T, steps=1)
+            q_true, v_true = np.asarray(ref.q)[-1], np.asarray(ref.v)[-1]
+            yardstick, floor_rel = "continuous reference (Dopri8, tolerance 1e-12)", 1e-10
+        scale = max(1.0, float(np.max(np.abs(np.concatenate([q_true, v_true])), initial=0.0)))
+        floor = floor_rel * scale
+
+        # check every method before running any of them
+        methods: dict[str, Any] = {}
+        for name in names:
+            m = gnipy.get_method(name)
+            m.check(system, b0)
+            methods[name] = m.prepare(system, b0)
+
+        final_node = _final_node_fn()
+        rows, errors, hs, failures = [], {}, {}, []
+        t_start = time.perf_counter()
+        from rich.progress import (
+            BarColumn,
+            MofNCompleteColumn,
+            SpinnerColumn,
+            TextColumn,
+            TimeElapsedColumn,
+        )
+
+        with _progress(
+            SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn()
+        ) as progress:
+            task = progress.add_task("convergence", total=len(names) * len(counts))
+            for name, m in methods.items():
+                errs = []
+                for i, n in enumerate(counts):
+                    h = T / n
+                    note = " (compiling)" if i == 0 else ""
+                    progress.update(task, description=f"{name}, h = {h:.4g}{note}")
+                    hj = jnp.asarray(h)
+                    state0 = m.init(system, b0, jnp.asarray(v0_used), hj)
+                    q, v, ok = final_node(m, system, state0, hj, jnp.asarray(n))
+                    q, v = np.asarray(q), np.asarray(v)
+                    e_q = float(np.max(np.abs(q - q_true), initial=0.0))
+                    e_v = float(np.max(np.abs(v - v_true), initial=0.0))
+                    if not bool(ok) or not (np.isfinite(e_q) and np.isfinite(e_v)):
+                        failures.append(f"{name} at h = {h:.6g}")
+                        e_q = e_v = float("nan")
+                    e = {"state": max(e_q, e_v), "q": e_q, "v": e_v}[measure]
+                    errs.append(e)
+                    rows.append({"method": name, "steps": n, "h": h, "t_final": T, "error": e, "error_q": e_q,
+                                 "error_v": e_v, "used_in_fit": int(bool(np.isfinite(e) and e > floor))})
+                    progress.advance(task)
+                errors[name] = np.array(errs)
+                hs[name] = T / np.array(counts, dtype=float)
+        seconds = time.perf_counter() - t_start
+
+        orders = {name: fitted_order(hs[name], errors[name], floor) for name in names}
+        expected = {name: _expected_order(m) for name, m in methods.items()}
+        for row in rows:
+            row["fitted_order"] = orders[row["method"]]
+            row["expected_order"] = "" if expected[row["method"]] is None else expected[row["method"]]
+            row["yardstick"] = "exact" if truth is not None else "reference"
+            row["measure"] = measure
+
+        out.mkdir(parents=True, exist_ok=True)
+        csv_path, png_path = out / "convergence.csv", out / "convergence.png"
+        fields = ["method", "steps", "h", "t_final", "error", "error_q", "error_v", "used_in_fit",
+                  "fitted_order", "expected_order", "yardstick", "measure"]
+        with open(csv_path, "w", newline="") as f:
+            writer = csv.DictWriter(f, fieldnames=fields)
+            writer.writeheader()
+            for row in rows:
+                writer.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()})
+        guides = sorted({p for p in expected.values() if p is not None}) or [1, 2]
+        what = {"state": "max(|q − q*|, |v − v*|)", "q": "|q − q*|", "v": "|v − v*|"}[measure]
+        plot_convergence(
+            hs, errors, png_path, guides=guides, floor=floor,
+            title=f"{spec.name}: error at t = {T:g} against the {yardstick.split(' (')[0]}",
+            ylabel=f"{what} at t = {T:g}",
+        )
+        _convergence_report(spec, params, names, counts, T, errors, orders, expected, yardstick, measure, floor,
+                            failures, seconds, csv_path, png_path)
+
+    _guarded(go, method_option="--methods")
+
+
+def _convergence_report(spec, params, names, counts, T, errors, orders, expected, yardstick, error, floor,
+                        failures, seconds, csv_path, png_path) -> None:
+    import math
+
+    from rich.table import Table
+
+    con = _console()
+    con.print(f"gni convergence: {spec.name} ({', '.join(f'{k}={v:g}' for k, v in params.items())}), "
+              f"t = 0 .. {T:g}", markup=False)
+    con.print(f"errors at t = {T:g} ({error}, max-norm) against the {yardstick}", markup=False)
+    table = Table(title_justify="left")
+    for head in ("method", "steps", "h", f"error ({error})"):
+        table.add_column(head, justify="left" if head == "method" else "right", no_wrap=True)
+    for name in names:
+        for i, n in enumerate(counts):
+            e = errors[name][i]
+            cell = "failed" if not math.isfinite(e) else f"{e:.3e}" + ("" if e > floor else " *")
+            table.add_row(name if i == 0 else "", str(n), f"{T / n:.4g}", cell, end_section=i == len(counts) - 1)
+    con.print(table)
+    if any(not (e > floor) for name in names for e in errors[name] if math.isfinite(e)):
+        con.print(f"* at or below round-off ({floor:.1e}): not used in the fit", markup=False)
+    orders_table = Table(title="fitted orders (least squares, log error against log h)", title_justify="left")
+    orders_table.add_column("method")
+    orders_table.add_column("fitted order", justify="right")
+    orders_table.add_column("expected", justify="right")
+    for name in names:
+        o = orders[name]
+        orders_table.add_row(name, f"{o:.2f}" if math.isfinite(o) else "n/a (fewer than 2 points above round-off)",
+                             "?" if expected[name] is None else str(expected[name]))
+    con.print(orders_table)
+    for name in names:  # one plain line per method, easy to grep
+        o = orders[name]
+        con.print(f"order {name}: {o:.3f}" if math.isfinite(o) else f"order {name}: n/a", markup=False)
+    for f in failures:
+        con.print(f"warning: solver failure for {f} (left out)", markup=False)
+    con.print(f"time: {seconds:.2f} s (including compilation)", markup=False)
+    con.print(f"written: {csv_path}, {png_path}", markup=False)
+
+
+# --------------------------------------------------------------------------------------------
+# gni info
+# --------------------------------------------------------------------------------------------
+_SHOWN_ATTRS = {"model", "params", "method", "h", "steps", "start", "save_every", "t_final", "gnipy_version",
+                "jax_version", "created", "command", "config_file", "result", "newton_iterations_total",
+                "newton_iterations_max", "units_convention", "q0", "v0", "R0", "project_v0", "coordinates"}
+
+
+def _fmt_attr(v) -> str:
+    import numpy as np
+
+    if isinstance(v, np.ndarray):
+        return "[" + ", ".join(f"{x:.10g}" for x in v.reshape(-1)) + "]"
+    if isinstance(v, (float, np.floating)):
+        return f"{float(v):.10g}"
+    return str(v)
+
+
+@app.command()
+def info(
+    file: Path = typer.Argument(..., help="A result file written by `gni run` (or gnipy.io.write_netcdf).",
+                                show_default=False, metavar="FILE.nc"),
+):
+    """Summarize a result file: model, parameters, method, times, variables, energy drift,
+    constraint residual and provenance."""
+
+    def go():
+        import json
+
+        import numpy as np
+        from rich.table import Table
+
+        from gnipy.io import OutputError, read_netcdf
+
+        try:
+            ds = read_netcdf(file)
+        except OutputError as e:
+            raise _UsageError("FILE", str(e)) from None
+        a = dict(ds.attrs)
+        table = Table(title=f"gni info: {file}", show_header=False, title_justify="left", box=None)
+        table.add_column(style="bold")
+        table.add_column(overflow="fold")
+        params = {}
+        if "params" in a:
+            try:
+                params = json.loads(str(a["params"]))
+            except ValueError:
+                params = {}
+        if not params:
+            params = {k[len("param_"):]: a[k] for k in a if k.startswith("param_")}
+        model_ = a.get("model", "(unknown)")
+        ptxt = ", ".join(f"{k}={float(v):g}" if isinstance(v, (int, float, np.number)) else f"{k}={v}"
+                         for k, v in params.items())
+        table.add_row("model", f"{model_} ({ptxt})" if ptxt else str(model_))
+        if "method" in a:
+            parts = [str(a["method"])]
+            if "h" in a:
+                parts.append(f"h = {float(a['h']):g}")
+            if "steps" in a:
+                parts.append(f"{int(a['steps'])} steps")
+            if "start" in a:
+                parts.append(f"start: {a['start']}")
+            table.add_row("method", ", ".join(parts))
+        if "t" in ds.variables and ds["t"].size:
+            t = np.asarray(ds["t"].values, dtype=float)
+            units = ds["t"].attrs.get("units", "")
+            more = f", saved every {int(a['save_every'])} steps" if "save_every" in a else ""
+            table.add_row("times", f"t = {t[0]:g} .. {t[-1]:g} {units}".rstrip() + f", {t.size} saved nodes{more}")
+        for name, var in ds.data_vars.items():
+            dims = ", ".join(f"{d}={ds.sizes[d]}" for d in var.dims)
+            long = var.attrs.get("long_name", "")
+            table.add_row(f"variable {name}", f"({dims}) {var.dtype}" + (f"  {long}" if long else ""))
+        for dim in ("coordinate", "velocity"):
+            if dim in ds.coords and ds.sizes.get(dim):
+                table.add_row(f"{dim} names", ", ".join(str(x) for x in ds[dim].values))
+        if "energy" in ds.variables and ds["energy"].size:
+            e = np.asarray(ds["energy"].values, dtype=float)
+            table.add_row("energy", f"initial {e[0]:.12g}, final {e[-1]:.12g}, max |E - E0| = "
+                          f"{np.max(np.abs(e - e[0])):.3e}")
+        if "constraint_residual" in ds.variables:
+            r = np.asarray(ds["constraint_residual"].values, dtype=float)
+            table.add_row("constraint residual", f"max |mu(q)(v - Y)| = {np.max(np.abs(r), initial=0.0):.3e}")
+        for k in sorted(a):
+            if k.startswith("invariant_drift_"):
+                table.add_row(f"invariant {k[len('invariant_drift_'):]}", f"max drift {float(a[k]):.3e}")
+        if "max_error_q_vs_exact" in a:
+            table.add_row("error vs exact", f"max |q - q_exact| = {float(a['max_error_q_vs_exact']):.3e}, "
+                          f"max |v - v_exact| = {float(a.get('max_error_v_vs_exact', float('nan'))):.3e}")
+        for k in ("q0", "v0", "R0", "project_v0", "save_every", "result", "newton_iterations_total",
+                  "newton_iterations_max", "gnipy_version", "jax_version", "created", "command", "config_file",
+                  "units_convention"):
+            if k in a:
+                table.add_row(k, _fmt_attr(a[k]))
+        for k in sorted(a):
+            if k in _SHOWN_ATTRS or k.startswith(("param_", "invariant_drift_", "max_error_")):
+                continue
+            table.add_row(k, _fmt_attr(a[k]))
+        _console().print(table)
 
     _guarded(go)
 
@@ -459,6 +1129,15 @@ def methods():
     for name, desc in METHOD_DESCRIPTIONS.items():
         con.print(f"[bold]{name:<{width}}[/bold]  ", end="")
         con.print(desc, markup=False)
+
+
+# --------------------------------------------------------------------------------------------
+# gni reproduce: the paper reproduction (src/gnipy/experiments/reproduce.py imports only the
+# standard library and typer at the top, so `gni --help` stays fast).
+# --------------------------------------------------------------------------------------------
+from .experiments.reproduce import reproduce_command  # noqa: E402
+
+app.command(name="reproduce")(reproduce_command)
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -1,5 +1,20 @@
 """File output: solutions as netCDF through xarray, written atomically.
 
+**Contents.** A result file holds the variables `t(time)`, `q(time, coordinate)`,
+`v(time, velocity)`, `p(time, velocity)`, `energy(time)`,
+`constraint_residual(time, constraint)`, and `R(time, i, j)` on Rⁿ × G; the coordinates
+`coordinate` and `velocity` hold the names. Global attributes record the provenance:
+`gnipy_version`, `jax_version`, `created` (UTC, ISO 8601), `model`, `params` (JSON) and one
+`param_NAME` per parameter, `method`, `h`, `steps`, `start` (how the first node was set up, e.g.
+`p+ = G v0`), and what the caller adds (`gni run` adds `q0`, `v0`, `save_every`, `command`, ...).
+
+**Units.** The models are nondimensional unless their documentation says otherwise: `t` carries
+`units = "time units"`, `energy` carries `units = "energy units"`, and the global attribute
+`units_convention` says so. Coordinates mix lengths and angles (radians), so `q`, `v` and `p`
+carry no single `units` attribute; their names are in the `coordinate` and `velocity`
+coordinates.
+
+**Atomic writes.**
 A file either appears complete or not at all: the data go to a temporary file in the destination
 directory, which then replaces the destination with `os.replace` (atomic on POSIX when both lie
 on one file system, hence the same directory rather than `/tmp`). An existing file is kept
@@ -16,7 +31,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["OutputError", "write_netcdf", "read_netcdf", "provenance"]
+__all__ = ["OutputError", "write_netcdf", "read_netcdf", "provenance", "VARIABLE_UNITS", "UNITS_CONVENTION"]
 
 
 class OutputError(OSError):
@@ -42,12 +57,31 @@ def _attr_value(v):
     return str(v)
 
 
+#: Units of the variables that have one (the models are nondimensional unless stated).
+VARIABLE_UNITS = {"t": "time units", "energy": "energy units"}
+
+UNITS_CONVENTION = (
+    "nondimensional unless the model states otherwise: t in time units, lengths in length units, "
+    "angles in radians, energy in energy units"
+)
+
+
+def _jax_version() -> str:
+    try:
+        import jax
+
+        return str(jax.__version__)
+    except Exception:  # pragma: no cover
+        return "unknown"
+
+
 def provenance(**extra) -> dict[str, Any]:
-    """Base provenance attributes: gnipy version and creation time (UTC), plus `extra`."""
+    """Base provenance attributes: gnipy and JAX versions and creation time (UTC), plus `extra`."""
     from . import __version__
 
     attrs = {
         "gnipy_version": __version__,
+        "jax_version": _jax_version(),
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
     }
     attrs.update(extra)
@@ -73,8 +107,8 @@ def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = No
     """Write a :class:`~gnipy.Solution` (via `Solution.to_xarray`) or an `xarray.Dataset` to netCDF.
 
     The write is atomic (see the module docstring). Provenance attributes are added when missing:
-    `gnipy_version`, `created` (Solution.to_xarray also gives model, method, h, steps, start and
-    the parameters).
+    `gnipy_version`, `jax_version`, `created`, `units_convention` (Solution.to_xarray also gives
+    model, method, h, steps, start and the parameters), and `units` on `t` and `energy`.
 
     Arguments:
         solution_or_dataset: what to write.
@@ -93,6 +127,10 @@ def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = No
     ds = _as_dataset(solution_or_dataset)
     for k, v in provenance().items():
         ds.attrs.setdefault(k, v)
+    ds.attrs.setdefault("units_convention", UNITS_CONVENTION)
+    for name, units in VARIABLE_UNITS.items():
+        if name in ds.variables and "units" not in ds[name].attrs:
+            ds[name].attrs["units"] = units
     for k, v in (attrs or {}).items():
         ds.attrs[str(k)] = v
     ds.attrs = {k: _attr_value(v) for k, v in ds.attrs.items()}

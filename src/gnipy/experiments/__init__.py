@@ -1,0 +1,1 @@
+"""The paper's experiments, reproducible by one call each: figures (:mod:`.figures`)."""

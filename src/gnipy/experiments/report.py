@@ -1,0 +1,302 @@
+"""The reproduction report: one Markdown file and one self-contained HTML page.
+
+:func:`write_report` writes `report.md` (figures linked as the PNG files next to it) and
+`report.html` (PNG figures embedded as base64 data URIs, inline CSS, no script and no external
+resource: the page can be mailed or archived alone). Both hold the provenance (gnipy version, date,
+machine, quick or full run, run time), each figure with its caption, table and notes, the theorem
+table with pass/fail, and the errata. Files are written atomically (a temporary file in the same
+folder, then `os.replace`), so a reader never sees half a report.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+import os
+import uuid
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+__all__ = ["write_report", "REPORT_TITLE", "PAPER"]
+
+REPORT_TITLE = "gnipy: reproduction of the Geometric Nonholonomic Integrator paper"
+PAPER = ('S. Ferraro, F. Jiménez, D. Martín de Diego, "New developments on the Geometric Nonholonomic '
+         'Integrator", Nonlinearity 28 (2015) 871–900, arXiv:1312.1587')
+
+# provenance keys shown first, in this order, with their labels; other keys of `meta` follow
+_META_LABELS = {
+    "gnipy_version": "gnipy version",
+    "date": "date",
+    "machine": "machine",
+    "mode": "mode",
+    "runtime_s": "run time",
+    "stage_runtimes_s": "run time per stage",
+    "python": "Python",
+    "jax_version": "JAX",
+    "command": "command",
+}
+
+
+def _fmt(x: Any) -> str:
+    """Numbers in a compact form (3 significant digits, scientific for small and large)."""
+    if isinstance(x, bool) or x is None:
+        return str(x)
+    if isinstance(x, int):
+        return str(x)
+    if isinstance(x, float):
+        if math.isnan(x) or math.isinf(x):
+            return str(x)
+        if x == 0.0:
+            return "0"
+        if 1e-3 <= abs(x) < 1e5:
+            return f"{x:.4g}"
+        return f"{x:.3e}"
+    try:  # numpy scalars
+        import numpy as np
+
+        if isinstance(x, np.generic):
+            return _fmt(x.item())
+    except ImportError:  # pragma: no cover
+        pass
+    if isinstance(x, (list, tuple)):
+        return "[" + ", ".join(_fmt(v) for v in x) + "]"
+    return str(x)
+
+
+def _fmt_meta(key: str, value: Any) -> str:
+    seconds = key.endswith("_s")
+    if isinstance(value, Mapping):
+        return ", ".join(f"{k}: {_fmt_meta(key, v)}" for k, v in value.items())
+    if seconds and isinstance(value, (int, float)) and not isinstance(value, bool):
+        return f"{value:.1f} s"
+    return _fmt(value)
+
+
+def _meta_items(meta: Mapping[str, Any]) -> list[tuple[str, str]]:
+    items = [(label, _fmt_meta(k, meta[k])) for k, label in _META_LABELS.items() if k in meta]
+    items += [(k.removesuffix("_s").replace("_", " "), _fmt_meta(k, v)) for k, v in meta.items() if k not in _META_LABELS]
+    return items
+
+
+def _columns(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    cols: list[str] = []
+    for row in rows:
+        for k in row:
+            if k not in cols:
+                cols.append(k)
+    return cols
+
+
+def _pass_text(passed: bool) -> str:
+    return "PASS" if passed else "FAIL"
+
+
+# ------------------------------------------------------------------------------------------------
+# Markdown
+# ------------------------------------------------------------------------------------------------
+def _md_cell(x: Any) -> str:
+    text = x if isinstance(x, str) else _fmt(x)
+    return " ".join(str(text).split()).replace("|", "\\|")
+
+
+def _md_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> list[str]:
+    lines = ["| " + " | ".join(_md_cell(h) for h in header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(_md_cell(c) for c in row) + " |" for row in rows]
+    return lines
+
+
+def _markdown(out_dir: Path, figures, theorems, errata, meta) -> str:
+    n_pass = sum(bool(r.passed) for r in theorems)
+    lines = [f"# {REPORT_TITLE}", "", f"Paper: {PAPER}.", "", "## Provenance", ""]
+    lines += _md_table(["", ""], _meta_items(meta))
+    summary = (f"**Theorem table: {n_pass} of {len(theorems)} claims pass.** "
+               f"Errata measured: {len(errata)}. Figures: {len(figures)}.")
+    lines += ["", summary, ""]
+
+    lines += ["## Figures", ""]
+    for fig in figures:
+        lines += [f"### {fig.title}", ""]
+        for f in fig.files:
+            if Path(f).suffix.lower() == ".png":
+                rel = Path(os.path.relpath(Path(f), out_dir)).as_posix()
+                lines += [f"![{fig.name}]({rel})", ""]
+        others = [Path(f).name for f in fig.files if Path(f).suffix.lower() != ".png"]
+        if others:
+            lines += ["Also: " + ", ".join(f"[{n}]({n})" for n in others), ""]
+        lines += [f"*{' '.join(str(fig.caption).split())}*", ""]
+        if fig.table:
+            lines += _md_table(_columns(fig.table), ([row.get(c, "") for c in _columns(fig.table)] for row in fig.table))
+            lines += [""]
+        if fig.metrics:
+            lines += ["Metrics:", ""]
+            lines += _md_table(["metric", "value"], fig.metrics.items())
+            lines += [""]
+        if fig.notes:
+            lines += [f"- {' '.join(str(n).split())}" for n in fig.notes] + [""]
+
+    lines += ["## Theorems", "", f"{n_pass} of {len(theorems)} pass.", ""]
+    lines += _md_table(["#", "claim", "paper", "expected", "measured", "result"],
+                       ([i, r.claim, r.paper_ref, r.expected, r.measured, f"**{_pass_text(r.passed)}**"]
+                        for i, r in enumerate(theorems, 1)))
+    lines += ["", "How each claim was measured:", ""]
+    lines += [f"{i}. {' '.join(str(r.detail).split())}" for i, r in enumerate(theorems, 1)]
+    lines += ["", "## Errata", ""]
+    for i, e in enumerate(errata, 1):
+        lines += [f"### {i}. {e.location}", "",
+                  f"- **Printed:** {' '.join(str(e.printed).split())}",
+                  f"- **Corrected:** {' '.join(str(e.corrected).split())}",
+                  f"- **Measured:** {' '.join(str(e.measurement).split())}",
+                  f"- **Evidence value:** {_fmt(e.evidence_value)}", ""]
+    return "\n".join(lines) + "\n"
+
+
+# ------------------------------------------------------------------------------------------------
+# HTML
+# ------------------------------------------------------------------------------------------------
+_CSS = """
+body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 0 auto;
+       max-width: 1100px; padding: 1.5em; color: #1d1d1f; line-height: 1.45; }
+h1 { font-size: 1.6em; border-bottom: 2px solid #444; padding-bottom: .2em; }
+h2 { font-size: 1.3em; margin-top: 2em; border-bottom: 1px solid #bbb; }
+h3 { font-size: 1.08em; margin-top: 1.6em; }
+table { border-collapse: collapse; margin: .8em 0; font-size: .86em; }
+th, td { border: 1px solid #ccc; padding: .25em .5em; vertical-align: top; text-align: left; }
+th { background: #f0f0f3; }
+td.num { text-align: right; font-variant-numeric: tabular-nums; white-space: nowrap; }
+.pass { color: #0a6b1f; font-weight: bold; }
+.fail { color: #b00020; font-weight: bold; }
+.caption { font-style: italic; color: #333; }
+.detail { color: #444; font-size: .92em; }
+figure { margin: 1em 0; }
+figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
+.summary { font-size: 1.05em; padding: .5em .8em; background: #f6f6f8; border-left: 4px solid #666; }
+.erratum { border-left: 3px solid #999; padding: .2em .9em; margin: 1em 0; background: #fafafa; }
+.small { font-size: .85em; color: #555; }
+"""
+
+
+def _e(x: Any) -> str:
+    return html.escape(x if isinstance(x, str) else _fmt(x))
+
+
+def _html_table(header: Sequence[str], rows: Iterable[Sequence[Any]], raw_last: bool = False) -> list[str]:
+    out = ["<table>", "<tr>" + "".join(f"<th>{_e(h)}</th>" for h in header) + "</tr>"]
+    for row in rows:
+        cells = []
+        for j, c in enumerate(row):
+            if raw_last and j == len(row) - 1:
+                cells.append(f"<td>{c}</td>")
+            elif isinstance(c, (int, float)) and not isinstance(c, bool):
+                cells.append(f'<td class="num">{_e(c)}</td>')
+            else:
+                cells.append(f"<td>{_e(c)}</td>")
+        out.append("<tr>" + "".join(cells) + "</tr>")
+    out.append("</table>")
+    return out
+
+
+def _data_uri(path: Path) -> str | None:
+    try:
+        data = Path(path).read_bytes()
+    except OSError:
+        return None
+    return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
+
+
+def _html(out_dir: Path, figures, theorems, errata, meta) -> str:
+    n_pass = sum(bool(r.passed) for r in theorems)
+    parts = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
+             f"<title>{_e(REPORT_TITLE)}</title>", f"<style>{_CSS}</style>", "</head>", "<body>",
+             f"<h1>{_e(REPORT_TITLE)}</h1>", f"<p>Paper: {_e(PAPER)}.</p>"]
+    status = "pass" if n_pass == len(theorems) else "fail"
+    parts.append(f'<p class="summary">Theorem table: <span class="{status}">{n_pass} of {len(theorems)} claims '
+                 f"pass</span>. Errata measured: {len(errata)}. Figures: {len(figures)}.</p>")
+    parts += ["<h2>Provenance</h2>"] + _html_table(["item", "value"], _meta_items(meta))
+
+    parts.append("<h2>Figures</h2>")
+    for fig in figures:
+        parts.append(f"<h3>{_e(fig.title)}</h3>")
+        for f in fig.files:
+            if Path(f).suffix.lower() == ".png":
+                uri = _data_uri(Path(f))
+                if uri is None:
+                    parts.append(f'<p class="fail">Image missing: {_e(Path(f).name)}</p>')
+                else:
+                    parts.append(f'<figure><img alt="{_e(fig.name)}" src="{uri}"></figure>')
+        others = [Path(f).name for f in fig.files if Path(f).suffix.lower() != ".png"]
+        if others:
+            parts.append(f'<p class="small">Also written next to this report: {_e(", ".join(others))}.</p>')
+        parts.append(f'<p class="caption">{_e(fig.caption)}</p>')
+        if fig.table:
+            cols = _columns(fig.table)
+            parts += _html_table(cols, ([row.get(c, "") for c in cols] for row in fig.table))
+        if fig.metrics:
+            parts += _html_table(["metric", "value"], fig.metrics.items())
+        if fig.notes:
+            parts.append("<ul>" + "".join(f"<li>{_e(n)}</li>" for n in fig.notes) + "</ul>")
+
+    parts += ["<h2>Theorems</h2>", f"<p>{n_pass} of {len(theorems)} pass.</p>"]
+    parts += _html_table(
+        ["#", "claim", "paper", "expected", "measured", "result"],
+        ([i, r.claim, r.paper_ref, r.expected, r.measured,
+          f'<span class="{"pass" if r.passed else "fail"}">{_pass_text(r.passed)}</span>']
+         for i, r in enumerate(theorems, 1)),
+        raw_last=True,
+    )
+    parts.append("<p>How each claim was measured:</p><ol class=\"detail\">"
+                 + "".join(f"<li>{_e(r.detail)}</li>" for r in theorems) + "</ol>")
+
+    parts.append("<h2>Errata</h2>")
+    for i, e in enumerate(errata, 1):
+        parts.append(
+            f'<div class="erratum"><h3>{i}. {_e(e.location)}</h3>'
+            f"<p><b>Printed:</b> {_e(e.printed)}</p><p><b>Corrected:</b> {_e(e.corrected)}</p>"
+            f"<p><b>Measured:</b> {_e(e.measurement)}</p><p><b>Evidence value:</b> {_e(e.evidence_value)}</p></div>"
+        )
+    parts += ["</body>", "</html>"]
+    return "\n".join(parts) + "\n"
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    """Write `text` to `path` through a temporary file in the same folder and `os.replace` (the
+    temporary file is created like any other file, so the report gets the usual permissions)."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        with open(tmp, "x", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def write_report(out_dir, figures: Sequence, theorems: Sequence, errata: Sequence,
+                 meta: Mapping[str, Any]) -> tuple[Path, Path]:
+    """Write `report.md` and the self-contained `report.html` into `out_dir`.
+
+    Arguments:
+        out_dir: the folder (created if missing); the figures' PNG files are linked from the
+            Markdown relative to it and embedded in the HTML.
+        figures: :class:`~gnipy.experiments.figures.FigureResult` objects (or anything with their
+            fields: name, title, caption, files, metrics, table, notes).
+        theorems: :class:`~gnipy.experiments.theorems.Row` objects.
+        errata: :class:`~gnipy.experiments.theorems.Erratum` objects.
+        meta: provenance, e.g. `gnipy_version`, `date`, `machine`, `mode`, `runtime_s` (shown first,
+            in that order), then any other keys.
+
+    Returns:
+        `(md_path, html_path)`.
+    """
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    md_path, html_path = out_dir / "report.md", out_dir / "report.html"
+    _write_atomic(md_path, _markdown(out_dir, figures, theorems, errata, meta))
+    _write_atomic(html_path, _html(out_dir, figures, theorems, errata, meta))
+    return md_path, html_path

@@ -1,0 +1,156 @@
+"""The figures of paper §7.4 (gnipy.experiments.figures), each run once in quick mode.
+
+Every expected number comes from theory or from the exact solution, never from an earlier run:
+
+- Example 1 (homogeneous ball, V = 0, constant metric): the paper's Euler A discrete Lagrangian
+  h·l(q_k, Δ, ω_k) does not depend on q_k, so it *is* the trapezoid l_d (checked below) and the GNI is
+  the reduced RATTLE, a symmetric method: order 2 in position, ω and energy.
+- DLA [IMMM]: positions order 2 (a symmetric two-step scheme), but the velocity it reports,
+  𝔾⁻¹p⁺_k = FL⁺ of the previous step, is the velocity at t_k − h/2 up to O(h²): its ω error is
+  (h/2)|ω̇| + O(h²), and for the exact circular motion |ω̇| = (Ω − κ)|ż₀| is constant.
+- Figure 2: the exact contact point runs round the circle of centre z₀ + iż₀/κ and radius |ż₀|/κ;
+  an order-2 method stays within O(h²) of it, so halving h divides the distance by 4.
+- Figure 3: the momentum start gives the order-2 GNI; the paper's start perturbs σ₀ by
+  −(h²/2)I⁻¹(ω⁰ × Iω⁰) + O(h³) and so p⁺₁ by O(h): order 1 in position and ω (caption: 1, 1, 2).
+"""
+
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnipy
+from gnipy.experiments import figures as F
+from gnipy.models import rolling_ball as rb
+from gnipy.spaces import Point
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("figures")
+    calls = {}
+    results = {}
+    for name, fn in F.FIGURES.items():
+        calls[name] = []
+        results[name] = fn(out, True, lambda adv, desc, c=calls[name]: c.append((adv, desc)))
+    return out, results, calls
+
+
+def test_files_written_into_out_dir(run):
+    out, results, _ = run
+    for name, res in results.items():
+        assert res.name == name
+        assert [f.name for f in res.files] == [f"{name}.png", f"{name}.pdf"]
+        png, pdf = (f.read_bytes() for f in res.files)
+        assert png.startswith(PNG_MAGIC) and len(png) > 10_000
+        assert pdf.startswith(b"%PDF") and len(pdf) > 5_000
+        assert all(f.parent == out for f in res.files)
+        assert res.title and res.caption and res.notes and res.table
+        assert all(isinstance(v, float) for v in res.metrics.values())
+    assert sorted(p.name for p in out.iterdir()) == sorted(f"figure{i}.{e}" for i in (1, 2, 3) for e in ("png", "pdf"))
+
+
+def test_progress_adds_up_to_one_per_figure(run):
+    _, _, calls = run
+    for name, c in calls.items():
+        assert c and all(adv >= 0 and isinstance(desc, str) for adv, desc in c)
+        assert sum(adv for adv, _ in c) == pytest.approx(1.0, abs=1e-9), name
+
+
+def test_figure_1_euler_a_is_the_trapezoid_here():
+    """The derivation behind the expected order 2: with V = 0 and a constant metric, h·l(q_k, Δ, ω)
+    equals h·(l(q_k, Δ, ω) + l(q_{k+1}, Δ, ω))/2 for any step."""
+    s = rb.build_system(rb.DEFAULT_PARAMS)
+    rng = np.random.default_rng(0)
+    b0 = Point(rng.standard_normal(2), np.asarray(gnipy.SO3().exp(rng.standard_normal(3))))
+    z = rng.standard_normal(5)
+    a, t = float(gnipy.EulerA()(s, b0, z, 0.1)), float(gnipy.Trapezoid()(s, b0, z, 0.1))
+    assert a == pytest.approx(t, rel=1e-15)
+
+
+def test_figure_1_orders(run):
+    res = run[1]["figure1"]
+    m = res.metrics
+    # GNI = reduced RATTLE here: order 2
+    for q in ("position", "omega", "energy"):
+        assert m[f"gni_order_{q}"] == pytest.approx(2.0, abs=0.2), (q, m)
+    # DLA: positions order 2, reported velocity order 1
+    assert m["dla_order_position"] == pytest.approx(2.0, abs=0.2), m
+    assert m["dla_order_omega"] == pytest.approx(1.0, abs=0.2), m
+    # ... with the leading constant (h/2)|ω̇|, |ω̇| = (Ω − κ)|ż₀| (exact circular motion)
+    p = rb.DEFAULT_PARAMS
+    kappa = p["I1"] * p["Omega"] / (p["I1"] + p["m"] * p["r"] ** 2)
+    h_min = min(row["h"] for row in res.table)
+    predicted = 0.5 * h_min * (p["Omega"] - kappa) * math.hypot(1.0, 1.0)
+    assert m["dla_error_omega_smallest_h"] == pytest.approx(predicted, rel=0.1)
+    # the table holds every run
+    assert {row["method"] for row in res.table} == {"gni", "dla"}
+    assert "exact solution" in res.caption and "t = 1, 2, ..., 10" in res.caption
+
+
+def test_figure_2_path_stays_on_the_exact_circle(run):
+    m = run[1]["figure2"].metrics
+    p = rb.DEFAULT_PARAMS
+    kappa = p["I1"] * p["Omega"] / (p["I1"] + p["m"] * p["r"] ** 2)
+    assert m["radius"] == pytest.approx(math.hypot(1.0, 1.0) / kappa, rel=1e-14)
+    assert m["h"] == 0.1 and m["steps"] == 1000
+    # O(h²): within (hω₀)² of the radius (ω₀ = 2 sets the step's rotation), and a factor 4 for h/2
+    assert m["relative_max_distance_from_exact_circle"] < (0.1 * 2.0) ** 2
+    assert m["distance_ratio_h_over_half_h"] == pytest.approx(4.0, rel=0.1)
+    # no drift off the circle
+    assert m["max_distance_second_half"] <= 1.05 * m["max_distance_first_half"]
+    assert m["kappa_discrete"] == pytest.approx(kappa, rel=(0.1 * 2.0) ** 2)
+
+
+def test_figure_3_paper_start_first_step():
+    """The paper's start agrees with the GNI's own first step in (x₁, y₁) and differs in σ₀ by
+    −(h²/2)I⁻¹(ω⁰ × Iω⁰) + O(h³)."""
+    s, q0, v0 = rb.example_2()
+    b0, v0j = F._initial_point(s, q0, v0)
+    method = gnipy.GNI(gnipy.EulerA()).prepare(s, b0)
+    w0 = np.asarray(rb.EXAMPLE_2["omega0"])
+    inertia = np.array([1.0, 1.1, 1.2])
+    h = 0.01
+    x1, R1, _ = F.run_nodes(method, s, F._init(method, s, b0, v0j, jnp.asarray(h)), h, 1, 1)
+    start = F.paper_start(s, q0, w0, h)
+    np.testing.assert_allclose(np.asarray(start.b.x), x1[0], rtol=0, atol=1e-15)
+    Rm = R1[0]
+    S = 2.0 * (Rm - np.eye(3)) @ np.linalg.inv(Rm + np.eye(3))  # Cayley inverse
+    sigma = np.array([S[2, 1], S[0, 2], S[1, 0]])
+    predicted = h * w0 - 0.5 * h**2 * np.cross(w0, inertia * w0) / inertia
+    assert np.max(np.abs(sigma - predicted)) < 0.1 * h**3
+    assert np.max(np.abs(sigma - h * w0)) > 0.9 * np.max(np.abs(predicted - h * w0))  # the h² term is seen
+
+
+def test_figure_3_orders_of_both_starts(run):
+    res = run[1]["figure3"]
+    m = res.metrics
+    for start in ("paper", "momentum"):
+        for q in ("position", "omega", "energy"):
+            for suffix in ("", "_fine"):
+                assert math.isfinite(m[f"{start}_start_order_{q}{suffix}"]), (start, q, suffix)
+    # momentum start: the order-2 GNI
+    for q in ("position", "omega", "energy"):
+        assert m[f"momentum_start_order_{q}"] == pytest.approx(2.0, abs=0.2), (q, m)
+    # paper's start: the O(h) start error dominates position and ω at small h
+    assert m["paper_start_order_position_fine"] == pytest.approx(1.0, abs=0.3), m
+    assert m["paper_start_order_omega_fine"] == pytest.approx(1.0, abs=0.3), m
+    assert m["paper_start_matches_caption"] == 1.0 and m["momentum_start_matches_caption"] == 0.0
+    notes = " ".join(res.notes)
+    assert "Comparison with the caption: the paper's start (a) matches the caption's slopes (1, 1, 2)" in notes
+    assert {row["start"] for row in res.table} == {"paper", "momentum"}
+    assert "quick run" in res.caption and "p⁺₁ = FL⁺" in res.caption
+
+
+def test_fitted_order_leaves_out_round_off():
+    hs = np.array([0.1, 0.05, 0.025, 0.0125, 0.00625])
+    errors = 3.0 * hs**2
+    assert F.fitted_order(hs, errors) == pytest.approx(2.0, abs=1e-12)
+    # a floor, and a point past the smallest error (round-off growing again), are left out
+    errors_ro = np.concatenate([errors[:4], [1e-2]])
+    assert F.fitted_order(hs, errors_ro) == pytest.approx(2.0, abs=1e-12)
+    assert F.fitted_order(hs, errors, floor=3.0 * 0.025**2 * 0.99) == pytest.approx(2.0, abs=1e-12)
+    assert math.isnan(F.fitted_order(hs, errors, floor=1.0))
