@@ -47,3 +47,16 @@ def _curved_mu(q):
 CURVED = gnipy.System(_curved_lagrangian, _curved_mu, n=3, name="curved-particle-test")
 CURVED_Q0 = np.array([0.5, 1.0, 0.0])
 CURVED_V0 = np.array([1.0, 0.3, 1.0])
+
+
+def cached_runner(cases, h, steps):
+    """`run(case, method)`: a cached `gnipy.simulate` of `steps` steps of size h, every node saved."""
+    cache: dict = {}
+
+    def _run(case, method):
+        if (case, method) not in cache:
+            system, q0, v0 = cases[case]
+            cache[case, method] = gnipy.simulate(system, method, q0, v0, h=h, steps=steps)
+        return cache[case, method]
+
+    return _run

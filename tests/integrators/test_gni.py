@@ -20,7 +20,7 @@ STEPS = 1000
 EPS = np.finfo(np.float64).eps
 VARIANTS = ["gni-euler-a", "gni-euler-b", "gni-trapezoid", "gni-midpoint"]
 
-from shared_systems import BALL, BALL_Q0, BALL_V0, CURVED, CURVED_Q0, CURVED_V0, PARTICLE  # noqa: E402
+from shared_systems import cached_runner, BALL, BALL_Q0, BALL_V0, CURVED, CURVED_Q0, CURVED_V0, PARTICLE  # noqa: E402
 
 CASES = {
     "linear": (PARTICLE, np.array([1.0, 1.0, 0.0]), np.array([1.0, 0.5, 1.0])),
@@ -32,15 +32,7 @@ CASES = {
 @pytest.fixture(scope="module")
 def run():
     """`run(case, method)`: a cached `gnipy.simulate` of STEPS steps, every node saved."""
-    cache: dict = {}
-
-    def _run(case, method):
-        if (case, method) not in cache:
-            system, q0, v0 = CASES[case]
-            cache[case, method] = gnipy.simulate(system, method, q0, v0, h=H, steps=STEPS)
-        return cache[case, method]
-
-    return _run
+    return cached_runner(CASES, H, STEPS)
 
 
 # --------------------------------------------------------------------------------------------

@@ -23,7 +23,7 @@ H = 0.02
 STEPS = 1000  # one step count for every trajectory: one compile per (system, method)
 EPS = np.finfo(np.float64).eps
 
-from shared_systems import BALL, BALL_Q0, BALL_V0, CURVED, PARTICLE, PARTICLE_Q0, PARTICLE_V0  # noqa: E402
+from shared_systems import cached_runner, BALL, BALL_Q0, BALL_V0, CURVED, PARTICLE, PARTICLE_Q0, PARTICLE_V0  # noqa: E402
 
 CASES = {"linear": (PARTICLE, PARTICLE_Q0, PARTICLE_V0), "affine": (BALL, BALL_Q0, BALL_V0)}
 
@@ -31,15 +31,7 @@ CASES = {"linear": (PARTICLE, PARTICLE_Q0, PARTICLE_V0), "affine": (BALL, BALL_Q
 @pytest.fixture(scope="module")
 def run():
     """`run(case, method)`: a cached `gnipy.simulate` of STEPS steps, every node saved."""
-    cache: dict = {}
-
-    def _run(case, method):
-        if (case, method) not in cache:
-            system, q0, v0 = CASES[case]
-            cache[case, method] = gnipy.simulate(system, method, q0, v0, h=H, steps=STEPS)
-        return cache[case, method]
-
-    return _run
+    return cached_runner(CASES, H, STEPS)
 
 
 def _rel(a, b):
