@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-__all__ = ["projectors", "reflect_momentum", "reported_momentum"]
+from .linalg import solve_spd
+
+__all__ = ["projectors", "reflect_momentum", "reported_momentum", "Qstar", "reflect_and_report"]
 
 
 def projectors(G, mu):
@@ -21,18 +23,20 @@ def projectors(G, mu):
     Returns:
         `(P, Q)`, both (n, n), with $P + Q = I$, $P^2 = P$, $\\mu P = 0$.
     """
-    Ginv_muT = jnp.linalg.solve(G, mu.T)  # G⁻¹μᵀ (n, m)
+    Ginv_muT = solve_spd(G, mu.T)  # G⁻¹μᵀ (n, m)
     C = mu @ Ginv_muT  # (m, m)
-    Q = Ginv_muT @ jnp.linalg.solve(C, mu)
+    Q = Ginv_muT @ solve_spd(C, mu)
     P = jnp.eye(G.shape[0], dtype=Q.dtype) - Q
     return P, Q
 
 
-def _Qstar(G, mu, p):
-    """$Q^* p = \\mu^T C^{-1} \\mu \\mathbb{G}^{-1} p$ without forming matrices."""
-    Ginv_p = jnp.linalg.solve(G, p)
-    C = mu @ jnp.linalg.solve(G, mu.T)
-    return mu.T @ jnp.linalg.solve(C, mu @ Ginv_p)
+def Qstar(G, mu, p):
+    """$Q^* p = \\mu^T C^{-1} \\mu \\mathbb{G}^{-1} p$ without forming matrices (G and C are SPD:
+    one unrolled elimination for $\\mathbb{G}^{-1}[p, \\mu^T]$, one for C)."""
+    X = solve_spd(G, jnp.concatenate([p[:, None], mu.T], axis=1))
+    Ginv_p, Ginv_muT = X[:, 0], X[:, 1:]
+    C = mu @ Ginv_muT
+    return mu.T @ solve_spd(C, mu @ Ginv_p)
 
 
 def reflect_momentum(G, mu, Pi, p_plus):
@@ -40,7 +44,7 @@ def reflect_momentum(G, mu, Pi, p_plus):
 
     Equivalent to $P^*(p^- - p^+) = 0$ and $Q^*((p^- + p^+)/2 - \\Pi) = 0$ ((GNIintAffa/b)).
     """
-    return p_plus - 2.0 * _Qstar(G, mu, p_plus - Pi)
+    return p_plus - 2.0 * Qstar(G, mu, p_plus - Pi)
 
 
 def reported_momentum(G, mu, Pi, p_plus):
@@ -48,4 +52,18 @@ def reported_momentum(G, mu, Pi, p_plus):
 
     It satisfies the constraints $\\mu \\mathbb{G}^{-1} (\\bar p - \\Pi) = 0$ exactly.
     """
-    return p_plus - _Qstar(G, mu, p_plus - Pi)
+    return p_plus - Qstar(G, mu, p_plus - Pi)
+
+
+def reflect_and_report(G, mu, Pi, p_plus):
+    """One GNI node's momenta in one pass: `(p_minus, p_bar, v_bar)`, the reflection (Comb)
+    $p^- = p^+ - 2Q^*(p^+ - \\Pi)$, the reported $\\bar p = p^+ - Q^*(p^+ - \\Pi)$ and its velocity
+    $\\bar v = \\mathbb{G}^{-1}\\bar p$ (one elimination on $\\mathbb{G}$ with the right-hand sides
+    $[p^+, \\Pi, \\mu^T]$, one on C)."""
+    X = solve_spd(G, jnp.concatenate([p_plus[:, None], Pi[:, None], mu.T], axis=1))
+    Ginv_p, Ginv_muT = X[:, 0] - X[:, 1], X[:, 2:]
+    C = mu @ Ginv_muT
+    c = solve_spd(C, mu @ Ginv_p)
+    q_star = mu.T @ c
+    v_bar = X[:, 0] - Ginv_muT @ c
+    return p_plus - 2.0 * q_star, p_plus - q_star, v_bar

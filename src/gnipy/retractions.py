@@ -30,6 +30,8 @@ import jax
 import jax.numpy as jnp
 from jax.scipy.linalg import block_diag
 
+from .linalg import solve as small_solve
+
 from .lie_groups import (
     _BERNOULLI,
     SE2,
@@ -182,7 +184,7 @@ class Cayley(Retraction):
             return group.exp(xi)
         X = group.hat(xi)
         eye = jnp.eye(group.matrix_size, dtype=X.dtype)
-        return jnp.linalg.solve(eye - 0.5 * X, eye + 0.5 * X)
+        return small_solve(eye - 0.5 * X, eye + 0.5 * X)
 
     def _dtau(self, group, xi):
         if isinstance(group, SO3):
@@ -192,8 +194,8 @@ class Cayley(Retraction):
             return jnp.eye(group.dim, dtype=xi.dtype)
         X = group.hat(xi)
         eye = jnp.eye(group.matrix_size, dtype=X.dtype)
-        A_inv = jnp.linalg.inv(eye - 0.5 * X)
-        B_inv = jnp.linalg.inv(eye + 0.5 * X)
+        A_inv = small_solve(eye - 0.5 * X, eye)
+        B_inv = small_solve(eye + 0.5 * X, eye)
         # dcay_x y = (I − x/2)⁻¹ y (I + x/2)⁻¹  (Appendix b)
         return jax.vmap(lambda E: group.vee(A_inv @ E @ B_inv))(group.basis()).T
 
@@ -217,7 +219,7 @@ class Cayley(Retraction):
             return group.log(g)
         # x = 2 (g + I)⁻¹ (g − I)
         eye = jnp.eye(group.matrix_size, dtype=g.dtype)
-        return group.vee(2.0 * jnp.linalg.solve(g + eye, g - eye))
+        return group.vee(2.0 * small_solve(g + eye, g - eye))
 
 
 # ---------------------------------------------------------------------------------------------

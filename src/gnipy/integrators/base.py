@@ -16,7 +16,10 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-__all__ = ["Integrator", "StepInfo", "MethodError", "solve_step", "default_root_finder"]
+from ..linalg import solve as small_solve
+from ..linalg import solve_spd
+
+__all__ = ["Integrator", "StepInfo", "MethodError", "solve_step", "newton", "default_root_finder"]
 
 
 class MethodError(ValueError):
@@ -32,8 +35,104 @@ class StepInfo(NamedTuple):
 
 
 def default_root_finder():
-    """Newton's method with tolerances near round-off (the GNI's implicit steps)."""
+    """Newton's method with tolerances near round-off, as an optimistix solver (pass it as
+    `root_finder=` to use optimistix instead of the built-in :func:`newton`)."""
     return optx.Newton(rtol=1e-12, atol=1e-12)
+
+
+def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_steps: int = 50):
+    r"""Solve a small system `F(z) = 0`: chord iterations with the Jacobian at the guess, then, if
+    they do not converge quickly, Newton's method with fresh Jacobians from the guess.
+
+    Written here rather than taken from optimistix because the GNI's steps are tiny (N ≤ 10) and
+    per-step cost is what matters: `optx.Newton` with its lineax LU costs several µs per step of
+    the rolling ball, this loop with the unrolled solves of :mod:`gnipy.linalg` about 1 µs
+    (measured, see BENCHMARKS.md). `optx.Newton` stays available through the `root_finder=`
+    argument of the integrators.
+
+    Phase 1 (chord): the GNI's first guess is accurate to $O(h^2)$ and its Jacobian, $\approx
+    \mathbb{G}/h$, changes by $O(h)$ over a step, so $z \leftarrow z - J(z_0)^{-1}F(z)$ contracts
+    by a small factor per iteration at the cost of one evaluation of F. $J(z_0)^{-1}$ is formed by
+    elimination without pivoting (stable for the symmetric-dominated Jacobians of discrete
+    Lagrangians, and fused by XLA into a few kernels).
+    Phase 2 (fallback): when the chord iteration's contraction estimate
+    $\theta_k = |\Delta_k|/|\Delta_{k-1}|$ exceeds 1/2, a value is not finite (e.g. a zero pivot
+    in the saddle-point systems of methods with multipliers) or phase 1 runs out of iterations,
+    Newton's method with partial pivoting restarts from the guess.
+
+    Stopping test (both phases, max norm): $|\Delta_k| \le \mathrm{atol} + \mathrm{rtol}\,|z_{k+1}|$,
+    and the iteration has reached round-off: the error estimate of Hairer–Wanner (*Solving ODEs
+    II*, IV.8) $\theta_k|\Delta_k|/(1-\theta_k) \le 0.01\,\varepsilon|z_{k+1}|$, or $\theta_k \ge 1/2$
+    (no more contraction: the round-off floor). Stopping at the tolerance alone, or a few ε above
+    the floor, leaves an error of the same sign step after step (the chord iteration approaches
+    from one side), which adds up to a drift far above round-off over $10^5$ steps (the
+    energy-theorem tests measure it).
+
+    Returns:
+        `(z, StepInfo)`: `ok` is False when phase 2 does not converge in `max_steps` iterations
+        or a value is not finite; `iterations` counts evaluations of F in both phases;
+        `residual` is $\max|F|$ at the last iterate from which a correction was computed.
+    """
+    dtype = guess.dtype
+    eps = jnp.finfo(dtype).eps
+    eye = jnp.eye(guess.shape[0], dtype=dtype)
+    inf = jnp.asarray(jnp.inf, dtype)
+    k0 = jnp.asarray(0, jnp.int32)
+    false = jnp.asarray(False)
+
+    def test(dz, z1, prev):
+        size = jnp.max(jnp.abs(dz))
+        scale = jnp.max(jnp.abs(z1))
+        theta = size / prev
+        # accepted: below the tolerance, and either the estimated error left, θ|Δ|/(1−θ), is far
+        # below eps|z| or the iteration no longer contracts (θ ≥ 1/2: the round-off floor). A
+        # remaining error of a few eps would have the same sign step after step (a linearly
+        # converging iteration approaches from one side) and add up to a drift.
+        floor = (theta >= 0.5) | (theta / (1.0 - theta) * size <= 0.01 * eps * scale)
+        done = (size <= atol + rtol * scale) & floor
+        return size, theta, done & jnp.isfinite(size)
+
+    # phase 1: chord iterations with J(guess)⁻¹ (elimination without pivoting)
+    Jinv = solve_spd(jax.jacfwd(F)(guess), eye)
+
+    def chord_cond(c):
+        _, j, done, _, _, stop = c
+        return (~done) & (~stop) & (j < max_steps)
+
+    def chord_body(c):
+        z, j, _, prev, _, _ = c
+        f = F(z)
+        dz = Jinv @ f
+        z1 = z - dz
+        size, theta, done = test(dz, z1, prev)
+        stop = ~done & (~jnp.isfinite(size) | ((j > 0) & (theta > 0.5)))
+        return z1, j + 1, done, size, jnp.max(jnp.abs(f)), stop
+
+    z, k1, done, size, residual, _ = jax.lax.while_loop(
+        chord_cond, chord_body, (guess, k0, false, inf, inf, false)
+    )
+
+    # phase 2 (only where phase 1 failed): Newton with pivoting, fresh Jacobians, from the guess
+    def newton_cond(c):
+        _, j, done, _, _ = c
+        return (~done) & (j < max_steps)
+
+    def newton_body(c):
+        z, j, _, prev, _ = c
+        f = F(z)
+        dz = small_solve(jax.jacfwd(F)(z), f)
+        z1 = z - dz
+        size, _, done = test(dz, z1, prev)
+        return z1, j + 1, done | ~jnp.isfinite(size), size, jnp.max(jnp.abs(f))
+
+    done1 = done
+    z = jnp.where(done1, z, guess)
+    z, k2, done, size, residual = jax.lax.while_loop(
+        newton_cond, newton_body, (z, k0, done1, jnp.where(done1, size, inf), residual)
+    )
+    k = k1 + k2
+    ok = done & jnp.isfinite(size) & jnp.all(jnp.isfinite(z))
+    return z, StepInfo(ok, k, residual)
 
 
 def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: int = 50):
@@ -44,7 +143,8 @@ def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: in
         guess: the first guess.
         explicit: `F` is affine in `z`: one Newton step from `guess` is the exact solution, so no
             iteration and no convergence test are needed (the fast path of explicit schemes).
-        solver: an optimistix root finder for the implicit case (default Newton, tol 1e-12).
+        solver: an optimistix root finder for the implicit case (default: the built-in
+            :func:`newton`, tolerance 1e-12).
         max_steps: iteration cap of the implicit case.
 
     Returns:
@@ -52,10 +152,11 @@ def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: in
     """
     if explicit:
         J = jax.jacfwd(F)(guess)
-        z = guess - jnp.linalg.solve(J, F(guess))
+        z = guess - small_solve(J, F(guess))
         ok = jnp.all(jnp.isfinite(z))
         return z, StepInfo(ok, jnp.asarray(1, dtype=jnp.int32), jnp.asarray(0.0, dtype=z.dtype))
-    solver = default_root_finder() if solver is None else solver
+    if solver is None:
+        return newton(F, guess, max_steps=max_steps)
     # The Cauchy test of optx.Newton asks |F| < atol absolutely, but F has a round-off floor of
     # about eps·|dF/dz|·|z| (e.g. G(z - q)/h), which passes atol once |z|/h is large, and the solve
     # then never terminates. Dividing F by that scale leaves the Newton iterates unchanged and

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from ..discrete_lagrangians import CustomDiscreteLagrangian, DiscreteLagrangian, EulerA, EulerB, Midpoint, Trapezoid
-from ..projectors import reflect_momentum, reported_momentum
+from ..projectors import reflect_and_report
 from .base import Integrator, solve_step
 
 __all__ = ["GNI", "GNIState"]
@@ -86,8 +86,8 @@ class GNI(Integrator):
     def step(self, system, state, h):
         b, p_plus = state
         G, mu, Pi = self._node(system, b)
-        p_minus = reflect_momentum(G, mu, Pi, p_plus)  # (Comb)
-        v_bar = jnp.linalg.solve(G, reported_momentum(G, mu, Pi, p_plus))
+        # (Comb) p⁻ = p⁺ − 2Q*(p⁺ − Π); the reported p̄ = p⁺ − Q*(p⁺ − Π) gives the first guess
+        p_minus, _, v_bar = reflect_and_report(G, mu, Pi, p_plus)
         space = system.space
 
         def ld(b0, z):
@@ -107,5 +107,5 @@ class GNI(Integrator):
     def observe(self, system, state, h):
         b, p_plus = state
         G, mu, Pi = self._node(system, b)
-        p_bar = reported_momentum(G, mu, Pi, p_plus)
-        return b, jnp.linalg.solve(G, p_bar), p_bar
+        _, p_bar, v_bar = reflect_and_report(G, mu, Pi, p_plus)
+        return b, v_bar, p_bar
