@@ -93,3 +93,17 @@ def test_files_page_code_runs_on_a_result_file(tmp_path, monkeypatch):
         exec(compile(block, "files.md", "exec"), namespace)  # noqa: S102
     namespace["ds"].close()
     assert (tmp_path / "disk.png").is_file()
+
+
+def test_performance_page_code_runs(tmp_path, monkeypatch):
+    """Ensembles (initial conditions, parameters) and a streamed run, as the page shows them."""
+    monkeypatch.chdir(tmp_path)
+    page = DOCS / "user-guide" / "performance.md"
+    namespace: dict = {}
+    for block in _python_blocks(page):
+        exec(compile(block, str(page), "exec"), namespace)  # noqa: S102
+    sol = namespace["sol"]
+    assert sol.batch_size == 50 and sol.q.shape == (50, 1001, 2)
+    np.testing.assert_allclose(sol.member_params["Omega"], np.linspace(0.0, 1.0, 50))
+    assert namespace["first"].q.shape == (21, 2)
+    assert namespace["result"].nodes == 20001 and (tmp_path / "ball.nc").is_file()

@@ -37,7 +37,9 @@ from .models import get_model, make_system, model_names  # noqa: E402
 from .projectors import projectors, reflect_momentum, reported_momentum  # noqa: E402
 from .reference import ContinuousReference  # noqa: E402
 from .retractions import Cayley, Exp, Retraction, get_retraction  # noqa: E402
+from .ensembles import model_systems, stack_systems  # noqa: E402
 from .simulate import simulate  # noqa: E402
+from .streaming import simulate_to_file  # noqa: E402
 from .solution import Solution, SolverFailure  # noqa: E402
 from .spaces import EuclideanSpace, GroupSpace, Point  # noqa: E402
 from .system import System, SystemError  # noqa: E402
@@ -65,6 +67,9 @@ __all__ = [
     "McLachlanPerlmutter",
     "ContinuousReference",
     "simulate",
+    "model_systems",
+    "simulate_to_file",
+    "stack_systems",
     "Solution",
     "SolverFailure",
     "projectors",

@@ -244,6 +244,7 @@ _CONFIG_KEYS: dict[str, tuple[str, str]] = {
     "out": ("--out", "path"),
     "plot": ("--plot", "path"),
     "project_v0": ("--project-v0", "boolean"),
+    "checkpoint_every": ("--checkpoint-every", "integer"),
 }
 
 _KIND_TEXT = {
@@ -585,6 +586,15 @@ def run(
         None, "--config", "-c", help="A TOML file with any of these options (keys as the option names, "
         "dashes or underscores); options given on the command line override it.", show_default=False,
     ),
+    checkpoint_every: int | None = typer.Option(
+        None, "--checkpoint-every", help="Stream the run in chunks of K steps (a multiple of --save-every), "
+        "each committed to OUT.parts/ with the integrator state, so that an interrupted run can be resumed "
+        "(--resume). Runs saving more than 10^6 nodes are streamed in any case.", show_default=False,
+    ),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue an interrupted streamed run of the same options from its last "
+        "checkpoint (the result equals an uninterrupted run exactly).",
+    ),
 ):
     """Integrate MODEL with METHOD and write the trajectory to a netCDF file.
 
@@ -605,6 +615,10 @@ def run(
 
     (`set` may also be a list of "NAME=VALUE" strings, `x0`/`v0`/`R0` strings "a,b,...").
     Relative paths in the file are relative to the file's directory.
+
+    Long runs are streamed: with --checkpoint-every K (or when more than 10^6 nodes are saved)
+    the nodes go to the file in chunks, memory holds one chunk, and the file appears (atomically)
+    when the run is complete; --resume continues an interrupted run.
     """
     origins: dict[str, str] = {}
 
@@ -652,6 +666,26 @@ def run(
         _check_output(out_)
         if plot_ is not None:
             _check_plot(plot_)
+        chunk = pick("checkpoint_every", checkpoint_every)
+        if chunk is not None and (isinstance(chunk, bool) or chunk < 1):
+            raise _UsageError("--checkpoint-every", f"must be a positive integer, got {chunk!r}")
+        if resume and chunk is None:
+            raise _UsageError("--resume", "only streamed runs resume: give --checkpoint-every K as in the interrupted run")
+        n_steps = steps_ if steps_ is not None else round(float(t_final_) / float(h_))
+        if chunk is not None or n_steps // int(save_every_) > STREAM_NODES:
+            if method_ == "reference":
+                raise _UsageError("--checkpoint-every", "the continuous reference is not streamed")
+            if plot_ is not None:
+                raise _UsageError("--plot", "not available for streamed runs: plot from the file (gnipy.plots)")
+            extra = {"save_every": int(save_every_), "project_v0": int(project), "command": "gni run",
+                     "q0": list(q0), "coordinates": ",".join(spec.coordinates)}
+            if config is not None:
+                extra["config_file"] = str(config)
+            if R0_ is not None:
+                extra["R0"] = list(R0_)
+            _run_streamed(spec, params, method_, q0, v0_, R0_, h_, steps_, t_final_, project, save_every_, chunk,
+                          resume, out_, extra)
+            return
         sol, v0_used, seconds = _simulate(
             spec, params, method_, q0, v0_, h_, steps_, t_final_, project, save_every_, R0=R0_
         )
@@ -671,6 +705,52 @@ def run(
         _report("gni run", spec, params, sol, exact, drifts, seconds, written)
 
     _guarded(go, origins)
+
+
+#: `gni run` streams runs that save more nodes than this (memory stays bounded by one chunk).
+STREAM_NODES = 1_000_000
+
+
+def _run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, save_every, chunk, resume, out,
+                  extra) -> None:
+    """`gni run` in chunks through :func:`gnipy.streaming.simulate_to_file`, with a progress bar."""
+    import numpy as np
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.table import Table
+
+    from gnipy.streaming import simulate_to_file
+
+    system = spec.build(params)
+    _, v0_used = system.check(q0, v0, R0=R0, project_v0=project)
+    extra = dict(extra, v0=[float(x) for x in v0_used])
+    t0 = time.perf_counter()
+    columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"),
+               TimeElapsedColumn(), TimeRemainingColumn())
+    with Progress(*columns, console=_console(), transient=True) as bar:
+        total = steps if steps is not None else round(float(t_final) / float(h))
+        task = bar.add_task(f"{spec.name} with {method}", total=total)
+
+        def progress(done, total):
+            bar.update(task, completed=done, total=total)
+
+        result = simulate_to_file(
+            system, method, q0, v0_used, R0=R0, path=out, h=h, steps=steps, t_final=t_final, save_every=save_every,
+            chunk_steps=chunk, resume=resume, attrs=extra, progress=progress,
+        )
+    seconds = time.perf_counter() - t0
+    table = Table(title="gni run (streamed)", show_header=False, title_justify="left")
+    table.add_column(style="bold")
+    table.add_column(overflow="fold")
+    table.add_row("model", f"{spec.name} ({', '.join(f'{k}={v:g}' for k, v in params.items())})")
+    table.add_row("method", f"{method}, h = {float(h):g}, {result.steps} steps, {result.nodes} saved nodes, "
+                  f"{result.chunks} chunks ({result.chunks_resumed} from an earlier run)")
+    table.add_row("final q", ", ".join(f"{c} = {x:.10g}" for c, x in zip(spec.coordinates, np.asarray(result.final_q))))
+    table.add_row("energy", f"max |E - E0| = {result.energy_error:.3e}")
+    table.add_row("constraint residual", f"max |mu(q)(v - Y)| = {result.constraint_residual:.3e}")
+    table.add_row("time", f"{seconds:.2f} s (including compilation)")
+    con = _console()
+    con.print(table)
+    con.print(f"written: {out}", markup=False)
 
 
 def _write_plot(sol, path: Path) -> None:
@@ -954,6 +1034,153 @@ def _convergence_report(spec, params, names, counts, T, errors, orders, expected
         con.print(f"warning: solver failure for {f} (left out)", markup=False)
     con.print(f"time: {seconds:.2f} s (including compilation)", markup=False)
     con.print(f"written: {csv_path}, {png_path}", markup=False)
+
+
+# --------------------------------------------------------------------------------------------
+# gni sweep
+# --------------------------------------------------------------------------------------------
+# argument names in gnipy.sweep's error messages (`grid: ...`) and the CLI option each is about
+_SWEEP_OPTION_OF = {
+    "grid": "--grid",
+    "out": "--out",
+    "chunk_size": "--chunk-size",
+    "workers": "--workers",
+    "scheduler": "--scheduler",
+    "set_params": "--set",
+    "save_every": "--save-every",
+    "method": "--method",
+    "max_chunks": "--max-chunks",
+}
+
+
+def _sweep_message(message: str) -> str:
+    """A gnipy.sweep error message with its argument names written as the CLI options."""
+    head, sep, rest = str(message).partition(":")
+    if sep and head.strip() in _SWEEP_OPTION_OF:
+        message = f"{_SWEEP_OPTION_OF[head.strip()]}:{rest}"
+    else:
+        message = _rename(message)
+    for name, option in (("overwrite=True", "--overwrite"), ("project_v0=True", "--project-v0"),
+                         ("set_params", "--set")):
+        message = message.replace(name, option)
+    return message
+
+
+def _sweep_report(report, spec: dict[str, Any]) -> None:
+    from gnipy.sweep import GridAxis
+
+    con = _console()
+    axes = [GridAxis(**g) for g in spec["grid"]]
+    fixed = ", ".join(f"{k}={v:g}" for k, v in spec["params"].items())
+    con.print(f"gni sweep: {spec['model']}" + (f" ({fixed})" if fixed else "") + f" with {spec['method']}, "
+              f"h = {spec['h']:g}, {spec['steps']} steps, saved every {spec['save_every']}", markup=False)
+    grid = " x ".join(f"{a.name} = {a.start:g} .. {a.stop:g} ({a.count})" for a in axes)
+    con.print(f"  grid: {grid}: {report.members} members in {report.chunks} chunk(s) of {report.chunk_size}",
+              markup=False)
+    con.print(f"  chunks: {report.chunks_computed} computed, {report.chunks_skipped} skipped (done before), "
+              f"{report.chunks_remaining} remaining", markup=False)
+    con.print(f"  failed members: {report.failed_members}", markup=False)
+    rate = ""
+    if report.members_computed:
+        rate = (f"; {report.members_computed / report.wall_time:.3g} members/s, "
+                f"{report.member_steps_per_second:.3g} member-steps/s")
+    con.print(f"  time: {report.wall_time:.2f} s (including cluster start and compilation){rate}", markup=False)
+    if report.complete:
+        con.print(f"written: {report.path}", markup=False)
+    else:
+        con.print(f"written (incomplete, run the same command again to resume): {report.path}", markup=False)
+
+
+@app.command()
+def sweep(
+    model: str = typer.Argument(..., help="Model name (see `gni models`).", show_default=False, metavar="MODEL"),
+    grid: list[str] | None = typer.Option(
+        None, "--grid", "-g", help="A grid axis NAME=START:STOP:COUNT, values numpy.linspace(START, STOP, COUNT); "
+        "NAME is a parameter, q0.<coordinate> or v0.<velocity> (e.g. m=0.5:2:10, q0.x=-1:1:5, v0.omega3=0:1:3). "
+        "Repeatable: the sweep is the Cartesian product.", show_default=False,
+    ),
+    method: str = typer.Option("gni-trapezoid", "--method", "-m", help="Method name (see `gni methods`)."),
+    h: float | None = typer.Option(None, "--h", help="Step size (> 0).", show_default=False),
+    steps: int | None = typer.Option(
+        None, "--steps", help="Number of steps (give this or --t-final).", show_default=False
+    ),
+    t_final: float | None = typer.Option(
+        None, "--t-final", help="Final time, a whole number of steps (give this or --steps).", show_default=False
+    ),
+    save_every: int | None = typer.Option(
+        None, "--save-every", help="Save every K-th node (and always the last). [default: the number of steps: "
+        "only the initial and the last node]", show_default=False,
+    ),
+    set_: list[str] | None = typer.Option(
+        None, "--set", help="Fix a parameter that is not swept, NAME=VALUE (repeatable, or comma-separated).",
+        show_default=False,
+    ),
+    project_v0: bool = typer.Option(
+        True, "--project-v0/--no-project-v0", help="Project each member's initial velocity onto its constraints "
+        "(on by default for sweeps: a v0 grid, or parameters that change the constraints, move v0 off them).",
+    ),
+    chunk_size: int = typer.Option(
+        1000, "--chunk-size", help="Members per task (one vmapped batch) and per zarr chunk along `member`."
+    ),
+    scheduler: str | None = typer.Option(
+        None, "--scheduler", help="Address of an existing dask scheduler, e.g. tcp://host:8786 (its workers need "
+        "gnipy). [default: start a local cluster]", show_default=False,
+    ),
+    workers: int | None = typer.Option(
+        None, "--workers", help="Number of worker processes of the local cluster. [default: the number of cores]",
+        show_default=False,
+    ),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Delete an existing sweep store at --out and start afresh (without it, the "
+        "same sweep is resumed).",
+    ),
+    max_chunks: int | None = typer.Option(
+        None, "--max-chunks", help="Compute at most this many chunks, then stop (run again to go on), e.g. under "
+        "a batch-job time limit.", show_default=False,
+    ),
+    out: Path = typer.Option(
+        ..., "--out", "-o", help="Output zarr store, a directory (e.g. sweep.zarr); its parent must exist.",
+        show_default=False,
+    ),
+):
+    """Run MODEL over a grid of parameters and initial conditions on a dask cluster; write zarr.
+
+    The members (the grid's Cartesian product) run in chunks of --chunk-size, each one vmapped
+    batch, on a local dask.distributed cluster (or an existing one: --scheduler), and each chunk
+    is written to the zarr store OUT as it completes, with a progress display on a terminal.
+    Running the same command again resumes an interrupted sweep: the chunks already written are
+    skipped. Read the result with gnipy.sweep.open_sweep(OUT), which gives the grid axes as
+    dimensions.
+    """
+
+    def go():
+        from gnipy.sweep import SweepError, SweepFailure, run_sweep
+
+        if not grid:
+            raise _UsageError("--grid", "missing: give at least one --grid NAME=START:STOP:COUNT")
+        _check_positive("--h", h)
+        if h is None:
+            raise _UsageError("--h", "missing: give --h")
+        if (steps is None) == (t_final is None):
+            raise _UsageError("--steps/--t-final", "give exactly one of --steps and --t-final")
+        _check_positive("--steps", steps, "integer")
+        _check_positive("--t-final", t_final)
+        set_params = _parse_set(set_)
+        try:
+            report = run_sweep(
+                model, list(grid), out=out, h=h, steps=steps, t_final=t_final, method=method, save_every=save_every,
+                set_params=set_params, project_v0=project_v0, chunk_size=chunk_size, scheduler=scheduler,
+                workers=workers, overwrite=overwrite, max_chunks=max_chunks, progress=True,
+            )
+        except SweepError as e:
+            _fail(_sweep_message(str(e)), EXIT_USAGE)
+        except SweepFailure as e:
+            _fail(f"{e}; the chunks done are kept: run the same command again to resume", EXIT_FAILURE)
+        except KeyboardInterrupt:
+            _fail("interrupted; the chunks done are kept: run the same command again to resume", 130)
+        _sweep_report(report, report.spec)
+
+    _guarded(go)
 
 
 # --------------------------------------------------------------------------------------------

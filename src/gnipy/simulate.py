@@ -49,12 +49,15 @@ def _tree_finite(tree) -> jax.Array:
     return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
 
 
-@eqx.filter_jit
-def _integrate(method, system, state0, h, n_blocks: int, block: int, remainder: int):
-    """Run `n_blocks * block + remainder` steps, observing every `block` steps and at the end."""
+def _integrate_core(method, system, state0, h, n_blocks: int, block, remainder, has_remainder: bool):
+    """Run `n_blocks * block + remainder` steps, observing every `block` steps and at the end.
+
+    `block` and `remainder` are traced (only the number of saved nodes fixes the shapes), so runs
+    that differ in their step count but save as many nodes share one compilation.
+    """
     int_t = jnp.int32
 
-    def one_step(carry, _):
+    def one_step(_, carry):
         state, k, fail_k, fail_res, it_tot, it_max = carry
         new, info = method.step(system, state, h)
         ok = info.ok & _tree_finite(new) & (fail_k < 0)
@@ -64,11 +67,10 @@ def _integrate(method, system, state0, h, n_blocks: int, block: int, remainder: 
         fail_k = jnp.where(newly_failed, k, fail_k)
         fail_res = jnp.where(newly_failed, res, fail_res)
         it = jnp.where(ok, info.iterations, 0).astype(int_t)
-        return (state, k + 1, fail_k, fail_res, it_tot + it, jnp.maximum(it_max, it)), None
+        return state, k + 1, fail_k, fail_res, it_tot + it, jnp.maximum(it_max, it)
 
-    def block_scan(carry, length):
-        carry, _ = jax.lax.scan(one_step, carry, None, length=length)
-        return carry
+    def block_loop(carry, length):
+        return jax.lax.fori_loop(0, length, one_step, carry)
 
     def observe(state):
         return method.observe(system, state, h)
@@ -78,24 +80,49 @@ def _integrate(method, system, state0, h, n_blocks: int, block: int, remainder: 
     obs0 = observe(state0)
 
     def outer(carry, _):
-        carry = block_scan(carry, block)
+        carry = block_loop(carry, block)
         return carry, observe(carry[0])
 
     carry, obs = jax.lax.scan(outer, carry, None, length=n_blocks)
     obs = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), obs0, obs)
-    if remainder:
-        carry = block_scan(carry, remainder)
+    if has_remainder:
+        carry = block_loop(carry, remainder)
         last = observe(carry[0])
         obs = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]), obs, last)
     b, v, p = obs
     energy = jax.vmap(system.energy)(b, v)
     residual = jax.vmap(system.constraint_residual)(b, v)
     _, _, fail_k, fail_res, it_tot, it_max = carry
-    return b, v, p, energy, residual, fail_k, fail_res, jnp.stack([it_tot, it_max])
+    return b, v, p, energy, residual, fail_k, fail_res, jnp.stack([it_tot, it_max]), carry[0]
+
+
+_integrate = eqx.filter_jit(_integrate_core)
+
+
+@eqx.filter_jit
+def _integrate_batch(method, system, system_batched: bool, state0, h, n_blocks: int, block, remainder,
+                     has_remainder: bool):
+    """:func:`_integrate_core` vmapped over the members (states, and the systems when batched)."""
+    def one(s, st):
+        return _integrate_core(method, s, st, h, n_blocks, block, remainder, has_remainder)
+
+    return eqx.filter_vmap(one, in_axes=(eqx.if_array(0) if system_batched else None, 0))(system, state0)
+
+
+@eqx.filter_jit
+def _init_batch(method, system, system_batched: bool, b0, v0, h):
+    return eqx.filter_vmap(
+        lambda s, b, v: method.init(s, b, v, h), in_axes=(eqx.if_array(0) if system_batched else None, 0, 0)
+    )(system, b0, v0)
+
+
+@eqx.filter_jit
+def _init_one(method, system, b0, v0, h):
+    return method.init(system, b0, v0, h)
 
 
 def simulate(
-    system: System,
+    system,
     method: Integrator | str = "gni-trapezoid",
     q0=None,
     v0=None,
@@ -109,15 +136,18 @@ def simulate(
     project_v0: bool = False,
     throw: bool = True,
 ) -> Solution:
-    """Integrate a nonholonomic system.
+    """Integrate a nonholonomic system, or an ensemble of them.
 
     Arguments:
-        system: the :class:`~gnipy.System`.
+        system: the :class:`~gnipy.System`; or a sequence of Systems that differ only in parameter
+            values (a parameter batch, e.g. :func:`gnipy.model_systems`).
         method: an integrator object (e.g. `GNI(Midpoint())`) or a method name (see
             :func:`~gnipy.method_names`), including `"reference"` for the continuous reference.
         q0, v0: the initial coordinates and velocity (default: the system's documented ones); on
             $\\mathbb{R}^n \\times G$, `q0` holds x and `v0` the velocity $(\\dot x, \\xi)$.
-        R0: the initial orientation on $\\mathbb{R}^n \\times G$ (default: the system's, or the identity).
+            Arrays with a leading batch axis, (B, n) and (B, N), run B trajectories at once.
+        R0: the initial orientation on $\\mathbb{R}^n \\times G$ (default: the system's, or the
+            identity); (k, k), or (B, k, k) for a batch.
         h: step size (> 0); the reference saves at the same times.
         steps / t_final: the number of steps, or the final time (a whole number of steps).
         save_every: the save stride K: nodes 0, K, 2K, ... and always the last one are saved.
@@ -127,18 +157,36 @@ def simulate(
             solution up to the last good saved node with `result = 1`.
 
     Returns:
-        A :class:`~gnipy.Solution`.
+        A :class:`~gnipy.Solution`. For a batch (B members: the batch size of the systems and
+        of the initial conditions, which broadcast against each other) the arrays carry a leading
+        member axis, `sol.member(i)` is the i-th trajectory, and `sol.results`,
+        `sol.failed_steps` hold each member's result code and failed step.
+
+    Compilation is shared between runs that save the same number of nodes: the step count, h and
+    the parameter values are traced, so convergence studies (one saved node per run, varying h)
+    and parameter scans compile once.
 
     Raises:
-        SystemError: bad arguments or initial conditions (the message names the argument).
+        SystemError: bad arguments or initial conditions (the message names the argument and,
+            in a batch, the member).
         MethodError: a method that cannot integrate this system.
-        SolverFailure: a step did not converge (step index, time, residual in the message).
+        SolverFailure: a step did not converge (step index, time, residual in the message; in
+            a batch, the first failing member).
     """
     from .methods import get_method
     from .reference import ContinuousReference
 
+    systems = None
+    if isinstance(system, (list, tuple)):
+        systems = list(system)
+        if not systems:
+            raise SystemError("system: an empty sequence of systems")
+        if not all(isinstance(s, System) for s in systems):
+            bad = next(i for i, s in enumerate(systems) if not isinstance(s, System))
+            raise SystemError(f"system[{bad}]: expected a gnipy.System, got {type(systems[bad]).__name__}")
+        system = systems[0]
     if not isinstance(system, System):
-        raise SystemError(f"system: expected a gnipy.System, got {type(system).__name__}")
+        raise SystemError(f"system: expected a gnipy.System or a sequence of them, got {type(system).__name__}")
     if isinstance(method, str):
         method = get_method(method)
     if not isinstance(method, (Integrator, ContinuousReference)):
@@ -162,26 +210,35 @@ def simulate(
         v0 = system.defaults[1] if v0 is None else v0
         if R0 is None and len(system.defaults) > 2:
             R0 = system.defaults[2]
-    b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
 
     n_blocks, remainder = divmod(steps, save_every)
     k_saved = np.concatenate([np.arange(n_blocks + 1) * save_every, [steps] if remainder else []]).astype(np.int64)
     times = t0 + h * k_saved
+    meta = dict(system=system.name, method=method.name, h=h, coordinates=system.coordinates,
+                velocities=system.velocities, params=system.params)
 
+    batched = systems is not None or _is_batch(system, q0, v0, R0)
+    if batched:
+        if isinstance(method, ContinuousReference):
+            raise MethodError("method: the continuous reference runs one trajectory at a time; pass one system and one initial condition")
+        return _simulate_batch(systems or [system], method, q0, v0, R0, h, steps, save_every, n_blocks, remainder,
+                               k_saved, times, t0, project_v0, throw, meta)
+
+    b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
     if isinstance(method, ContinuousReference):
         return method.solve(system, b0, jnp.asarray(v0), times, h=h)
 
     method.check(system, b0)
     method = method.prepare(system, b0)
     hj = jnp.asarray(h)
-    state0 = method.init(system, b0, jnp.asarray(v0), hj)
-    b, v, p, energy, residual, fail_k, fail_res, its = _integrate(
-        method, system, state0, hj, n_blocks, save_every, remainder
+    core = system.without_metadata()
+    state0 = _init_one(method, core, b0, jnp.asarray(v0), hj)
+    b, v, p, energy, residual, fail_k, fail_res, its, _ = _integrate(
+        method, core, state0, hj, n_blocks, jnp.asarray(save_every, jnp.int32), jnp.asarray(remainder, jnp.int32),
+        bool(remainder),
     )
     q, R = system.space.coordinates(b), system.space.orientation(b)
     fail_k = int(fail_k)
-    meta = dict(system=system.name, method=method.name, h=h, coordinates=system.coordinates,
-                velocities=system.velocities, params=system.params)
     if fail_k < 0:
         return Solution(jnp.asarray(times), q, v, p, energy, residual, its, R=R, **meta)
     good = int(np.searchsorted(k_saved, fail_k, side="right"))  # saved nodes with index <= fail_k
@@ -197,3 +254,71 @@ def simulate(
         raise SolverFailure(msg, step=fail_k, time=t0 + h * fail_k, residual=float(fail_res), solution=partial)
     return partial
 
+
+def _is_batch(system: System, q0, v0, R0) -> bool:
+    """Whether the initial conditions carry a leading batch axis."""
+    try:
+        q = np.asarray(q0, dtype=np.float64)
+        v = np.asarray(v0, dtype=np.float64)
+    except (TypeError, ValueError):
+        return False  # let System.check name the bad argument
+    if q.ndim == 2 or v.ndim == 2:
+        return True
+    if system.group is not None and R0 is not None:
+        try:
+            R = np.asarray(R0, dtype=np.float64)
+        except (TypeError, ValueError):
+            return False
+        k = system.group.matrix_size
+        return R.ndim == 3 or (R.ndim == 2 and R.shape != (k, k) and R.shape[-1] == k * k)
+    return False
+
+
+def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks, remainder, k_saved, times, t0,
+                    project_v0, throw, meta):
+    from .ensembles import broadcast_initial_conditions, check_batch, member_params, stack_systems
+
+    system = systems[0]
+    size = len(systems) if len(systems) > 1 else None
+    B, q0, v0, R0 = broadcast_initial_conditions(system, q0, v0, R0, size)
+    # the full checks (mechanical type, dimensions) once, on the first member; the value checks
+    # (metric, rank, v0 on the constraints) for every member, vectorized
+    system.check(q0[0], None, R0=None if R0 is None else R0[0])
+    sys_batched = len(systems) > 1
+    core = stack_systems(systems) if sys_batched else system.without_metadata()
+    b0, v0 = check_batch(core, sys_batched, q0, v0, R0, project_v0=project_v0)
+    first_b0 = jax.tree_util.tree_map(lambda a: a[0], b0)
+    method.check(system, first_b0)
+    method = method.prepare(system, first_b0)
+    hj = jnp.asarray(h)
+    state0 = _init_batch(method, core, sys_batched, b0, v0, hj)
+    b, v, p, energy, residual, fail_k, fail_res, its, _ = _integrate_batch(
+        method, core, sys_batched, state0, hj, n_blocks, jnp.asarray(save_every, jnp.int32),
+        jnp.asarray(remainder, jnp.int32), bool(remainder),
+    )
+    space = system.space
+    q, R = space.coordinates(b), space.orientation(b)
+    fail_k = np.asarray(fail_k)
+    failed = fail_k >= 0
+    results = np.where(failed, RESULT_SOLVER_FAILED, 0).astype(np.int32)
+    its = np.asarray(its)
+    batch_meta = dict(meta)
+    if sys_batched:
+        batch_meta["params"] = ()
+    sol = Solution(
+        jnp.asarray(times), q, v, p, energy, residual, jnp.asarray([its[:, 0].sum(), its[:, 1].max()]), R=R,
+        result=RESULT_SOLVER_FAILED if failed.any() else 0, failed_step=int(fail_k[failed].min()) if failed.any() else -1,
+        results=jnp.asarray(results), failed_steps=jnp.asarray(fail_k),
+        member_params=member_params(systems) if sys_batched else None,
+        **batch_meta,
+    )
+    if failed.any() and throw:
+        i = int(np.argmax(failed))
+        k = int(fail_k[i])
+        msg = (
+            f"{method.name}: member {i} of {B}: step {k} (t = {t0 + h * k:.6g} -> {t0 + h * (k + 1):.6g}) failed: "
+            f"the solve did not converge or gave a non-finite value (residual {float(np.asarray(fail_res)[i]):.3e}); "
+            f"{int(failed.sum())} member(s) failed"
+        )
+        raise SolverFailure(msg, step=k, time=t0 + h * k, residual=float(np.asarray(fail_res)[i]), solution=sol)
+    return sol

@@ -43,9 +43,19 @@ class Solution(eqx.Module):
         iterations: total and maximum Newton iterations per step, `(total, max)`.
         R: orientations $R_k$ on $\\mathbb{R}^n \\times G$, (T, k, k) (reconstructed
             $R_{k+1} = R_k\\tau(h\\xi_k)$, paper §7.2 Remark), else None.
-        result: 0 on success, 1 if a step failed (then the arrays stop at the last good node).
-        failed_step: index of the first failed step, or -1.
+        result: 0 on success, 1 if a step failed (then the arrays stop at the last good node;
+            in a batch: 1 if any member failed).
+        failed_step: index of the first failed step, or -1 (in a batch: the earliest).
+        results, failed_steps: in a batch, each member's result code and failed step, (B,);
+            None for a single trajectory.
+        member_params: in a parameter batch, each member's parameter values, name -> (B,).
         system, method, h, coordinates: metadata.
+
+    **Batches.** A solution of B trajectories (from :func:`gnipy.simulate` with batched
+    initial conditions or systems) has a leading member axis on `q, v, p, energy,
+    constraint_residual, R` (`t` is shared). A failed member's saved nodes after its failed
+    step hold its last good state: read members through :meth:`member` (truncated at the
+    failure) or mask with :attr:`valid`.
     """
 
     t: jax.Array
@@ -65,6 +75,44 @@ class Solution(eqx.Module):
     velocities: tuple[str, ...] = eqx.field(static=True, default=())
     params: tuple[tuple[str, float], ...] = eqx.field(static=True, default=())
     start: str = eqx.field(static=True, default="p+ = G v0")
+    results: jax.Array | None = None
+    failed_steps: jax.Array | None = None
+    member_params: dict | None = None
+
+    @property
+    def batch_size(self) -> int | None:
+        """The number of members of a batch, or None for a single trajectory."""
+        return None if self.results is None else int(np.shape(self.results)[0])
+
+    @property
+    def valid(self):
+        """Which saved nodes are computed, (T,) or (B, T): False after a member's failed step."""
+        k = np.rint((np.asarray(self.t) - float(self.t[0])) / self.h).astype(np.int64) if self.h > 0 else None
+        if self.results is None:
+            return np.ones(len(self.t), dtype=bool)
+        fs = np.asarray(self.failed_steps)
+        return (fs[:, None] < 0) | (k[None, :] <= fs[:, None])
+
+    def member(self, i: int) -> "Solution":
+        """The i-th trajectory of a batch as a Solution (stopping at its last good node if it failed)."""
+        B = self.batch_size
+        if B is None:
+            raise ValueError("member: this solution is a single trajectory, not a batch")
+        if isinstance(i, bool) or not isinstance(i, (int, np.integer)) or not -B <= i < B:
+            raise IndexError(f"member: index {i!r} out of range for a batch of {B}")
+        i = int(i) % B
+        good = int(np.sum(self.valid[i]))
+        params = self.params
+        if self.member_params is not None:
+            params = tuple((k, float(np.asarray(v)[i])) for k, v in self.member_params.items())
+        fs = int(np.asarray(self.failed_steps)[i])
+        return Solution(
+            self.t[:good], self.q[i, :good], self.v[i, :good], self.p[i, :good], self.energy[i, :good],
+            self.constraint_residual[i, :good], self.iterations,
+            R=None if self.R is None else self.R[i, :good],
+            result=int(np.asarray(self.results)[i]), failed_step=fs, system=self.system, method=self.method,
+            h=self.h, coordinates=self.coordinates, velocities=self.velocities, params=params, start=self.start,
+        )
 
     @property
     def steps(self) -> int:
@@ -81,6 +129,8 @@ class Solution(eqx.Module):
 
         from . import __version__
 
+        if self.batch_size is not None:
+            return self._batch_to_xarray(attrs)
         n = self.q.shape[-1]
         coords = list(self.coordinates) if len(self.coordinates) == n else [f"q{i}" for i in range(n)]
         N = self.v.shape[-1]
@@ -128,8 +178,65 @@ class Solution(eqx.Module):
             ds.attrs.update(attrs)
         return ds
 
+    def _batch_to_xarray(self, attrs):
+        import xarray as xr
+
+        from . import __version__
+
+        n, N, m = self.q.shape[-1], self.v.shape[-1], self.constraint_residual.shape[-1]
+        coords = list(self.coordinates) if len(self.coordinates) == n else [f"q{i}" for i in range(n)]
+        vel = list(self.velocities) if len(self.velocities) == N else [f"v{i}" for i in range(N)]
+        mt = ("member", "time")
+        ds = xr.Dataset(
+            {
+                "t": (("time",), np.asarray(self.t), {"long_name": "time"}),
+                "q": ((*mt, "coordinate"), np.asarray(self.q), {"long_name": "configuration"}),
+                "v": ((*mt, "velocity"), np.asarray(self.v), {"long_name": "reported velocity"}),
+                "p": ((*mt, "velocity"), np.asarray(self.p), {"long_name": "reported momentum"}),
+                "energy": (mt, np.asarray(self.energy), {"long_name": "energy ½vᵀGv + V"}),
+                "constraint_residual": ((*mt, "constraint"), np.asarray(self.constraint_residual),
+                                        {"long_name": "constraint residual mu(q)(v - Y(q))"}),
+                "result": (("member",), np.asarray(self.results), {"long_name": "0: success, 1: a step failed"}),
+                "failed_step": (("member",), np.asarray(self.failed_steps), {"long_name": "first failed step or -1"}),
+                "valid": (mt, self.valid, {"long_name": "saved node computed (False after a failed step)"}),
+            },
+            coords={"member": np.arange(self.batch_size), "time": np.arange(len(self.t)), "coordinate": coords,
+                    "velocity": vel, "constraint": np.arange(m)},
+        )
+        if self.R is not None:
+            ds["R"] = ((*mt, "i", "j"), np.asarray(self.R), {"long_name": "orientation R (group matrix)"})
+        for k, v in (self.member_params or {}).items():
+            ds[f"param_{k}"] = (("member",), np.asarray(v), {"long_name": f"parameter {k}"})
+        ds.attrs.update(
+            {
+                "gnipy_version": __version__, "model": self.system, "method": self.method, "h": float(self.h),
+                "steps": int(self.steps), "start": self.start, "result": int(self.result),
+                "newton_iterations_total": int(np.asarray(self.iterations)[0]),
+                "newton_iterations_max": int(np.asarray(self.iterations)[1]),
+                "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            }
+        )
+        for k, v in self.params:
+            ds.attrs[f"param_{k}"] = float(v)
+        if attrs:
+            ds.attrs.update(attrs)
+        return ds
+
     def summary(self) -> str:
         """A short human-readable summary."""
+        if self.batch_size is not None:
+            e = np.asarray(self.energy)
+            valid = self.valid
+            dev = np.where(valid, np.abs(e - e[:, :1]), 0.0)
+            r = np.asarray(self.constraint_residual)
+            return "\n".join([
+                f"{self.system} with {self.method}: {self.batch_size} members, h = {self.h:g}, {self.steps} steps, "
+                f"t = {float(self.t[0]):g} .. {float(self.t[-1]):g}",
+                f"  failed members: {int(np.sum(np.asarray(self.results) != 0))}",
+                f"  max |E - E0| over members = {np.max(dev):.3e}",
+                f"  max constraint residual = {np.max(np.abs(r)) if r.size else 0.0:.3e}",
+                f"  Newton iterations: total {int(np.asarray(self.iterations)[0])}, max per step {int(np.asarray(self.iterations)[1])}",
+            ])
         e = np.asarray(self.energy)
         r = np.asarray(self.constraint_residual)
         lines = [

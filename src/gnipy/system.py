@@ -229,6 +229,22 @@ class System(eqx.Module):
         """Whether the constraints have an affine part."""
         return self.affine is not None
 
+    def without_metadata(self) -> "System":
+        """A copy without the provenance fields `params` and `defaults`.
+
+        This is what compiled code receives: systems that differ only in parameter values then
+        share one compilation, and can be stacked into a batch (their parameters are array
+        leaves of the functions, e.g. `jax.tree_util.Partial` arguments).
+        """
+        import dataclasses
+
+        new = object.__new__(type(self))
+        for f in dataclasses.fields(self):
+            object.__setattr__(new, f.name, getattr(self, f.name))
+        object.__setattr__(new, "params", ())
+        object.__setattr__(new, "defaults", None)
+        return new
+
     # ----------------------------------------------------------------------------------------
     # Validation (host side, outside jit)
     # ----------------------------------------------------------------------------------------
@@ -288,8 +304,9 @@ class System(eqx.Module):
         b0 = self.initial_point(q0, R0)
         if v0 is not None:
             v0 = _as_vector("v0", v0, self.dim)
-        self.check_mechanical(b0, tol=tol)
-        G = np.asarray(self.metric(b0))
+        vals = self._validation_values(b0)
+        self._check_mechanical_values(vals, tol=1e-9)
+        G = vals["G"]
         if not np.all(np.isfinite(G)):
             raise SystemError("lagrangian: the metric d²l/dv² is not finite at q0")
         if np.max(np.abs(G - G.T)) > tol * max(1.0, np.max(np.abs(G))):
@@ -300,7 +317,7 @@ class System(eqx.Module):
                 "lagrangian: the metric d²l/dv² is not positive definite at q0 "
                 f"(smallest eigenvalue {_fmt(eig[0])})"
             )
-        mu = np.asarray(self.mu(b0))
+        mu = vals["mu"]
         N = self.dim
         if mu.ndim != 2 or mu.shape[1] != N:
             raise SystemError(f"constraints: mu(q) must have shape (m, {N}), got {mu.shape}")
@@ -315,7 +332,9 @@ class System(eqx.Module):
                 f"constraints: mu(q0) is rank deficient (rank {int(np.sum(sv > 1e-10 * max(1.0, sv[0])))} "
                 f"< {m} constraints; smallest singular value {_fmt(sv[-1])})"
             )
-        Y = np.asarray(self.Y(b0))
+        Y = vals["Y"]
+        if Y.shape != (N,):
+            raise SystemError(f"affine: Y(q) must have shape ({N},), got {Y.shape}")
         if not np.all(np.isfinite(Y)):
             raise SystemError("affine: Y(q0) is not finite")
         if v0 is None:
@@ -328,34 +347,49 @@ class System(eqx.Module):
                     "v0: the initial velocity violates the constraints mu(q0)(v0 - Y(q0)) = 0 "
                     f"(residual {_fmt(np.max(np.abs(res)))}); pass project_v0=True to project it"
                 )
-            v0 = np.asarray(project_velocity(self, b0, jnp.asarray(v0)))
+            v0 = np.asarray(_project_velocity(self.without_metadata(), b0, jnp.asarray(v0)))
         return b0, v0
 
-    def check_mechanical(self, b0, *, tol: float = 1e-9, samples: int = 3):
-        """Raise :class:`SystemError` unless `l(b, v) = ½vᵀG(b)v − V(b)` at and near `b0`."""
+    _SAMPLES = 3
+
+    def _validation_values(self, b0) -> dict:
+        """Everything the checks need, in one compiled evaluation (op by op, the derivatives cost
+        seconds of small compilations): l, G, V and ∂l/∂v(0) at `b0` and at nearby points, and
+        G, μ, Y at `b0`. A failure of the user's functions becomes a SystemError."""
         rng = np.random.default_rng(0)
         N = self.dim
-        for i in range(samples):
-            b = self.space.move(b0, jnp.asarray((0.0 if i == 0 else 0.1) * rng.standard_normal(N)))
-            v = rng.standard_normal(N)
-            v_ = jnp.asarray(v)
-            try:
-                lv = float(self.L(b, v_))
-            except Exception as e:  # the user's function failed: say where
-                raise SystemError(f"lagrangian: evaluating l(q, v) failed: {e}") from e
-            G = np.asarray(self.metric(b))
-            V = float(self.potential(b))
-            lin = np.asarray(jax.grad(lambda w: self.L(b, w))(jnp.zeros(N)))
-            quad = 0.5 * v @ G @ v - V
-            scale = max(1.0, abs(lv), abs(quad))
+        ws = 0.1 * rng.standard_normal((self._SAMPLES, N))
+        ws[0] = 0.0
+        vs = rng.standard_normal((self._SAMPLES, N))
+        try:
+            out = _validation_values(self.without_metadata(), b0, jnp.asarray(ws), jnp.asarray(vs))
+        except SystemError:
+            raise
+        except Exception as e:  # the user's function failed while being traced: say where
+            raise SystemError(f"lagrangian/constraints/affine: evaluating the system's functions failed: {e}") from e
+        out = {k: np.asarray(v) for k, v in out.items()}
+        out["vs"] = vs
+        return out
+
+    def _check_mechanical_values(self, vals, *, tol: float):
+        for i in range(self._SAMPLES):
+            lv, G, V, lin, v = vals["lv"][i], vals["Gs"][i], vals["Vs"][i], vals["lin"][i], vals["vs"][i]
             if not np.isfinite(lv):
                 raise SystemError("lagrangian: l(q, v) is not finite near q0")
+            quad = 0.5 * v @ G @ v - V
+            scale = max(1.0, abs(lv), abs(quad))
             if np.max(np.abs(lin)) > tol * scale or abs(lv - quad) > tol * scale:
                 raise SystemError(
                     "lagrangian: not of mechanical type ½ vᵀG(q)v − V(q) "
                     f"(linear term {_fmt(np.max(np.abs(lin)))}, "
                     f"mismatch with the quadratic part {_fmt(abs(lv - quad))})"
                 )
+
+    def check_mechanical(self, b0, *, tol: float = 1e-9, samples: int = 3):
+        """Raise :class:`SystemError` unless `l(b, v) = ½vᵀG(b)v − V(b)` at and near `b0`
+        (`samples` points: `b0` and random nearby ones; compiled once per system structure)."""
+        del samples  # fixed at _SAMPLES so that the compiled check is shared
+        self._check_mechanical_values(self._validation_values(b0), tol=tol)
 
     def has_constant_metric(self, b0) -> bool:
         """Whether the metric does not depend on the base point (exact zero derivative at samples).
@@ -364,12 +398,39 @@ class System(eqx.Module):
         base point, and a nonzero value almost surely at random points otherwise.
         """
         rng = np.random.default_rng(1)
-        for _ in range(2):
-            b = self.space.move(b0, jnp.asarray(0.3 * rng.standard_normal(self.dim)))
-            dG = np.asarray(jax.jacfwd(lambda w: self.metric(self.space.move(b, w)))(jnp.zeros(self.dim)))
-            if np.any(dG != 0.0):
-                return False
-        return True
+        ws = jnp.asarray(0.3 * rng.standard_normal((2, self.dim)))
+        dG = np.asarray(_metric_derivatives(self.without_metadata(), b0, ws))
+        return not np.any(dG != 0.0)
+
+
+@eqx.filter_jit
+def _validation_values(system, b0, ws, vs):
+    def at(w, v):
+        b = system.space.move(b0, w)
+        return dict(
+            lv=system.L(b, v),
+            Gs=system.metric(b),
+            Vs=system.potential(b),
+            lin=jax.grad(lambda u: system.L(b, u))(jnp.zeros_like(v)),
+        )
+
+    out = jax.vmap(at)(ws, vs)
+    out.update(G=system.metric(b0), mu=system.mu(b0), Y=system.Y(b0))
+    return out
+
+
+@eqx.filter_jit
+def _project_velocity(system, b, v):
+    return project_velocity(system, b, v)
+
+
+@eqx.filter_jit
+def _metric_derivatives(system, b0, ws):
+    def one(w):
+        b = system.space.move(b0, w)
+        return jax.jacfwd(lambda u: system.metric(system.space.move(b, u)))(jnp.zeros(system.dim))
+
+    return jax.vmap(one)(ws)
 
 
 def _as_vector(name: str, x, n: int) -> np.ndarray:

@@ -120,7 +120,7 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
     def newton_body(c):
         z, j, _, prev, _ = c
         f = F(z)
-        dz = small_solve(jax.jacfwd(F)(z), f)
+        dz = jnp.linalg.solve(jax.jacfwd(F)(z), f)  # LAPACK: a rare fallback, cheaper to compile
         z1 = z - dz
         size, _, done = test(dz, z1, prev)
         return z1, j + 1, done | ~jnp.isfinite(size), size, jnp.max(jnp.abs(f))

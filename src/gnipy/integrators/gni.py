@@ -17,7 +17,6 @@ from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
-import jax.numpy as jnp
 
 from ..discrete_lagrangians import CustomDiscreteLagrangian, DiscreteLagrangian, EulerA, EulerB, Midpoint, Trapezoid
 from ..projectors import reflect_and_report

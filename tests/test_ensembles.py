@@ -1,0 +1,166 @@
+"""Ensembles: `simulate` over batches of initial conditions and of parameter values (vmap).
+
+Checks against exact solutions (each member converges at order 2 to its own exact solution), against
+single runs of the same member, and the batch's error handling (sizes, the member named in
+messages, failures of single members).
+"""
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnipy
+from gnipy import GNI, Midpoint, System
+from gnipy.ensembles import model_systems, stack_systems
+from gnipy.io import read_netcdf, write_netcdf
+from gnipy.models import rolling_ball
+
+MOMENTS = np.array([0.4, 2.0 / 3.0, 1.0])  # equal moments I1 = I2 = I3 = I per member: exact circle
+OMEGAS = np.array([1.0, 0.5, 2.0])
+T_FINAL = 2.0
+
+
+@pytest.fixture(scope="module")
+def ball_batch():
+    """Three balls (different I and Ω) from three initial conditions, at h and h/2, saving only
+    the last node (both runs share one compilation)."""
+    systems = model_systems("rolling-ball", I1=MOMENTS, I2=MOMENTS, I3=MOMENTS, Omega=OMEGAS)
+    q0 = np.array([[1.0, 1.0], [0.5, -0.2], [-1.0, 0.3]])
+    w = np.array([[0.0, 2.0, 0.0], [0.3, -0.4, 1.0], [-1.0, 0.5, 0.2]])
+    v0 = np.array([rolling_ball.velocity_from_constraints(s.parameters, q, wi) for s, q, wi in zip(systems, q0, w)])
+    runs = {}
+    for h in (0.02, 0.01):
+        steps = round(T_FINAL / h)
+        runs[h] = gnipy.simulate(systems, "gni-trapezoid", q0, v0, h=h, steps=steps, save_every=steps)
+    return systems, q0, v0, runs
+
+
+def test_batch_shapes_and_metadata(ball_batch):
+    systems, _, _, runs = ball_batch
+    sol = runs[0.01]
+    assert sol.batch_size == 3
+    assert sol.q.shape == (3, 2, 2) and sol.v.shape == (3, 2, 5) and sol.R.shape == (3, 2, 3, 3)
+    assert sol.t.shape == (2,) and float(sol.t[-1]) == pytest.approx(T_FINAL)
+    np.testing.assert_array_equal(np.asarray(sol.results), 0)
+    np.testing.assert_array_equal(sol.member_params["Omega"], OMEGAS)
+    np.testing.assert_array_equal(sol.member_params["I2"], MOMENTS)
+    assert sol.valid.all()
+
+
+def test_each_member_converges_to_its_exact_solution_at_order_2(ball_batch):
+    systems, q0, v0, runs = ball_batch
+    errors = {}
+    for h, sol in runs.items():
+        err = []
+        for i, s in enumerate(systems):
+            q_ex, v_ex = rolling_ball.exact(s.parameters, q0[i], v0[i], np.array([T_FINAL]))
+            err.append(np.max(np.abs(np.asarray(sol.q[i, -1]) - q_ex[0])) + np.max(np.abs(np.asarray(sol.v[i, -1]) - v_ex[0])))
+        errors[h] = np.array(err)
+    slopes = np.log2(errors[0.02] / errors[0.01])
+    assert np.all(errors[0.01] > 1e-9)  # above round-off: the slopes mean something
+    np.testing.assert_allclose(slopes, 2.0, atol=0.1)
+
+
+def test_members_equal_single_runs(ball_batch):
+    systems, q0, v0, runs = ball_batch
+    sol = runs[0.02]
+    for i in (0, 2):
+        one = gnipy.simulate(systems[i], "gni-trapezoid", q0[i], v0[i], h=0.02, steps=100, save_every=100)
+        m = sol.member(i)
+        np.testing.assert_allclose(np.asarray(m.q), np.asarray(one.q), rtol=0, atol=1e-13)
+        np.testing.assert_allclose(np.asarray(m.R), np.asarray(one.R), rtol=0, atol=1e-13)
+        np.testing.assert_allclose(np.asarray(m.p), np.asarray(one.p), rtol=0, atol=1e-13)
+        assert dict(m.params)["Omega"] == OMEGAS[i]
+
+
+def test_batch_of_initial_conditions_broadcasts_one_system():
+    particle = gnipy.make_system("nonholonomic-particle")
+    q0 = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, 0.5]])
+    v0 = np.array([1.0, 0.0, 1.0])  # shared; projected onto each member's constraints
+    sol = gnipy.simulate(particle, "gni-midpoint", q0, v0, h=0.1, steps=10, project_v0=True)
+    assert sol.batch_size == 2 and sol.q.shape == (2, 11, 3)
+    assert np.max(np.abs(np.asarray(sol.constraint_residual))) <= 1e-14
+    for i in range(2):
+        one = gnipy.simulate(particle, "gni-midpoint", q0[i], v0, h=0.1, steps=10, project_v0=True)
+        np.testing.assert_allclose(np.asarray(sol.q[i]), np.asarray(one.q), rtol=0, atol=1e-14)
+
+
+def test_batch_to_xarray_and_netcdf(ball_batch, tmp_path):
+    sol = ball_batch[3][0.01]
+    ds = sol.to_xarray()
+    assert ds["q"].dims == ("member", "time", "coordinate")
+    assert ds["R"].dims == ("member", "time", "i", "j")
+    assert ds["result"].dims == ("member",) and ds["valid"].dims == ("member", "time")
+    np.testing.assert_array_equal(ds["param_Omega"].values, OMEGAS)
+    path = write_netcdf(sol, tmp_path / "batch.nc")
+    back = read_netcdf(path)
+    np.testing.assert_array_equal(back["q"].values, np.asarray(sol.q))
+    assert "member" in sol.summary() or "members" in sol.summary()
+
+
+# ---------------------------------------------------------------------------------------------
+# errors and failures
+# ---------------------------------------------------------------------------------------------
+def _wall_system():
+    # V = log(1 − x): undefined for x ≥ 1, and the force 1/(1 − x) pushes the particle there
+    return System(lambda q, v: 0.5 * v @ v - jnp.log1p(-q[0]), lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3, name="wall")
+
+
+def test_failed_member_is_reported_and_truncated():
+    s = _wall_system()
+    q0 = np.array([[0.5, 0.0, 0.0], [-5.0, 0.0, 0.0]])  # member 0 hits the wall within 0.5 time units
+    v0 = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    sol = gnipy.simulate(s, GNI(Midpoint()), q0, v0, h=0.1, steps=20, save_every=2, throw=False)
+    assert sol.result == 1
+    np.testing.assert_array_equal(np.asarray(sol.results), [1, 0])
+    k = int(sol.failed_steps[0])
+    assert 0 < k < 20 and int(sol.failed_steps[1]) == -1
+    m0, m1 = sol.member(0), sol.member(1)
+    assert m0.result == 1 and m0.failed_step == k
+    assert float(m0.t[-1]) <= 0.1 * k + 1e-12 and len(m1.t) == 11
+    assert np.all(np.asarray(m0.q)[:, 0] < 1.0) and np.all(np.isfinite(np.asarray(sol.q)))
+    np.testing.assert_array_equal(sol.valid[0], np.arange(11) * 2 <= k)
+    with pytest.raises(gnipy.SolverFailure, match=r"member 0 of 2: step \d+ .*residual"):
+        gnipy.simulate(s, GNI(Midpoint()), q0, v0, h=0.1, steps=20, save_every=2)
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "pattern"),
+    [
+        ({"q0": np.zeros((2, 3)), "v0": np.zeros((3, 3))}, r"batch: the batch sizes differ"),
+        ({"q0": np.zeros((2, 2)), "v0": np.zeros((2, 3))}, r"q0: expected vectors of length 3"),
+        ({"q0": np.zeros((2, 3)), "v0": np.array([[1.0, 0, 0], [0, 0, 1.0]])}, r"v0\[1\]: the initial velocity violates"),
+        ({"q0": np.array([[0.0, 0, 0], [np.nan, 0, 0]]), "v0": np.zeros(3)}, r"q0\[1\]: contains NaN"),
+        ({"q0": np.zeros((2, 3, 1)), "v0": np.zeros(3)}, r"q0: expected a vector of length 3, got shape \(2, 3, 1\)"),
+    ],
+)
+def test_batch_bad_input_names_argument_and_member(kwargs, pattern):
+    particle = gnipy.make_system("nonholonomic-particle")  # constraint ż = y ẋ
+    with pytest.raises(gnipy.SystemError, match=pattern):
+        gnipy.simulate(particle, "gni-trapezoid", h=0.1, steps=2, **kwargs)
+
+
+def test_batch_rotations_checked_per_member():
+    ball = gnipy.make_system("rolling-ball")
+    R = np.stack([np.eye(3), np.diag([1.0, 1.0, -1.0])])
+    with pytest.raises(gnipy.SystemError, match=r"R0\[1\]: not a rotation"):
+        gnipy.simulate(ball, "gni-trapezoid", R0=R, h=0.1, steps=2)
+
+
+def test_systems_must_share_structure():
+    a = gnipy.make_system("nonholonomic-particle")
+    b = gnipy.make_system("contact-oscillator")
+    with pytest.raises(gnipy.SystemError, match=r"system\[1\]: a batch of systems must differ only in parameter"):
+        stack_systems([a, b])
+    with pytest.raises(gnipy.SystemError, match=r"system\[1\]: expected a gnipy.System"):
+        gnipy.simulate([a, "x"], "gni-trapezoid", h=0.1, steps=2)
+    with pytest.raises(gnipy.SystemError, match=r"params: parameter arrays have different lengths"):
+        model_systems("rolling-ball", m=[1.0, 2.0], r=[1.0, 2.0, 3.0])
+    with pytest.raises(gnipy.SystemError, match=r"unknown parameter 'mass'"):
+        model_systems("rolling-ball", mass=[1.0, 2.0])
+
+
+def test_reference_is_not_batched():
+    particle = gnipy.make_system("nonholonomic-particle")
+    with pytest.raises(gnipy.MethodError, match="one trajectory at a time"):
+        gnipy.simulate([particle, particle], "reference", h=0.1, steps=2)

@@ -1,0 +1,421 @@
+"""`gni sweep` and gnipy.sweep: grids of runs in vmapped chunks on dask.distributed,
+written to zarr, resumable.
+
+Most tests share one in-process (threaded) dask cluster; the interruption test runs the
+CLI in a subprocess on its default local *process* cluster and kills it (SIGKILL)
+part-way.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import xarray as xr
+import zarr
+from typer.testing import CliRunner
+
+import gnipy
+from gnipy.cli import app
+from gnipy.sweep import GridAxis, SweepError, open_sweep, parse_grid, run_sweep
+
+runner = CliRunner()
+
+# The rolling ball (R² × SO(3)): q, v and R per member; 6 members in chunks of 4, so
+# that the last chunk (2 members) is padded on input.
+BALL = dict(
+    model="rolling-ball",
+    grid=["Omega=0.5:1:2", "q0.x=-1:1:3"],
+    method="gni-midpoint",
+    h=0.05,
+    steps=20,
+    save_every=10,
+    chunk_size=4,
+)
+
+# The contact oscillator with members that fail (large initial velocity at a large
+# step): 48 members in 24 chunks, for the resumption tests.
+OSC_GRID = ["epsilon=0.1:0.5:6", "v0.dx=-1:3000:8"]
+OSC = dict(
+    model="contact-oscillator",
+    grid=OSC_GRID,
+    h=0.5,
+    steps=2000,
+    save_every=500,
+    chunk_size=2,
+)
+OSC_ARGS = (
+    "sweep contact-oscillator --grid epsilon=0.1:0.5:6 --grid v0.dx=-1:3000:8 "
+    "--h 0.5 --steps 2000 --save-every 500 --chunk-size 2"
+).split()
+assert OSC_ARGS[3::2][:2] == OSC_GRID
+
+
+def invoke(*args):
+    return runner.invoke(app, [str(a) for a in args])
+
+
+def _error_lines(output):
+    return [line for line in output.splitlines() if line.startswith("Error")]
+
+
+def _assert_same_data(a: xr.Dataset, b: xr.Dataset):
+    assert set(a.data_vars) == set(b.data_vars)
+    for name in a.data_vars:
+        np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+    assert json.loads(a.attrs["sweep_spec"]) == json.loads(b.attrs["sweep_spec"])
+
+
+@pytest.fixture(scope="module")
+def client():
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(
+        n_workers=1, threads_per_worker=2, processes=False, dashboard_address=None
+    ) as cluster:
+        with Client(cluster, set_as_default=False) as c:
+            yield c
+
+
+@pytest.fixture(scope="module")
+def ball_store(client, tmp_path_factory):
+    out = tmp_path_factory.mktemp("ball") / "ball.zarr"
+    report = run_sweep(**BALL, out=out, client=client, progress=False)
+    return out, report
+
+
+@pytest.fixture(scope="module")
+def osc_reference(client, tmp_path_factory):
+    """The oscillator sweep, uninterrupted."""
+    out = tmp_path_factory.mktemp("osc") / "reference.zarr"
+    report = run_sweep(**OSC, out=out, client=client, progress=False)
+    assert report.complete and report.chunks_computed == 24
+    assert report.chunks_skipped == 0
+    return out, report
+
+
+# --------------------------------------------------------------------------------------
+# Results
+# --------------------------------------------------------------------------------------
+def test_every_member_equals_its_own_simulation(ball_store):
+    out, report = ball_store
+    assert report.members == 6 and report.chunks == 2 and report.complete
+    assert report.chunks_computed == 2
+    assert report.failed_members == 0
+    ds = xr.open_zarr(out, consolidated=False)
+    assert ds.sizes["member"] == 6  # no padding in the store
+    spec = gnipy.get_model("rolling-ball")
+    i = 0
+    for Omega in (0.5, 1.0):
+        for x in (-1.0, 0.0, 1.0):
+            params = {**spec.params, "Omega": Omega}
+            q0, v0 = spec.initial_condition(params)
+            # v0 is then off the constraints: projected, as in the sweep
+            q0 = (x, *q0[1:])
+            one = gnipy.simulate(
+                gnipy.make_system("rolling-ball", Omega=Omega),
+                "gni-midpoint",
+                q0,
+                v0,
+                R0=np.reshape(spec.R0, (3, 3)),
+                h=0.05,
+                steps=20,
+                save_every=10,
+                project_v0=True,
+            )
+            assert ds["grid_Omega"].values[i] == Omega
+            assert ds["grid_q0.x"].values[i] == x
+            for name in ("q", "v", "p", "R", "energy", "constraint_residual"):
+                np.testing.assert_allclose(
+                    ds[name].values[i],
+                    np.asarray(getattr(one, name)),
+                    rtol=0,
+                    atol=1e-13,
+                    err_msg=f"{name}, member {i}",
+                )
+            i += 1
+    np.testing.assert_allclose(ds["t"].values, [0.0, 0.5, 1.0])
+    assert (ds["result"].values == 0).all() and ds["valid"].values.all()
+    assert ds["chunk_done"].values.all()
+
+
+def test_open_sweep_gives_the_grid_as_dimensions(ball_store):
+    out, _ = ball_store
+    ds = open_sweep(out)
+    assert ds["q"].dims == ("Omega", "q0.x", "time", "coordinate")
+    assert ds["R"].dims == ("Omega", "q0.x", "time", "i", "j")
+    assert ds["result"].dims == ("Omega", "q0.x")
+    np.testing.assert_array_equal(ds["Omega"].values, [0.5, 1.0])
+    np.testing.assert_array_equal(ds["q0.x"].values, [-1.0, 0.0, 1.0])
+    assert list(ds["velocity"].values) == ["dx", "dy", "omega1", "omega2", "omega3"]
+    flat = xr.open_zarr(out, consolidated=False)
+    # C order: member 4 is (Omega[1], q0.x[1])
+    np.testing.assert_array_equal(
+        ds["q"].sel({"Omega": 1.0, "q0.x": 0.0}).values, flat["q"].values[4]
+    )
+    np.testing.assert_array_equal(
+        ds["q"].isel(time=0).values[..., 0], [[-1.0, 0.0, 1.0]] * 2
+    )
+    # the zarr chunks are the sweep's chunks along member
+    assert flat["q"].encoding["chunks"][0] == 4
+    spec = json.loads(ds.attrs["sweep_spec"])
+    assert spec["model"] == "rolling-ball" and spec["method"] == "gni-midpoint"
+    assert spec["h"] == 0.05
+    assert spec["steps"] == 20 and spec["save_every"] == 10 and spec["chunk_size"] == 4
+    assert spec["grid"] == [
+        GridAxis("Omega", 0.5, 1.0, 2).to_dict(),
+        GridAxis("q0.x", -1.0, 1.0, 3).to_dict(),
+    ]
+    assert spec["gnipy_version"] == gnipy.__version__ and "Omega" not in spec["params"]
+
+
+def test_failed_members_are_recorded_not_raised(osc_reference):
+    out, report = osc_reference
+    ds = open_sweep(out)
+    failed = ds["result"].values == 1
+    assert 0 < failed.sum() < failed.size and report.failed_members == int(failed.sum())
+    fs = ds["failed_step"].values
+    assert (fs[failed] >= 0).all() and (fs[~failed] == -1).all()
+    k = np.rint(ds["t"].values / 0.5)
+    np.testing.assert_array_equal(
+        ds["valid"].values, (fs[..., None] < 0) | (k <= fs[..., None])
+    )
+    assert np.isfinite(ds["q"].values).all()  # held at the last good state, not NaN
+
+
+# --------------------------------------------------------------------------------------
+# Resuming
+# --------------------------------------------------------------------------------------
+def test_interrupted_cli_sweep_resumes_without_recomputing(
+    osc_reference, client, tmp_path
+):
+    """`gni sweep` on its default local process cluster, killed (SIGKILL, with its
+    workers) once some chunks are done; the same command again (here on an existing
+    cluster, --scheduler) computes only the rest, and the store equals the uninterrupted
+    sweep exactly."""
+    out = tmp_path / "killed.zarr"
+    args = [*OSC_ARGS, "--workers", "1", "--out", str(out)]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "gnipy.cli", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        start_new_session=True,
+    )
+    done = np.zeros(0, dtype=bool)
+    try:
+        deadline = time.monotonic() + 180
+        while time.monotonic() < deadline and proc.poll() is None:
+            if (out / "zarr.json").exists():
+                done = zarr.open_group(str(out), mode="r")["chunk_done"][:]
+                if done.sum() >= 2:
+                    break
+            time.sleep(0.005)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)  # the driver and its cluster's workers
+        except ProcessLookupError:  # it ended by itself: the assertions below say why
+            pass
+        output = proc.communicate()[0].decode()
+    for _ in range(100):  # nothing of the killed sweep is left running
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            break
+        time.sleep(0.05)
+    else:
+        pytest.fail("processes of the killed sweep are still running")
+    assert proc.returncode == -signal.SIGKILL, output
+    done = zarr.open_group(str(out), mode="r")["chunk_done"][:]
+    assert 2 <= done.sum() < done.size, output
+    with pytest.raises(SweepError, match="incomplete"):
+        open_sweep(out)
+
+    res = invoke(*args[:-4], "--scheduler", client.scheduler.address, "--out", out)
+    assert res.exit_code == 0, res.output
+    n = int(done.sum())
+    assert f"chunks: {24 - n} computed, {n} skipped" in res.output, res.output
+    _assert_same_data(open_sweep(out), open_sweep(osc_reference[0]))
+
+
+def test_resume_after_max_chunks_and_after_an_unflagged_chunk(
+    osc_reference, client, tmp_path
+):
+    out = tmp_path / "partial.zarr"
+    first = run_sweep(**OSC, out=out, client=client, progress=False, max_chunks=5)
+    counts = (first.chunks_computed, first.chunks_skipped, first.chunks_remaining)
+    assert counts == (5, 0, 19)
+    assert not first.complete
+    part = open_sweep(out, allow_incomplete=True)  # the chunks not done are marked
+    not_done = part["result"].values == -1
+    assert not_done.sum() == 38 and not part["valid"].values[not_done].any()
+    second = run_sweep(**OSC, out=out, client=client, progress=False)
+    counts = (second.chunks_computed, second.chunks_skipped, second.chunks_remaining)
+    assert counts == (19, 5, 0)
+    _assert_same_data(open_sweep(out), open_sweep(osc_reference[0]))
+
+    # a chunk whose data were (partly) written but whose flag was not: recomputed
+    group = zarr.open_group(str(out), mode="r+")
+    group["q"][6:8] = -7.0
+    group["chunk_done"][3] = False
+    third = run_sweep(**OSC, out=out, client=client, progress=False)
+    assert (third.chunks_computed, third.chunks_skipped) == (1, 23)
+    _assert_same_data(open_sweep(out), open_sweep(osc_reference[0]))
+    # done: nothing to compute (and no cluster is needed)
+    again = run_sweep(**OSC, out=out, progress=False)
+    assert (again.chunks_computed, again.chunks_skipped) == (0, 24)
+
+
+def test_a_different_sweep_on_the_store_is_refused(osc_reference, client, tmp_path):
+    out, _ = osc_reference
+    before = open_sweep(out)
+    with pytest.raises(
+        SweepError,
+        match=r"out: .*holds a different sweep: h is 0\.5 there and 0\.25 here",
+    ):
+        run_sweep(**{**OSC, "h": 0.25}, out=out, client=client, progress=False)
+    with pytest.raises(
+        SweepError, match="grid is epsilon=0.1:0.5:6 v0.dx=-1.0:3000.0:8 there"
+    ):
+        run_sweep(
+            **{**OSC, "grid": ["epsilon=0.1:0.5:6", "v0.dx=-1:3000:9"]},
+            out=out,
+            client=client,
+            progress=False,
+        )
+    res = invoke(*OSC_ARGS[:-2], "--chunk-size", "3", "--out", out)
+    assert res.exit_code == 2 and "Traceback" not in res.output
+    errors = _error_lines(res.output)
+    assert len(errors) == 1 and "--out" in errors[0]
+    assert "chunk_size is 2 there and 3 here" in errors[0]
+    assert "--overwrite" in errors[0]
+    _assert_same_data(open_sweep(out), before)  # untouched
+    # --overwrite starts afresh (on the shared cluster: --scheduler)
+    copy = tmp_path / "copy.zarr"
+    run_sweep(
+        **{**OSC, "h": 0.25}, out=copy, client=client, progress=False, max_chunks=1
+    )
+    address = client.scheduler.address
+    res = invoke(*OSC_ARGS, "--scheduler", address, "--overwrite", "--max-chunks", "2",
+                 "--out", copy)
+    assert res.exit_code == 0, res.output
+    assert "chunks: 2 computed, 0 skipped" in res.output
+    assert "22 remaining" in res.output
+    attrs = xr.open_zarr(copy, consolidated=False).attrs
+    assert json.loads(attrs["sweep_spec"])["h"] == 0.5
+    # no temporary directories left
+    assert [p.name for p in tmp_path.iterdir()] == ["copy.zarr"]
+
+
+# --------------------------------------------------------------------------------------
+# Bad input
+# --------------------------------------------------------------------------------------
+def test_parse_grid():
+    axis = parse_grid("q0.x=-1:1:5")
+    assert axis == GridAxis("q0.x", -1.0, 1.0, 5) and str(axis) == "q0.x=-1.0:1.0:5"
+    np.testing.assert_array_equal(axis.values, np.linspace(-1, 1, 5))
+    np.testing.assert_array_equal(parse_grid("m = 2 : 3 : 1").values, [2.0])
+    bad = ["m=1:2", "m=a:b:3", "m=1:2:0", "m=nan:1:2", "m=1:inf:2", "m=1:2:2.5"]
+    for text in [*bad, "=1:2:3", "m1:2:3"]:
+        with pytest.raises(SweepError, match="^grid: "):
+            parse_grid(text)
+
+
+def test_a_bad_member_in_a_chunk_is_named():
+    """A worker names a member that the driver's check of the grid corners missed."""
+    from gnipy.sweep import _plan, run_chunk
+
+    plan = _plan("vertical-disk", ["q0.phi=0:0:2"], method="gni-trapezoid", h=0.1,
+                 steps=10, t_final=None, save_every=None, set_params={},
+                 project_v0=False, chunk_size=2)
+    columns = {"q0.phi": np.array([0.0, 1.5])}  # v0 is off the constraints at phi = 1.5
+    with pytest.raises(SweepError, match=r"^grid: member 11 \(q0.phi=1.5\): v0: "):
+        run_chunk(plan.spec, 10, columns, 2)
+
+
+DISK = ["sweep", "vertical-disk", "--h", "0.1", "--steps", "10"]
+M = [*DISK, "--grid", "m=1:2:2"]  # a good grid
+VD = ["sweep", "vertical-disk", "--grid", "m=1:2:2"]  # without --h and --steps
+BAD = [
+    ([*DISK, "--grid", "m=1:2"], "--grid"),
+    ([*DISK, "--grid", "m=a:b:3"], "--grid"),
+    ([*DISK, "--grid", "m=1:2:0"], "--grid"),
+    ([*DISK, "--grid", "m=1:2:-3"], "--grid"),
+    ([*DISK, "--grid", "nope=1:2:3"], "--grid"),
+    ([*DISK, "--grid", "q0.nope=1:2:3"], "--grid"),
+    ([*DISK, "--grid", "m=nan:1:2"], "--grid"),
+    ([*DISK, "--grid", "m=1:inf:2"], "--grid"),
+    ([*M, "--grid", "m=1:3:2"], "--grid"),
+    ([*M, "--set", "m=3"], "--grid"),
+    ([*DISK, "--grid", "m=-1:1:3"], "--grid"),  # a member with a negative mass
+    ([*DISK], "--grid"),
+    ([*M, "--set", "nope=1"], "--set"),
+    ([*M, "--set", "r=nan"], "--set"),
+    ([*M, "--chunk-size", "0"], "--chunk-size"),
+    ([*M, "--workers", "0"], "--workers"),
+    ([*M, "--save-every", "0"], "--save-every"),
+    ([*M, "--max-chunks", "0"], "--max-chunks"),
+    ([*M, "--method", "nope"], "--method"),
+    ([*M, "--method", "reference"], "--method"),
+    ([*M, "--workers", "2", "--scheduler", "tcp://127.0.0.1:1"], "--workers"),
+    (["sweep", "no-such-model", *M[2:]], "MODEL"),
+    ([*VD, "--h", "0", "--steps", "10"], "--h"),
+    ([*VD, "--h", "nan", "--steps", "10"], "--h"),
+    ([*VD, "--steps", "10"], "--h"),
+    ([*VD, "--h", "0.1"], "--steps/--t-final"),
+    ([*VD, "--h", "0.1", "--steps", "10", "--t-final", "1"], "--steps/--t-final"),
+    ([*VD, "--h", "0.3", "--t-final", "1"], "--t-final"),
+    ([*VD, "--h", "0.1", "--steps", "0"], "--steps"),
+    ([*DISK, "--grid", "v0.dx=0:1:2", "--no-project-v0"], "--project-v0"),
+]
+
+
+@pytest.mark.parametrize("args, option", BAD, ids=[" ".join(a[1:]) for a, _ in BAD])
+def test_bad_input(args, option, tmp_path):
+    res = invoke(*args, "--out", tmp_path / "bad.zarr")
+    assert res.exit_code == 2, res.output
+    assert "Traceback" not in res.output
+    errors = _error_lines(res.output)
+    assert len(errors) == 1 and option in errors[0], res.output
+    assert os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize(
+    "where", ["missing-dir", "is-file", "parent-is-file", "not-a-store", "unwritable"]
+)
+def test_unwritable_output_is_rejected_before_running(where, tmp_path, monkeypatch):
+    out = tmp_path / "s.zarr"
+    if where == "missing-dir":
+        out = tmp_path / "nope" / "s.zarr"
+    elif where == "is-file":
+        out.write_text("")
+    elif where == "parent-is-file":
+        (tmp_path / "f").write_text("")
+        out = tmp_path / "f" / "s.zarr"
+    elif where == "not-a-store":
+        out.mkdir()
+        (out / "precious.txt").write_text("keep me")
+    else:
+        # root ignores chmod: simulate it
+        monkeypatch.setattr(os, "access", lambda *a, **k: False)
+    for extra in ([], ["--overwrite"]):
+        res = invoke(*DISK, "--grid", "m=1:2:2", "--out", out, *extra)
+        assert res.exit_code == 2 and "Traceback" not in res.output
+        errors = _error_lines(res.output)
+        assert len(errors) == 1, res.output
+        assert "--out" in errors[0] and str(out) in errors[0], res.output
+    if where == "not-a-store":
+        assert (out / "precious.txt").read_text() == "keep me"
+
+
+def test_help_lists_every_option():
+    res = invoke("sweep", "--help")
+    assert res.exit_code == 0
+    options = "--grid --method --h --steps --t-final --save-every --set --project-v0 "
+    options += "--no-project-v0 --chunk-size --scheduler --workers --overwrite "
+    options += "--max-chunks"
+    for option in [*options.split(), "--out"]:
+        assert option in res.output, option
