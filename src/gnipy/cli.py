@@ -185,6 +185,8 @@ def _check_positive(option: str, value, kind: str = "number"):
 def _check_output(path: Path, option: str = "--out") -> None:
     import os
 
+    if "\x00" in str(path):
+        raise _UsageError(option, f"{str(path)!r}: a path cannot contain a NUL character")
     directory = path.parent if str(path.parent) else Path(".")
     if path.is_dir():
         raise _UsageError(option, f"{str(path)!r} is a directory")
@@ -539,7 +541,14 @@ def main(
         False, "--version", callback=_version_callback, is_eager=True, help="Print the gnipy version and exit."
     ),
 ):
-    """Simulate nonholonomic mechanical systems with the Geometric Nonholonomic Integrator (GNI)."""
+    """Simulate nonholonomic mechanical systems with the Geometric Nonholonomic Integrator (GNI).
+
+    Compiled programs are kept in ~/.cache/gnipy/jax between runs ($GNIPY_CACHE_DIR to move it,
+    GNIPY_NO_COMPILATION_CACHE=1 to turn it off).
+    """
+    from gnipy.compilation import enable_compilation_cache
+
+    enable_compilation_cache()
 
 
 @app.command()
@@ -819,6 +828,11 @@ def _parse_methods(text: str) -> list[str]:
     return names
 
 
+#: Bounds of `gni convergence`: step sizes per study, and steps per run (int32 step counters).
+MAX_CONVERGENCE_COUNT = 1000
+MAX_STEPS = 2**31 - 1
+
+
 def _step_counts(h_max: float, h_min: float, count: int, t_final: float) -> list[int]:
     """Whole numbers of steps for `count` log-spaced h from h_max down to h_min (distinct)."""
     import numpy as np
@@ -827,6 +841,12 @@ def _step_counts(h_max: float, h_min: float, count: int, t_final: float) -> list
         _check_positive(option, value)
     if isinstance(count, bool) or count < 2:
         raise _UsageError("--count", f"need at least 2 step sizes to fit an order, got {count!r}")
+    if count > MAX_CONVERGENCE_COUNT:
+        raise _UsageError("--count", f"at most {MAX_CONVERGENCE_COUNT} step sizes, got {count!r}")
+    if t_final / h_min > MAX_STEPS:
+        raise _UsageError(
+            "--t-final/--h-min", f"{t_final!r} / {h_min!r} is more than {MAX_STEPS:.0e} steps per run"
+        )
     if h_min >= h_max:
         raise _UsageError("--h-min/--h-max", f"need h-min < h-max, got {h_min!r} and {h_max!r}")
     if h_max > t_final:
@@ -1210,79 +1230,91 @@ def info(
     constraint residual and provenance."""
 
     def go():
-        import json
-
-        import numpy as np
-        from rich.table import Table
-
         from gnipy.io import OutputError, read_netcdf
 
         try:
             ds = read_netcdf(file)
         except OutputError as e:
             raise _UsageError("FILE", str(e)) from None
-        a = dict(ds.attrs)
-        table = Table(title=f"gni info: {file}", show_header=False, title_justify="left", box=None)
-        table.add_column(style="bold")
-        table.add_column(overflow="fold")
-        params = {}
-        if "params" in a:
-            try:
-                params = json.loads(str(a["params"]))
-            except ValueError:
-                params = {}
-        if not params:
-            params = {k[len("param_"):]: a[k] for k in a if k.startswith("param_")}
-        model_ = a.get("model", "(unknown)")
-        ptxt = ", ".join(f"{k}={float(v):g}" if isinstance(v, (int, float, np.number)) else f"{k}={v}"
-                         for k, v in params.items())
-        table.add_row("model", f"{model_} ({ptxt})" if ptxt else str(model_))
-        if "method" in a:
-            parts = [str(a["method"])]
-            if "h" in a:
-                parts.append(f"h = {float(a['h']):g}")
-            if "steps" in a:
-                parts.append(f"{int(a['steps'])} steps")
-            if "start" in a:
-                parts.append(f"start: {a['start']}")
-            table.add_row("method", ", ".join(parts))
-        if "t" in ds.variables and ds["t"].size:
-            t = np.asarray(ds["t"].values, dtype=float)
-            units = ds["t"].attrs.get("units", "")
-            more = f", saved every {int(a['save_every'])} steps" if "save_every" in a else ""
-            table.add_row("times", f"t = {t[0]:g} .. {t[-1]:g} {units}".rstrip() + f", {t.size} saved nodes{more}")
-        for name, var in ds.data_vars.items():
-            dims = ", ".join(f"{d}={ds.sizes[d]}" for d in var.dims)
-            long = var.attrs.get("long_name", "")
-            table.add_row(f"variable {name}", f"({dims}) {var.dtype}" + (f"  {long}" if long else ""))
-        for dim in ("coordinate", "velocity"):
-            if dim in ds.coords and ds.sizes.get(dim):
-                table.add_row(f"{dim} names", ", ".join(str(x) for x in ds[dim].values))
-        if "energy" in ds.variables and ds["energy"].size:
-            e = np.asarray(ds["energy"].values, dtype=float)
-            table.add_row("energy", f"initial {e[0]:.12g}, final {e[-1]:.12g}, max |E - E0| = "
-                          f"{np.max(np.abs(e - e[0])):.3e}")
-        if "constraint_residual" in ds.variables:
-            r = np.asarray(ds["constraint_residual"].values, dtype=float)
-            table.add_row("constraint residual", f"max |mu(q)(v - Y)| = {np.max(np.abs(r), initial=0.0):.3e}")
-        for k in sorted(a):
-            if k.startswith("invariant_drift_"):
-                table.add_row(f"invariant {k[len('invariant_drift_'):]}", f"max drift {float(a[k]):.3e}")
-        if "max_error_q_vs_exact" in a:
-            table.add_row("error vs exact", f"max |q - q_exact| = {float(a['max_error_q_vs_exact']):.3e}, "
-                          f"max |v - v_exact| = {float(a.get('max_error_v_vs_exact', float('nan'))):.3e}")
-        for k in ("q0", "v0", "R0", "project_v0", "save_every", "result", "newton_iterations_total",
-                  "newton_iterations_max", "gnipy_version", "jax_version", "created", "command", "config_file",
-                  "units_convention"):
-            if k in a:
-                table.add_row(k, _fmt_attr(a[k]))
-        for k in sorted(a):
-            if k in _SHOWN_ATTRS or k.startswith(("param_", "invariant_drift_", "max_error_")):
-                continue
-            table.add_row(k, _fmt_attr(a[k]))
-        _console().print(table)
+        try:
+            _info_table(file, ds)
+        except (ValueError, TypeError, AttributeError, OverflowError, KeyError, IndexError) as e:
+            raise _UsageError(
+                "FILE", f"{str(file)!r} is not a result file gnipy can summarize ({type(e).__name__}: {e})"
+            ) from None
 
     _guarded(go)
+
+
+def _info_table(file, ds) -> None:
+    """Print the summary table of `gni info` (raises on attributes of unexpected types)."""
+    import json
+
+    import numpy as np
+    from rich.table import Table
+
+    a = dict(ds.attrs)
+    table = Table(title=f"gni info: {file}", show_header=False, title_justify="left", box=None)
+    table.add_column(style="bold")
+    table.add_column(overflow="fold")
+    params = {}
+    if "params" in a:
+        try:
+            params = json.loads(str(a["params"]))
+        except ValueError:
+            params = {}
+        if not isinstance(params, dict):
+            params = {}
+    if not params:
+        params = {k[len("param_"):]: a[k] for k in a if k.startswith("param_")}
+    model_ = a.get("model", "(unknown)")
+    ptxt = ", ".join(f"{k}={float(v):g}" if isinstance(v, (int, float, np.number)) else f"{k}={v}"
+                     for k, v in params.items())
+    table.add_row("model", f"{model_} ({ptxt})" if ptxt else str(model_))
+    if "method" in a:
+        parts = [str(a["method"])]
+        if "h" in a:
+            parts.append(f"h = {float(a['h']):g}")
+        if "steps" in a:
+            parts.append(f"{int(a['steps'])} steps")
+        if "start" in a:
+            parts.append(f"start: {a['start']}")
+        table.add_row("method", ", ".join(parts))
+    if "t" in ds.variables and ds["t"].size:
+        t = np.asarray(ds["t"].values, dtype=float)
+        units = ds["t"].attrs.get("units", "")
+        more = f", saved every {int(a['save_every'])} steps" if "save_every" in a else ""
+        table.add_row("times", f"t = {t[0]:g} .. {t[-1]:g} {units}".rstrip() + f", {t.size} saved nodes{more}")
+    for name, var in ds.data_vars.items():
+        dims = ", ".join(f"{d}={ds.sizes[d]}" for d in var.dims)
+        long = var.attrs.get("long_name", "")
+        table.add_row(f"variable {name}", f"({dims}) {var.dtype}" + (f"  {long}" if long else ""))
+    for dim in ("coordinate", "velocity"):
+        if dim in ds.coords and ds.sizes.get(dim):
+            table.add_row(f"{dim} names", ", ".join(str(x) for x in ds[dim].values))
+    if "energy" in ds.variables and ds["energy"].size:
+        e = np.asarray(ds["energy"].values, dtype=float)
+        table.add_row("energy", f"initial {e[0]:.12g}, final {e[-1]:.12g}, max |E - E0| = "
+                      f"{np.max(np.abs(e - e[0])):.3e}")
+    if "constraint_residual" in ds.variables:
+        r = np.asarray(ds["constraint_residual"].values, dtype=float)
+        table.add_row("constraint residual", f"max |mu(q)(v - Y)| = {np.max(np.abs(r), initial=0.0):.3e}")
+    for k in sorted(a):
+        if k.startswith("invariant_drift_"):
+            table.add_row(f"invariant {k[len('invariant_drift_'):]}", f"max drift {float(a[k]):.3e}")
+    if "max_error_q_vs_exact" in a:
+        table.add_row("error vs exact", f"max |q - q_exact| = {float(a['max_error_q_vs_exact']):.3e}, "
+                      f"max |v - v_exact| = {float(a.get('max_error_v_vs_exact', float('nan'))):.3e}")
+    for k in ("q0", "v0", "R0", "project_v0", "save_every", "result", "newton_iterations_total",
+              "newton_iterations_max", "gnipy_version", "jax_version", "created", "command", "config_file",
+              "units_convention"):
+        if k in a:
+            table.add_row(k, _fmt_attr(a[k]))
+    for k in sorted(a):
+        if k in _SHOWN_ATTRS or k.startswith(("param_", "invariant_drift_", "max_error_")):
+            continue
+        table.add_row(k, _fmt_attr(a[k]))
+    _console().print(table)
 
 
 DEMO_MODEL, DEMO_METHOD, DEMO_H, DEMO_T = "rotating-table-ball", "gni-trapezoid", 0.01, 10.0

@@ -12,7 +12,10 @@ from .integrators.base import Integrator, MethodError
 from .solution import RESULT_SOLVER_FAILED, Solution, SolverFailure
 from .system import System, SystemError
 
-__all__ = ["simulate", "resolve_steps"]
+__all__ = ["simulate", "resolve_steps", "MAX_STEPS"]
+
+#: Most steps in one `simulate` call (the compiled loop counts steps in int32).
+MAX_STEPS = 2**31 - 1
 
 
 def resolve_steps(h, steps=None, t_final=None) -> tuple[float, int]:
@@ -192,6 +195,11 @@ def simulate(
     if not isinstance(method, (Integrator, ContinuousReference)):
         raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
     h, steps = resolve_steps(h, steps, t_final)
+    if steps > MAX_STEPS:
+        raise SystemError(
+            f"steps: at most {MAX_STEPS} steps per call (the step counters are int32), got {steps}; "
+            "stream longer runs with gnipy.simulate_to_file"
+        )
     if isinstance(save_every, bool) or int(save_every) != save_every or save_every < 1:
         raise SystemError(f"save_every: must be a positive integer, got {save_every!r}")
     save_every = int(min(save_every, steps))

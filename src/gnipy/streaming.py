@@ -31,14 +31,13 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import dask
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .integrators.base import Integrator, MethodError
 from .io import OutputError, write_netcdf
-from .simulate import _init_one, _integrate, resolve_steps
+from .simulate import MAX_STEPS, _init_one, _integrate, resolve_steps
 from .solution import RESULT_SOLVER_FAILED, SolverFailure
 from .system import System, SystemError
 
@@ -189,6 +188,8 @@ def simulate_to_file(
     if isinstance(chunk_steps, bool) or int(chunk_steps) != chunk_steps or chunk_steps < 1:
         raise SystemError(f"chunk_steps/--checkpoint-every: must be a positive integer, got {chunk_steps!r}")
     chunk_steps = int(chunk_steps)
+    if chunk_steps > MAX_STEPS:
+        raise SystemError(f"chunk_steps/--checkpoint-every: at most {MAX_STEPS} steps per chunk, got {chunk_steps}")
     if chunk_steps % save_every:
         raise SystemError(
             f"chunk_steps/--checkpoint-every: {chunk_steps} is not a multiple of the save stride {save_every}"
@@ -381,6 +382,8 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
     result = max(s["result"] for s in stats)
     failed_step = next((s["failed"] for s in stats if s["result"]), -1)
     nodes = sum(s["n"] for s in stats)
+    import dask
+
     # dask's synchronous scheduler: one part in memory at a time, and no concurrent HDF5 calls
     # (the netCDF library is not thread-safe; threaded reads of several parts can crash it)
     with dask.config.set(scheduler="synchronous"):

@@ -199,7 +199,9 @@ class System(eqx.Module):
 
     def velocity(self, b, p):
         """Inverse Legendre transform $v = \\mathbb{G}(b)^{-1} p$."""
-        return jnp.linalg.solve(self.metric(b), p)
+        from .linalg import solve_spd
+
+        return solve_spd(self.metric(b), p)
 
     def mu(self, b):
         """Constraint one-forms $\\mu(b)$ as an (m, N) array."""

@@ -244,6 +244,15 @@ def reproduce_command(
     schemes equal to the GNI) and the errata, each measured by running gnipy; writes report.md and
     a self-contained report.html into --out. Exits with code 1 if a theorem row fails or a stage
     fails."""
-    result = run_reproduction(Path(out), quick)
+    out = Path(out)
+    if "\x00" in str(out) or out.exists() and not out.is_dir():
+        typer.echo(f"Error: --out: {str(out)!r} is not a directory", err=True)
+        raise typer.Exit(2)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        typer.echo(f"Error: --out: cannot create the folder {str(out)!r}: {e.strerror or e}", err=True)
+        raise typer.Exit(2) from None
+    result = run_reproduction(out, quick)
     if not result.ok:
         raise typer.Exit(1)

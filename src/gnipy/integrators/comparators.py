@@ -19,6 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
 from ..discrete_lagrangians import DiscreteLagrangian, EulerA, EulerB, Midpoint, Trapezoid
 from .base import Integrator, require_constant_metric, solve_step
 
@@ -176,7 +177,7 @@ class McLachlanPerlmutter(Integrator):
         m = mu_half.shape[0]
 
         def velocity(lam):
-            return v0 + h * jnp.linalg.solve(M, force + mu_half.T @ lam)
+            return v0 + h * solve_spd(M, force + mu_half.T @ lam)
 
         def residual(lam):
             v1 = velocity(lam)

@@ -49,6 +49,7 @@ from typing import ClassVar, NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
 from .base import Integrator, StepInfo, require_constant_metric
 
 __all__ = [
@@ -124,14 +125,14 @@ def _kick_drift_kick(system, state: TildeState, h, s: float) -> TildeState:
     q, p, lam = state
     M = system.metric(q)  # constant metric: the same at q_k and q_{k+1}
     p_half = p - 0.5 * h * (system.potential_gradient(q) + system.mu(q).T @ lam)  # (EuAHama)
-    q1 = q + h * jnp.linalg.solve(M, p_half)  # (EuAHamb)
+    q1 = q + h * solve_spd(M, p_half)  # (EuAHamb)
     mu1 = system.mu(q1)
     Vq1 = system.potential_gradient(q1)
     Pi1 = system.Pi(q1)
-    C1 = mu1 @ jnp.linalg.solve(M, mu1.T)
+    C1 = mu1 @ solve_spd(M, mu1.T)
     # (EuAHamd) substituted into (EuAHame): (h/2) C λ̃ = μ M⁻¹ (p_{k+1/2} + (s − 1)(h/2) V_q − Π)
-    rhs = mu1 @ jnp.linalg.solve(M, p_half + (s - 1.0) * 0.5 * h * Vq1 - Pi1)
-    lam1 = (2.0 / h) * jnp.linalg.solve(C1, rhs)
+    rhs = mu1 @ solve_spd(M, p_half + (s - 1.0) * 0.5 * h * Vq1 - Pi1)
+    lam1 = (2.0 / h) * solve_spd(C1, rhs)
     p1 = p_half - 0.5 * h * (Vq1 + mu1.T @ lam1)  # (EuAHamd)
     return TildeState(q1, p1, lam1)
 
@@ -216,10 +217,10 @@ def shake_map(system, state: ShakeState, h) -> ShakeState:
     q0, q1 = state[1], state[2]
     M = system.metric(q1)
     mu = system.mu(q1)
-    Minv_muT = jnp.linalg.solve(M, mu.T)
+    Minv_muT = solve_spd(M, mu.T)
     C = mu @ Minv_muT
-    a = 2.0 * q1 - q0 - h * h * jnp.linalg.solve(M, system.potential_gradient(q1))
-    lam = jnp.linalg.solve(C, mu @ (a - q0 - 2.0 * h * system.Y(q1))) / (h * h)  # (Afinb)
+    a = 2.0 * q1 - q0 - h * h * solve_spd(M, system.potential_gradient(q1))
+    lam = solve_spd(C, mu @ (a - q0 - 2.0 * h * system.Y(q1))) / (h * h)  # (Afinb)
     q2 = a - h * h * (Minv_muT @ lam)  # (Afina)
     return ShakeState(q0, q1, q2)
 
@@ -243,9 +244,9 @@ def tilde_state_from_gni(system, q, p_plus, h, s: float) -> TildeState:
     M = system.metric(q)
     mu = system.mu(q)
     Pi = system.Pi(q)
-    Minv_muT = jnp.linalg.solve(M, mu.T)
+    Minv_muT = solve_spd(M, mu.T)
     C = mu @ Minv_muT
-    w = jnp.linalg.solve(C, mu @ jnp.linalg.solve(M, p_plus - Pi))  # C⁻¹μM⁻¹(p⁺ − Π)
+    w = solve_spd(C, mu @ solve_spd(M, p_plus - Pi))  # C⁻¹μM⁻¹(p⁺ − Π)
     p_bar = p_plus - mu.T @ w  # P*p⁺ + Q*Π
     lam = (2.0 / h) * w
     p_tilde = p_bar - s * 0.5 * h * system.potential_gradient(q)
@@ -291,7 +292,7 @@ class _TildeScheme(Integrator):
         """
         q, p_tilde, _ = state
         p_bar = p_tilde + self._s * 0.5 * (self._fraction * h) * system.potential_gradient(q)
-        return q, jnp.linalg.solve(system.metric(q), p_bar), p_bar
+        return q, solve_spd(system.metric(q), p_bar), p_bar
 
 
 class NonholonomicEulerA(_TildeScheme):
@@ -424,7 +425,7 @@ class Shake(Integrator):
         Returns:
             A :class:`ShakeState`.
         """
-        kick = 0.5 * h * h * jnp.linalg.solve(system.metric(q0), system.potential_gradient(q0))
+        kick = 0.5 * h * h * solve_spd(system.metric(q0), system.potential_gradient(q0))
         return ShakeState(q0 - h * v0 - kick, q0, q0 + h * v0 - kick)
 
     def step(self, system, state, h):

@@ -72,6 +72,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
 from ..spaces import Point
 from .base import Integrator, MethodError, solve_step
 
@@ -146,7 +147,7 @@ class ReducedRattle(Integrator):
 
     @staticmethod
     def _solve_xx(Gxx, r):
-        return r if r.shape[0] == 0 else jnp.linalg.solve(Gxx, r)
+        return r if r.shape[0] == 0 else solve_spd(Gxx, r)
 
     def _ld(self, system, R, h):
         """The retracted trapezoid $l_d(x_k, x_{k+1}, \\sigma_k)$ of §7.2."""
@@ -186,9 +187,9 @@ class ReducedRattle(Integrator):
         """$\\tilde\\lambda$ with $\\mu\\mathbb{G}^{-1}(\\hat p - \\tfrac h2\\mu^T\\tilde\\lambda - \\Pi) = 0$ ((RATd))."""
         G = system.metric(b)
         mu = system.mu(b)
-        Ginv_muT = jnp.linalg.solve(G, mu.T)
+        Ginv_muT = solve_spd(G, mu.T)
         C = mu @ Ginv_muT
-        return (2.0 / h) * jnp.linalg.solve(C, Ginv_muT.T @ (p_hat - system.Pi(b)))
+        return (2.0 / h) * solve_spd(C, Ginv_muT.T @ (p_hat - system.Pi(b)))
 
     # ------------------------------------------------------------------------------------------
     # The integrator interface
