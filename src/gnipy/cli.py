@@ -543,12 +543,13 @@ def main(
 ):
     """Simulate nonholonomic mechanical systems with the Geometric Nonholonomic Integrator (GNI).
 
-    Compiled programs are kept in ~/.cache/gnipy/jax between runs ($GNIPY_CACHE_DIR to move it,
-    GNIPY_NO_COMPILATION_CACHE=1 to turn it off).
+    With GNIPY_COMPILATION_CACHE=1 in the environment, compiled programs are kept in
+    ~/.cache/gnipy/jax between runs ($GNIPY_CACHE_DIR to move it).
     """
-    from gnipy.compilation import enable_compilation_cache
+    from gnipy.compilation import cache_requested, enable_compilation_cache
 
-    enable_compilation_cache()
+    if cache_requested():
+        enable_compilation_cache()
 
 
 @app.command()

@@ -2,12 +2,16 @@
 
 A first `gnipy.simulate` call in a fresh process spends most of its few seconds compiling. JAX can
 keep compiled programs on disk and load them in later processes (measured for the rolling ball
-on 2 cores: first call 5.1 s without the cache, 1.7 s with it; the rest is tracing). The
-command line (`gni ...`) and the workers of `gni sweep` turn the cache on; in a Python session call
-:func:`enable_compilation_cache` before the first simulation.
+on 2 cores: first call 5.1 s without the cache, 1.7 s with it; the rest is tracing).
 
-The directory is `$GNIPY_CACHE_DIR` if set, else `~/.cache/gnipy/jax`. Setting
-`GNIPY_NO_COMPILATION_CACHE=1` disables it (for the command line as well).
+**Opt-in.** The cache is off by default: with jax 0.10.2 on CPU we saw a segmentation fault inside
+JAX's cache write (`compilation_cache.put_executable_and_time`) when the cache had been turned on
+in a process that had already compiled other programs. Turn it on by setting
+`GNIPY_COMPILATION_CACHE=1` (the command line and the workers of `gni sweep` then call
+:func:`enable_compilation_cache` at start-up, before compiling anything), or call it yourself at
+the start of a Python session.
+
+The directory is `$GNIPY_CACHE_DIR` if set, else `~/.cache/gnipy/jax`.
 """
 
 from __future__ import annotations
@@ -15,7 +19,12 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-__all__ = ["enable_compilation_cache", "default_cache_dir"]
+__all__ = ["enable_compilation_cache", "default_cache_dir", "cache_requested"]
+
+
+def cache_requested() -> bool:
+    """Whether `GNIPY_COMPILATION_CACHE` asks for the cache (set and not `0`/empty)."""
+    return os.environ.get("GNIPY_COMPILATION_CACHE", "").strip() not in ("", "0")
 
 
 def default_cache_dir() -> Path:
@@ -35,11 +44,9 @@ def enable_compilation_cache(path=None, *, min_compile_seconds: float = 0.2) -> 
         min_compile_seconds: programs that compile faster than this are not stored.
 
     Returns:
-        The directory used, or None when `GNIPY_NO_COMPILATION_CACHE` is set or the directory
-        cannot be created (the cache is an optimisation: nothing fails without it).
+        The directory used, or None when the directory cannot be created (the cache is an
+        optimisation: nothing fails without it).
     """
-    if os.environ.get("GNIPY_NO_COMPILATION_CACHE", "").strip() not in ("", "0"):
-        return None
     import jax
 
     directory = Path(path) if path is not None else default_cache_dir()

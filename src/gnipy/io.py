@@ -31,7 +31,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["OutputError", "write_netcdf", "read_netcdf", "provenance", "VARIABLE_UNITS", "UNITS_CONVENTION"]
+__all__ = ["OutputError", "check_writable", "write_netcdf", "read_netcdf", "provenance", "VARIABLE_UNITS", "UNITS_CONVENTION"]
 
 
 class OutputError(OSError):
@@ -103,6 +103,20 @@ def _as_dataset(obj):
     raise TypeError(f"write_netcdf: expected a gnipy.Solution or an xarray.Dataset, got {type(obj).__name__}")
 
 
+def check_writable(path) -> Path:
+    """`path` as a Path, if a file can be created there (its directory exists and is writable, and
+    it is not a directory); else :class:`OutputError` naming the path and why."""
+    path = Path(os.fspath(path))
+    directory = path.parent if str(path.parent) else Path(".")
+    if not directory.is_dir():
+        raise OutputError(f"cannot write {path}: directory {directory} does not exist")
+    if path.is_dir():
+        raise OutputError(f"cannot write {path}: it is a directory")
+    if not os.access(directory, os.W_OK | os.X_OK):
+        raise OutputError(f"cannot write {path}: directory {directory} is not writable")
+    return path
+
+
 def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = None) -> Path:
     """Write a :class:`~gnipy.Solution` (via `Solution.to_xarray`) or an `xarray.Dataset` to netCDF.
 
@@ -135,13 +149,7 @@ def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = No
         ds.attrs[str(k)] = v
     ds.attrs = {k: _attr_value(v) for k, v in ds.attrs.items()}
 
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise OutputError(f"cannot write {path}: directory {directory} does not exist")
-    if path.is_dir():
-        raise OutputError(f"cannot write {path}: it is a directory")
-    if not os.access(directory, os.W_OK | os.X_OK):
-        raise OutputError(f"cannot write {path}: directory {directory} is not writable")
+    directory = check_writable(path).parent
 
     # Rejected: tempfile.mkstemp, which creates the file with mode 0600 (the result would not get
     # the usual umask permissions); the netCDF library creates the file itself here.

@@ -47,6 +47,20 @@ def resolve_steps(h, steps=None, t_final=None) -> tuple[float, int]:
     return h, int(steps)
 
 
+def default_initial_condition(system: System, q0, v0, R0):
+    """`(q0, v0, R0)` with the system's documented defaults filling what is None."""
+    if q0 is None and system.n == 0:
+        q0 = ()
+    if q0 is None or v0 is None:
+        if system.defaults is None:
+            raise SystemError(f"q0/v0: the system {system.name!r} has no default initial condition; give q0 and v0")
+        q0 = system.defaults[0] if q0 is None else q0
+        v0 = system.defaults[1] if v0 is None else v0
+        if R0 is None and len(system.defaults) > 2:
+            R0 = system.defaults[2]
+    return q0, v0, R0
+
+
 def _tree_finite(tree) -> jax.Array:
     leaves = [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(tree) if eqx.is_inexact_array(x)]
     return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
@@ -209,15 +223,7 @@ def simulate(
         raise SystemError(f"t0: expected a number, got {t0!r}") from e
     if not math.isfinite(t0):
         raise SystemError(f"t0: must be finite, got {t0!r}")
-    if q0 is None and system.n == 0:
-        q0 = ()
-    if q0 is None or v0 is None:
-        if system.defaults is None:
-            raise SystemError(f"q0/v0: the system {system.name!r} has no default initial condition; give q0 and v0")
-        q0 = system.defaults[0] if q0 is None else q0
-        v0 = system.defaults[1] if v0 is None else v0
-        if R0 is None and len(system.defaults) > 2:
-            R0 = system.defaults[2]
+    q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
 
     n_blocks, remainder = divmod(steps, save_every)
     k_saved = np.concatenate([np.arange(n_blocks + 1) * save_every, [steps] if remainder else []]).astype(np.int64)

@@ -127,7 +127,6 @@ class Solution(eqx.Module):
         `constraint_residual(time, constraint)`, plus provenance attributes."""
         import xarray as xr
 
-        from . import __version__
 
         if self.batch_size is not None:
             return self._batch_to_xarray(attrs)
@@ -158,30 +157,11 @@ class Solution(eqx.Module):
         )
         if self.R is not None:
             ds["R"] = (("time", "i", "j"), np.asarray(self.R), {"long_name": "orientation R (group matrix)"})
-        ds.attrs.update(
-            {
-                "gnipy_version": __version__,
-                "model": self.system,
-                "method": self.method,
-                "h": float(self.h),
-                "steps": int(self.steps),
-                "start": self.start,
-                "result": int(self.result),
-                "newton_iterations_total": int(np.asarray(self.iterations)[0]),
-                "newton_iterations_max": int(np.asarray(self.iterations)[1]),
-                "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            }
-        )
-        for k, v in self.params:
-            ds.attrs[f"param_{k}"] = float(v)
-        if attrs:
-            ds.attrs.update(attrs)
-        return ds
+        return self._with_attrs(ds, attrs)
 
     def _batch_to_xarray(self, attrs):
         import xarray as xr
 
-        from . import __version__
 
         n, N, m = self.q.shape[-1], self.v.shape[-1], self.constraint_residual.shape[-1]
         coords = list(self.coordinates) if len(self.coordinates) == n else [f"q{i}" for i in range(n)]
@@ -207,6 +187,12 @@ class Solution(eqx.Module):
             ds["R"] = ((*mt, "i", "j"), np.asarray(self.R), {"long_name": "orientation R (group matrix)"})
         for k, v in (self.member_params or {}).items():
             ds[f"param_{k}"] = (("member",), np.asarray(v), {"long_name": f"parameter {k}"})
+        return self._with_attrs(ds, attrs)
+
+    def _with_attrs(self, ds, attrs):
+        """The provenance attributes of a result dataset (and the caller's `attrs`)."""
+        from . import __version__
+
         ds.attrs.update(
             {
                 "gnipy_version": __version__, "model": self.system, "method": self.method, "h": float(self.h),

@@ -37,7 +37,8 @@ import numpy as np
 
 from .integrators.base import Integrator, MethodError
 from .io import OutputError, write_netcdf
-from .simulate import MAX_STEPS, _init_one, _integrate, resolve_steps
+from .io import check_writable
+from .simulate import MAX_STEPS, _init_one, _integrate, default_initial_condition, resolve_steps
 from .solution import RESULT_SOLVER_FAILED, SolverFailure
 from .system import System, SystemError
 
@@ -87,25 +88,13 @@ def parts_directory(path) -> Path:
     return path.with_name(path.name + ".parts")
 
 
-def _atomic_dataset_write(ds, path: Path) -> None:
+def _atomic_write(path: Path, write) -> None:
+    """`write(tmp)` to a temporary name beside `path`, flushed to disk, then renamed to `path`."""
     tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
     try:
-        ds.to_netcdf(tmp)
-        with open(tmp, "rb") as f:  # the part must be on disk before it counts as done
+        write(tmp)
+        with open(tmp, "rb") as f:  # on disk before it counts as done
             os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            tmp.unlink()
-        except FileNotFoundError:
-            pass
-        raise
-
-
-def _atomic_text_write(text: str, path: Path) -> None:
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
-    try:
-        tmp.write_text(text)
         os.replace(tmp, path)
     except BaseException:
         try:
@@ -198,27 +187,12 @@ def simulate_to_file(
     t0 = float(t0)
     if not math.isfinite(t0):
         raise SystemError(f"t0: must be finite, got {t0!r}")
-    if q0 is None and system.n == 0:
-        q0 = ()
-    if q0 is None or v0 is None:
-        if system.defaults is None:
-            raise SystemError(f"q0/v0: the system {system.name!r} has no default initial condition; give q0 and v0")
-        q0 = system.defaults[0] if q0 is None else q0
-        v0 = system.defaults[1] if v0 is None else v0
-        if R0 is None and len(system.defaults) > 2:
-            R0 = system.defaults[2]
+    q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
     b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
     method.check(system, b0)
     method = method.prepare(system, b0)
 
-    path = Path(os.fspath(path))
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise OutputError(f"cannot write {path}: directory {directory} does not exist")
-    if path.is_dir():
-        raise OutputError(f"cannot write {path}: it is a directory")
-    if not os.access(directory, os.W_OK | os.X_OK):
-        raise OutputError(f"cannot write {path}: directory {directory} is not writable")
+    path = check_writable(path)
 
     n_chunks = -(-steps // chunk_steps)
     spec = {
@@ -246,7 +220,7 @@ def simulate_to_file(
         shutil.rmtree(parts, ignore_errors=True)
         try:
             parts.mkdir()
-            _atomic_text_write(json.dumps(spec, indent=1), parts / "spec.json")
+            _atomic_write(parts / "spec.json", lambda tmp: tmp.write_text(json.dumps(spec, indent=1)))
         except OSError as e:
             raise OutputError(f"cannot write {parts}: {e.strerror or e}") from e
     resumed = done
@@ -293,7 +267,7 @@ def simulate_to_file(
             residual=float(fail_res), iterations_total=int(its[0]), iterations_max=int(its[1]),
         )
         try:
-            _atomic_dataset_write(ds, _part_path(parts, c))
+            _atomic_write(_part_path(parts, c), ds.to_netcdf)
         except OSError as e:
             raise OutputError(f"cannot write {_part_path(parts, c)}: {e.strerror or e}") from e
         computed += 1

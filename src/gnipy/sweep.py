@@ -498,10 +498,11 @@ def run_chunk(
         SweepError: a member whose parameters or initial condition are not acceptable
             (named by its index in the sweep and its grid values).
     """
-    from .compilation import enable_compilation_cache
+    from .compilation import cache_requested, enable_compilation_cache
     from .simulate import simulate
 
-    enable_compilation_cache()  # each worker process: reuse programs compiled by earlier runs
+    if cache_requested():  # opt-in (see gnipy.compilation): reuse programs compiled by earlier runs
+        enable_compilation_cache()
     B = len(next(iter(columns.values())))
     systems, q0, v0, R0 = _member_inputs(job, columns, B)
     try:
