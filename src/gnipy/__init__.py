@@ -40,6 +40,7 @@ from .retractions import Cayley, Exp, Retraction, get_retraction  # noqa: E402
 from .ensembles import model_systems, stack_systems  # noqa: E402
 from .simulate import simulate  # noqa: E402
 from .streaming import simulate_to_file  # noqa: E402
+from .sweep import open_sweep, run_sweep  # noqa: E402
 from .solution import Solution, SolverFailure  # noqa: E402
 from .spaces import EuclideanSpace, GroupSpace, Point  # noqa: E402
 from .system import System, SystemError  # noqa: E402
@@ -69,6 +70,8 @@ __all__ = [
     "simulate",
     "model_systems",
     "simulate_to_file",
+    "run_sweep",
+    "open_sweep",
     "stack_systems",
     "Solution",
     "SolverFailure",

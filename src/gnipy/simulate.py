@@ -190,9 +190,11 @@ def simulate(
         SolverFailure: a step did not converge (step index, time, residual in the message; in
             a batch, the first failing member).
     """
+    from .compilation import release_compiled_programs_if_needed
     from .methods import get_method
     from .reference import ContinuousReference
 
+    release_compiled_programs_if_needed()
     systems = None
     if isinstance(system, (list, tuple)):
         systems = list(system)

@@ -157,9 +157,11 @@ def simulate_to_file(
     """
     import xarray as xr
 
+    from .compilation import release_compiled_programs_if_needed
     from .methods import get_method
     from .reference import ContinuousReference
 
+    release_compiled_programs_if_needed()
     if not isinstance(system, System):
         raise SystemError(f"system: expected a gnipy.System, got {type(system).__name__}")
     if isinstance(method, str):
