@@ -5,12 +5,13 @@ A first `gnipy.simulate` call in a fresh process spends most of its few seconds 
 keep compiled programs on disk and load them in later processes (measured for the rolling ball
 on 2 cores: first call 5.1 s without the cache, 1.7 s with it; the rest is tracing).
 
-**Opt-in.** The cache is off by default: with jax 0.10.2 on CPU we saw a segmentation fault inside
-JAX's cache write (`compilation_cache.put_executable_and_time`) when the cache had been turned on
-in a process that had already compiled other programs. Turn it on by setting
-`GNIPY_COMPILATION_CACHE=1` (the command line and the workers of `gni sweep` then call
-:func:`enable_compilation_cache` at start-up, before compiling anything), or call it yourself at
-the start of a Python session.
+**Opt-in.** The cache is off by default. In the test suite we saw a segmentation fault inside JAX's
+cache writer (`compilation_cache.put_executable_and_time`); it was most likely the process running
+out of memory maps (see :func:`release_compiled_programs_if_needed`: the same test then aborted
+inside XLA's compiler with the cache off), but until the cache has been checked on its own it stays
+opt-in. Turn it on by setting `GNIPY_COMPILATION_CACHE=1` (the command line and the workers of
+`gni sweep` then call :func:`enable_compilation_cache` at start-up, before compiling anything), or
+call it yourself at the start of a Python session.
 
 The directory is `$GNIPY_CACHE_DIR` if set, else `~/.cache/gnipy/jax`.
 """
