@@ -6,6 +6,7 @@ import sys
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from gnipy.compilation import memory_map_count, release_compiled_programs_if_needed
 
@@ -30,3 +31,43 @@ def test_cache_is_opt_in_and_goes_where_asked(tmp_path):
     out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
     assert out.split() == ["False", str(tmp_path / "cache")]
     assert (tmp_path / "cache").is_dir()
+
+
+def test_map_count_is_read_again_only_after_a_compile(monkeypatch):
+    import gnipy.compilation as comp
+
+    reads = []
+
+    def counting():
+        reads.append(1)
+        return 10
+
+    monkeypatch.setattr(comp, "memory_map_count", counting)
+    monkeypatch.setattr(comp, "_last_count", None)
+    assert not comp.release_compiled_programs_if_needed()
+    assert not comp.release_compiled_programs_if_needed()
+    assert not comp.release_compiled_programs_if_needed(fraction=0.1)
+    assert len(reads) == 1  # no compilation in between: the last count stands
+    jax.jit(lambda x: jnp.tanh(x) * 3.25 - 1.5)(jnp.ones(7)).block_until_ready()  # a new program
+    assert not comp.release_compiled_programs_if_needed()
+    assert len(reads) == 2
+    assert comp.release_compiled_programs_if_needed(fraction=0.0)  # 10 maps ≥ 0: released
+    assert len(reads) == 2
+
+
+def test_compiler_options_are_accepted_and_the_decorator_compiles_the_same_function(monkeypatch):
+    from gnipy.compilation import COMPILER_OPTIONS, compiler_options, jit
+
+    # this JAX runs on the CPU and knows the options (a rejected option would give {} silently)
+    assert compiler_options() == COMPILER_OPTIONS
+    monkeypatch.setenv("GNIPY_XLA_DEFAULTS", "1")
+    assert compiler_options.__wrapped__() == {}
+
+    def f(x, n: int):
+        return jnp.sum(jnp.sin(x) ** n)
+
+    x = jnp.linspace(0.0, 1.0, 11)
+    expected = np.sum(np.sin(np.linspace(0.0, 1.0, 11)) ** 3)
+    np.testing.assert_allclose(float(jit(f)(x, 3)), expected, rtol=1e-14)
+    assert jit(f).__name__ == "f"
+    np.testing.assert_allclose(float(jit(donate="none")(f)(x, 2)), np.sum(np.sin(np.asarray(x)) ** 2), rtol=1e-14)

@@ -725,7 +725,13 @@ def _run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, 
                   extra) -> None:
     """`gni run` in chunks through :func:`gnipy.streaming.simulate_to_file`, with a progress bar."""
     import numpy as np
-    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
+    from rich.progress import (
+        BarColumn,
+        Progress,
+        TextColumn,
+        TimeElapsedColumn,
+        TimeRemainingColumn,
+    )
     from rich.table import Table
 
     from gnipy.streaming import simulate_to_file
@@ -792,7 +798,9 @@ def _final_node_fn():
         import jax
         import jax.numpy as jnp
 
-        @eqx.filter_jit
+        from .compilation import jit
+
+        @jit
         def final_node(method, system, state0, h, steps):
             def body(_, carry):
                 state, ok = carry

@@ -21,6 +21,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .compilation import jit
 from .spaces import Point
 from .system import System, SystemError
 
@@ -192,7 +193,7 @@ def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
     return B, q0, v0, R
 
 
-@eqx.filter_jit
+@jit
 def _batch_diagnostics(system, batched: bool, b0, v0):
     def one(s, b, v):
         G = s.metric(b)

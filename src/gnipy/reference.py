@@ -24,6 +24,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .compilation import jit
 from .solution import Solution, SolverFailure
 
 __all__ = ["ContinuousReference", "lagrange_dalembert_acceleration"]
@@ -92,7 +93,7 @@ class ContinuousReference(eqx.Module):
                         R=space.orientation(b), velocities=system.velocities, **meta)
 
 
-@eqx.filter_jit
+@jit
 def _solve(ref, system, b0, v0, times):
     space = system.space
     N = v0.shape[0]

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .compilation import jit
 from .integrators.base import Integrator, MethodError
 from .solution import RESULT_SOLVER_FAILED, Solution, SolverFailure
 from .system import System, SystemError
@@ -113,10 +115,10 @@ def _integrate_core(method, system, state0, h, n_blocks: int, block, remainder, 
     return b, v, p, energy, residual, fail_k, fail_res, jnp.stack([it_tot, it_max]), carry[0]
 
 
-_integrate = eqx.filter_jit(_integrate_core)
+_integrate = jit(_integrate_core)
 
 
-@eqx.filter_jit
+@jit
 def _integrate_batch(method, system, system_batched: bool, state0, h, n_blocks: int, block, remainder,
                      has_remainder: bool):
     """:func:`_integrate_core` vmapped over the members (states, and the systems when batched)."""
@@ -126,14 +128,14 @@ def _integrate_batch(method, system, system_batched: bool, state0, h, n_blocks: 
     return eqx.filter_vmap(one, in_axes=(eqx.if_array(0) if system_batched else None, 0))(system, state0)
 
 
-@eqx.filter_jit
+@jit
 def _init_batch(method, system, system_batched: bool, b0, v0, h):
     return eqx.filter_vmap(
         lambda s, b, v: method.init(s, b, v, h), in_axes=(eqx.if_array(0) if system_batched else None, 0, 0)
     )(system, b0, v0)
 
 
-@eqx.filter_jit
+@jit
 def _init_one(method, system, b0, v0, h):
     return method.init(system, b0, v0, h)
 
@@ -292,7 +294,12 @@ def _is_batch(system: System, q0, v0, R0) -> bool:
 
 def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks, remainder, k_saved, times, t0,
                     project_v0, throw, meta):
-    from .ensembles import broadcast_initial_conditions, check_batch, member_params, stack_systems
+    from .ensembles import (
+        broadcast_initial_conditions,
+        check_batch,
+        member_params,
+        stack_systems,
+    )
 
     system = systems[0]
     size = len(systems) if len(systems) > 1 else None

@@ -25,6 +25,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .compilation import jit
 from .spaces import EuclideanSpace, GroupSpace, Point
 
 __all__ = ["System", "SystemError"]
@@ -264,7 +265,7 @@ class System(eqx.Module):
             return jnp.asarray(x0)
         k = self.group.matrix_size
         if R0 is None:
-            R = np.asarray(self.group.identity(), dtype=np.float64)
+            R = np.eye(k)  # the identity of every matrix group (NumPy: no device dispatch)
         else:
             try:
                 R = np.asarray(R0, dtype=np.float64)
@@ -405,7 +406,7 @@ class System(eqx.Module):
         return not np.any(dG != 0.0)
 
 
-@eqx.filter_jit
+@jit
 def _validation_values(system, b0, ws, vs):
     def at(w, v):
         b = system.space.move(b0, w)
@@ -421,12 +422,12 @@ def _validation_values(system, b0, ws, vs):
     return out
 
 
-@eqx.filter_jit
+@jit
 def _project_velocity(system, b, v):
     return project_velocity(system, b, v)
 
 
-@eqx.filter_jit
+@jit
 def _metric_derivatives(system, b0, ws):
     def one(w):
         b = system.space.move(b0, w)

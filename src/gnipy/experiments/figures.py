@@ -38,6 +38,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from ..compilation import jit
 from ..discrete_lagrangians import EulerA
 from ..integrators.comparators import DiscreteLagrangeDAlembert
 from ..integrators.gni import GNI, GNIState
@@ -126,7 +127,7 @@ def _finite(tree) -> jax.Array:
     return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
 
 
-@eqx.filter_jit
+@jit
 def _drive(method, system, state0, h, first, block, n_saves):
     """From `state0`, run `first` steps and save, then `n_saves - 1` times `block` steps and save.
 
@@ -235,13 +236,13 @@ def paper_start(system, q0, omega0, h: float, R0=None) -> GNIState:
     return _start_from_step(system, b0, z, jnp.asarray(h, jnp.float64))
 
 
-@eqx.filter_jit
+@jit
 def _init(method, system, b0, v0, h):
     """`method.init` (the momentum start $p^+_0 = \\mathbb{G}v_0$), jit-compiled (cheaper than eager)."""
     return method.init(system, b0, v0, h)
 
 
-@eqx.filter_jit
+@jit
 def _start_from_step(system, b0, z, h):
     """The GNI state at node 1 after the step `z` from `b0`: $(b_1, p^+_1 = FL^+(b_0, z))$ with the
     Euler A $l_d$ (jit-compiled: evaluated eagerly, the gradients cost seconds of small compiles)."""

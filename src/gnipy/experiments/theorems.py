@@ -58,6 +58,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from ..compilation import jit
 from ..discrete_lagrangians import CustomDiscreteLagrangian, EulerA, Trapezoid
 from ..integrators import paper_schemes as ps
 from ..integrators.gni import GNI
@@ -187,7 +188,7 @@ def _finite(tree) -> jax.Array:
     return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
 
 
-@eqx.filter_jit
+@jit
 def _drive(method, system, b0, v0, h, n, length: int, project: bool, keep_states: bool):
     """Start `method` at `(b0, v0)` (v0 projected onto the constraints if `project`) and take `n` ≤
     `length` steps; return the observations at nodes 0..length (nodes past n repeat node n).
@@ -219,7 +220,7 @@ def _drive(method, system, b0, v0, h, n, length: int, project: bool, keep_states
     return obs, states, v0, system.constraint_residual(b0, v0), ok
 
 
-@eqx.filter_jit
+@jit
 def _step_velocity_residual(system, q, h):
     """μ(q_k)(Δ_k − Y(q_k)) for the step velocity Δ_k = (q_{k+1} − q_k)/h (on $\\mathbb{R}^n$)."""
     return jax.vmap(system.constraint_residual)(q[:-1], (q[1:] - q[:-1]) / h)
@@ -228,7 +229,7 @@ def _step_velocity_residual(system, q, h):
 _CHECKED: dict = {}
 
 
-@eqx.filter_jit
+@jit
 def _metric_is_constant(system, b0):
     """$\\partial\\mathbb{G}/\\partial q = 0$ exactly at two random points near `b0` (the test of
     :meth:`gnipy.System.has_constant_metric`, compiled: op by op it costs about 2 s the first time)."""
@@ -333,12 +334,12 @@ def _bare(system: System) -> System:
     )
 
 
-@eqx.filter_jit
+@jit
 def _constraint_residual(system, b, v):
     return system.constraint_residual(b, v)
 
 
-@eqx.filter_jit
+@jit
 def _ldap_rhs(system, y):
     space = system.space
     N = system.dim
@@ -514,7 +515,7 @@ def constrained_tilde_states(system, n_states: int, h: float, sign: float, seed:
     return ps.TildeState(q, _project_tilde(system, q, p, jnp.asarray(h), jnp.asarray(sign)), lam)
 
 
-@eqx.filter_jit
+@jit
 def _project_tilde(system, q, p, h, sign):
     def project(q, p):
         M, mu = system.metric(q), system.mu(q)
@@ -537,7 +538,7 @@ def _manifold_residual(system, s, h):
     return system.mu(s.q) @ jnp.linalg.solve(M, s.p_tilde + 0.5 * h * system.potential_gradient(s.q) - system.Pi(s.q))
 
 
-@eqx.filter_jit
+@jit
 def _round_trips(system, states, off_states, h):
     """Theorem 5.2 on a batch of states of $M_A^h$ (and a batch off it, for the control).
 
@@ -832,7 +833,7 @@ def _rolling_ball_nodes(system, q0, v0, h: float, steps: int):
             np.concatenate([np.asarray(v0_bar)[None], v]))
 
 
-@eqx.filter_jit
+@jit
 def _gni_start(method, system, b0, v0, h):
     """The GNI state from v0 projected onto the constraints, and the velocity it reports."""
     state0 = method.init(system, b0, project_velocity(system, b0, v0), h)
@@ -878,7 +879,7 @@ def _erratum_sign(quick: bool) -> Erratum:
     )
 
 
-@eqx.filter_jit
+@jit
 def _node_terms(system, q):
     """M⁻¹V_q(q_k) and the projector P = I − M⁻¹μᵀC⁻¹μ at a batch of configurations."""
 

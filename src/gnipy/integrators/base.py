@@ -52,7 +52,8 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
 
     Phase 1 (chord): the GNI's first guess is accurate to $O(h^2)$ and its Jacobian, $\approx
     \mathbb{G}/h$, changes by $O(h)$ over a step, so $z \leftarrow z - J(z_0)^{-1}F(z)$ contracts
-    by a small factor per iteration at the cost of one evaluation of F. $J(z_0)^{-1}$ is formed by
+    by a small factor per iteration at the cost of one evaluation of F ($F(z_0)$ itself comes with
+    the forward-mode Jacobian, so the first iteration evaluates nothing more). $J(z_0)^{-1}$ is formed by
     elimination without pivoting (stable for the symmetric-dominated Jacobians of discrete
     Lagrangians, and fused by XLA into a few kernels).
     Phase 2 (fallback): when the chord iteration's contraction estimate
@@ -78,7 +79,6 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
     eye = jnp.eye(guess.shape[0], dtype=dtype)
     inf = jnp.asarray(jnp.inf, dtype)
     k0 = jnp.asarray(0, jnp.int32)
-    false = jnp.asarray(False)
 
     def test(dz, z1, prev):
         size = jnp.max(jnp.abs(dz))
@@ -92,8 +92,18 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
         done = (size <= atol + rtol * scale) & floor
         return size, theta, done & jnp.isfinite(size)
 
-    # phase 1: chord iterations with J(guess)⁻¹ (elimination without pivoting)
-    Jinv = solve_spd(jax.jacfwd(F)(guess), eye)
+    # phase 1: chord iterations with J(guess)⁻¹ (elimination without pivoting). The forward-mode
+    # Jacobian computes F(guess) on the way: the first iteration uses it instead of evaluating F again
+    def value_twice(z):
+        f = F(z)
+        return f, f
+
+    J0, f0 = jax.jacfwd(value_twice, has_aux=True)(guess)
+    Jinv = solve_spd(J0, eye)
+    dz0 = Jinv @ f0
+    z1 = guess - dz0
+    size0, _, done0 = test(dz0, z1, inf)
+    stop0 = ~done0 & ~jnp.isfinite(size0)
 
     def chord_cond(c):
         _, j, done, _, _, stop = c
@@ -109,7 +119,7 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
         return z1, j + 1, done, size, jnp.max(jnp.abs(f)), stop
 
     z, k1, done, size, residual, _ = jax.lax.while_loop(
-        chord_cond, chord_body, (guess, k0, false, inf, inf, false)
+        chord_cond, chord_body, (z1, k0 + 1, done0, size0, jnp.max(jnp.abs(f0)), stop0)
     )
 
     # phase 2 (only where phase 1 failed): Newton with pivoting, fresh Jacobians, from the guess
