@@ -96,14 +96,13 @@ def _integrate_core(method, system, state0, h, n_blocks: int, block, remainder, 
 
     carry = (state0, jnp.asarray(0, int_t), jnp.asarray(-1, int_t), jnp.asarray(0.0), jnp.asarray(0, int_t),
              jnp.asarray(0, int_t))
-    obs0 = observe(state0)
 
-    def outer(carry, _):
-        carry = block_loop(carry, block)
+    def outer(carry, i):
+        # block 0 has no steps: it observes the initial node (observe is traced once, not twice)
+        carry = block_loop(carry, jnp.where(i == 0, 0, block))
         return carry, observe(carry[0])
 
-    carry, obs = jax.lax.scan(outer, carry, None, length=n_blocks)
-    obs = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), obs0, obs)
+    carry, obs = jax.lax.scan(outer, carry, jnp.arange(n_blocks + 1, dtype=int_t))
     if has_remainder:
         carry = block_loop(carry, remainder)
         last = observe(carry[0])

@@ -76,7 +76,6 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
     """
     dtype = guess.dtype
     eps = jnp.finfo(dtype).eps
-    eye = jnp.eye(guess.shape[0], dtype=dtype)
     inf = jnp.asarray(jnp.inf, dtype)
     k0 = jnp.asarray(0, jnp.int32)
 
@@ -99,7 +98,7 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
         return f, f
 
     J0, f0 = jax.jacfwd(value_twice, has_aux=True)(guess)
-    Jinv = solve_spd(J0, eye)
+    Jinv = solve_spd(J0, jnp.eye(guess.shape[0], dtype=dtype))
     dz0 = Jinv @ f0
     z1 = guess - dz0
     size0, _, done0 = test(dz0, z1, inf)
@@ -129,8 +128,8 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
 
     def newton_body(c):
         z, j, _, prev, _ = c
-        f = F(z)
-        dz = jnp.linalg.solve(jax.jacfwd(F)(z), f)  # LAPACK: a rare fallback, cheaper to compile
+        J, f = jax.jacfwd(value_twice, has_aux=True)(z)
+        dz = jnp.linalg.solve(J, f)  # LAPACK: a rare fallback, cheaper to compile
         z1 = z - dz
         size, _, done = test(dz, z1, prev)
         return z1, j + 1, done | ~jnp.isfinite(size), size, jnp.max(jnp.abs(f))
