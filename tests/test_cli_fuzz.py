@@ -111,7 +111,6 @@ def tripwire():
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(gnipy, "simulate", _tripwire)
         mp.setattr(gnipy.streaming, "simulate_to_file", _tripwire)
-        mp.setattr(gnipy.cli, "_final_node_fn", _tripwire)
         mp.setattr(gnipy.experiments.reproduce, "run_reproduction", _tripwire)
         if HAS_SWEEP:  # (being written: only its command-line checks are fuzzed here)
             import gnipy.sweep

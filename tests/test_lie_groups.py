@@ -13,6 +13,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from group_checks import maxabs as _maxabs
+from group_checks import membership_error, run_once, series_expm
 from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from jax.scipy.linalg import block_diag
@@ -28,18 +30,11 @@ GROUPS = {
 }
 
 
-def expm(X, squarings=5, terms=18):
-    """Reference matrix exponential, independent of the groups' closed forms: the Taylor series of
-    $e^{X/2^s}$ squared s times (round-off accurate for |X| ≲ 10; cheaper to compile than
-    `jax.scipy.linalg.expm`)."""
-    A = X / 2**squarings
-    eye = jnp.eye(X.shape[0], dtype=X.dtype)
-    out = eye
-    for j in range(terms, 0, -1):
-        out = eye + A @ out / j
-    for _ in range(squarings):
-        out = out @ out
-    return out
+def expm(X):
+    """Reference matrix exponential, independent of the groups' closed forms (round-off accurate for
+    |X| ≲ 10)."""
+    return series_expm(X, squarings=5, terms=18)
+
 
 # Magnitudes of the algebra samples: exact zero, tiny values (Taylor branches), both sides of each
 # branch switch (|θ| = 0.0633 for the SO(3) log, 0.5 and 1 for the series in θ² and (θ/2)²), and
@@ -47,47 +42,6 @@ def expm(X, squarings=5, terms=18):
 MAGNITUDES = np.array([0.0, 1e-12, 1e-9, 1e-6, 1e-3, 0.06, 0.07, 0.3, 0.49, 0.51, 0.99, 1.01, 2.0, 3.0])
 N_DIRECTIONS = 6
 N_RANDOM = 32
-
-
-def membership_error(group, g):
-    """Distance of the matrix g from the group (0 for an exact element)."""
-    if isinstance(group, SO3):
-        return jnp.maximum(jnp.abs(g.T @ g - jnp.eye(3)).max(), jnp.abs(jnp.linalg.det(g) - 1.0))
-    if isinstance(group, SE2):
-        R = g[:2, :2]
-        return jnp.max(
-            jnp.stack(
-                [
-                    jnp.abs(R.T @ R - jnp.eye(2)).max(),
-                    jnp.abs(jnp.linalg.det(R) - 1.0),
-                    jnp.abs(g[2] - jnp.array([0.0, 0.0, 1.0])).max(),
-                ]
-            )
-        )
-    if isinstance(group, Rn):
-        n = group.n
-        return jnp.maximum(jnp.abs(g[:n, :n] - jnp.eye(n)).max(), jnp.abs(g[n] - jnp.eye(n + 1)[n]).max())
-    if isinstance(group, TrivialGroup):
-        return jnp.abs(g - 1.0).max()
-    if isinstance(group, ProductGroup):
-        blocks = group.blocks(g)
-        off = jnp.abs(g - block_diag(*blocks)).max()
-        return jnp.max(jnp.stack([off] + [membership_error(f, b) for f, b in zip(group.factors, blocks)]))
-    raise TypeError(type(group))
-
-
-def run_once(f, *args):
-    """Compile and run a check function once, with XLA's backend (LLVM) optimizations off.
-
-    The checks run once, so their compile time dominates; level 0 compiles about twice as fast and
-    keeps IEEE semantics (the tolerances are far above any difference in instruction selection).
-    """
-    compiled = jax.jit(f).lower(*args).compile(compiler_options={"xla_backend_optimization_level": 0})
-    return compiled(*args)
-
-
-def _maxabs(x):
-    return jnp.abs(x).max() if x.size else jnp.zeros(())
 
 
 @functools.cache

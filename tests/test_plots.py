@@ -114,6 +114,19 @@ def test_fitted_order():
     assert np.isnan(plots.fitted_order(h[:1], h[:1]))
 
 
+def test_fitted_order_options():
+    h = 1.0 / 2.0 ** np.arange(3, 9)
+    # truncation error 2h² until h = 2⁻⁶, then round-off growing as h shrinks (1e-9/h): the slope
+    # over all points is spoiled, the one that stops at the smallest error is the order
+    err = 2 * h**2
+    err[-2:] = 2 * h[-3] ** 2 * np.array([2.0, 4.0])
+    assert plots.fitted_order(h, err) < 1.5
+    assert plots.fitted_order(h, err, stop_at_minimum=True) == pytest.approx(2.0, abs=1e-12)
+    # the fewest points: two clean points give the order unless three are asked for
+    assert plots.fitted_order(h[:2], 2 * h[:2] ** 2) == pytest.approx(2.0, abs=1e-12)
+    assert np.isnan(plots.fitted_order(h[:2], 2 * h[:2] ** 2, min_points=3))
+
+
 def test_plot_convergence_legend_has_the_fitted_slopes(tmp_path):
     h = 1.0 / 2.0 ** np.arange(3, 8)
     errors = {"first": 0.5 * h, "second": 2 * h**2, "exact": np.zeros_like(h)}

@@ -15,9 +15,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from group_checks import maxabs as _maxabs
+from group_checks import membership_error, run_once, series_expm
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from jax.scipy.linalg import block_diag
 
 import gnipy  # noqa: F401  (float64)
 from gnipy.lie_groups import SE2, SO3, MatrixLieGroup, ProductGroup, Rn, TrivialGroup
@@ -82,16 +83,9 @@ N_DIRECTIONS = 4
 N_TINY = 4  # magnitudes 0, 1e-12, 1e-9, 1e-6
 
 
-def expm(X, squarings=6, terms=12):
+def expm(X):
     """Reference matrix exponential (Taylor series of $e^{X/2^s}$, squared s times)."""
-    A = X / 2**squarings
-    eye = jnp.eye(X.shape[0], dtype=X.dtype)
-    out = eye
-    for j in range(terms, 0, -1):
-        out = eye + A @ out / j
-    for _ in range(squarings):
-        out = out @ out
-    return out
+    return series_expm(X, squarings=6, terms=12)
 
 
 def tau_definition(retraction, group, xi):
@@ -108,46 +102,6 @@ def right_trivialized(group, tau_fn, xi, jac=jax.jacfwd):
     J = jac(tau_fn)(xi)  # (k, k, d)
     t_inv = jnp.linalg.inv(tau_fn(xi))
     return jax.vmap(lambda Jj: group.vee(Jj @ t_inv), in_axes=2, out_axes=1)(J)
-
-
-def membership_error(group, g):
-    if isinstance(group, SO3):
-        return jnp.maximum(jnp.abs(g.T @ g - jnp.eye(3)).max(), jnp.abs(jnp.linalg.det(g) - 1.0))
-    if isinstance(group, SE2):
-        R = g[:2, :2]
-        return jnp.max(
-            jnp.stack(
-                [
-                    jnp.abs(R.T @ R - jnp.eye(2)).max(),
-                    jnp.abs(jnp.linalg.det(R) - 1.0),
-                    jnp.abs(g[2] - jnp.array([0.0, 0.0, 1.0])).max(),
-                ]
-            )
-        )
-    if isinstance(group, Rn):
-        n = group.n
-        return jnp.maximum(jnp.abs(g[:n, :n] - jnp.eye(n)).max(), jnp.abs(g[n] - jnp.eye(n + 1)[n]).max())
-    if isinstance(group, TrivialGroup):
-        return jnp.abs(g - 1.0).max()
-    if isinstance(group, ProductGroup):
-        blocks = group.blocks(g)
-        off = jnp.abs(g - block_diag(*blocks)).max()
-        return jnp.max(jnp.stack([off] + [membership_error(f, b) for f, b in zip(group.factors, blocks)]))
-    raise TypeError(type(group))
-
-
-def run_once(f, *args):
-    """Compile and run a check function once, with XLA's backend (LLVM) optimizations off.
-
-    The checks run once, so their compile time dominates; level 0 compiles about twice as fast and
-    keeps IEEE semantics (the tolerances are far above any difference in instruction selection).
-    """
-    compiled = jax.jit(f).lower(*args).compile(compiler_options={"xla_backend_optimization_level": 0})
-    return compiled(*args)
-
-
-def _maxabs(x):
-    return jnp.abs(x).max() if x.size else jnp.zeros(())
 
 
 def samples(group, seed):

@@ -236,16 +236,21 @@ def plot_solution(obj, path=None, *, title: str | None = None):
     return fig
 
 
-def fitted_order(h, errors, floor: float = ROUND_OFF) -> float:
+def fitted_order(h, errors, floor: float = ROUND_OFF, *, min_points: int = 2,
+                 stop_at_minimum: bool = False) -> float:
     """The least-squares slope of log(error) against log(h), on the points above `floor`.
 
     Points at or below `floor` (round-off, or an exact result) and non-finite points are left out;
-    with fewer than two points left the result is NaN.
+    with fewer than `min_points` step sizes left the result is NaN. The one implementation of the
+    fitted order in gnipy (`gni convergence`, the theorem table and the figures of `gni reproduce`).
 
     Arguments:
         h: step sizes.
         errors: the errors at those step sizes.
         floor: the round-off level (default :data:`ROUND_OFF` = 1e-11).
+        min_points: the fewest step sizes a slope is fitted on.
+        stop_at_minimum: also leave out the step sizes smaller than the one with the smallest
+            error (past it the error grows as h shrinks: round-off, not truncation).
 
     Returns:
         The fitted order (a float, NaN when it cannot be fitted).
@@ -253,7 +258,9 @@ def fitted_order(h, errors, floor: float = ROUND_OFF) -> float:
     h = np.asarray(h, dtype=float)
     e = np.asarray(errors, dtype=float)
     keep = np.isfinite(e) & np.isfinite(h) & (e > floor) & (h > 0)
-    if np.unique(h[keep]).size < 2:
+    if stop_at_minimum and keep.any():
+        keep &= h >= h[keep][np.argmin(e[keep])]
+    if np.unique(h[keep]).size < max(2, min_points):
         return float("nan")
     return float(np.polyfit(np.log(h[keep]), np.log(e[keep]), 1)[0])
 

@@ -43,6 +43,7 @@ from ..discrete_lagrangians import EulerA
 from ..integrators.comparators import DiscreteLagrangeDAlembert
 from ..integrators.gni import GNI, GNIState
 from ..models import rolling_ball as rb
+from ..plots import fitted_order as _plots_fitted_order
 from ..spaces import Point
 
 __all__ = [
@@ -106,12 +107,9 @@ def fit_mask(hs: Sequence[float], errors: Sequence[float], floor: float = ROUNDO
 
 def fitted_order(hs: Sequence[float], errors: Sequence[float], floor: float = ROUNDOFF_FLOOR) -> float:
     """Least-squares slope of log(error) against log(h) over the points of :func:`fit_mask` (errors
-    above `floor`, above round-off); NaN when fewer than two such points remain."""
-    hs, errors = np.asarray(hs, dtype=np.float64), np.asarray(errors, dtype=np.float64)
-    keep = fit_mask(hs, errors, floor)
-    if keep.sum() < 2:
-        return float("nan")
-    return float(np.polyfit(np.log(hs[keep]), np.log(errors[keep]), 1)[0])
+    above `floor`, and none past the smallest error); NaN when fewer than two such points remain
+    (:func:`gnipy.plots.fitted_order` with `stop_at_minimum=True`)."""
+    return _plots_fitted_order(hs, errors, floor, stop_at_minimum=True)
 
 
 def _fine_order(hs, errors, floor: float = ROUNDOFF_FLOOR, points: int = 3) -> float:

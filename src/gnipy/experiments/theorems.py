@@ -66,6 +66,7 @@ from ..lie_groups import SO3
 from ..methods import get_method
 from ..models import get_model
 from ..models import rolling_ball as rb
+from ..plots import fitted_order as _plots_fitted_order
 from ..reference import ContinuousReference, lagrange_dalembert_acceleration
 from ..system import System, project_velocity
 
@@ -175,12 +176,9 @@ class _Work:
 # ------------------------------------------------------------------------------------------------
 def fitted_order(hs: Sequence[float], errors: Sequence[float], floor: float = ROUND_OFF) -> float:
     """Least-squares slope of log(error) against log(h) over the points with error > `floor`;
-    NaN when fewer than three such points remain."""
-    hs, errors = np.asarray(hs, dtype=np.float64), np.asarray(errors, dtype=np.float64)
-    keep = np.isfinite(errors) & (errors > floor)
-    if keep.sum() < 3:
-        return float("nan")
-    return float(np.polyfit(np.log(hs[keep]), np.log(errors[keep]), 1)[0])
+    NaN when fewer than three such points remain (:func:`gnipy.plots.fitted_order` with
+    `min_points=3`)."""
+    return _plots_fitted_order(hs, errors, floor, min_points=3)
 
 
 def _finite(tree) -> jax.Array:
