@@ -264,7 +264,7 @@ def invoke(*args):
     return runner.invoke(app, [str(a) for a in args])
 
 
-def check_clean(res, computation_ok: bool = False) -> set[str] | None:
+def assert_clean(res, computation_ok: bool = False) -> set[str] | None:
     """The properties every invocation has; returns the options the error names (None on
     success).
 
@@ -291,8 +291,8 @@ def check_clean(res, computation_ok: bool = False) -> set[str] | None:
     raise AssertionError(f"the error names no option: {errors[0]!r}")
 
 
-def check_fails_naming(res, allowed: set[str], required: str | None = None) -> set[str]:
-    named = check_clean(res)
+def assert_fails_naming(res, allowed: set[str], required: str | None = None) -> set[str]:
+    named = assert_clean(res)
     assert named is not None, f"expected a failure, got exit code 0:\n{res.output}"
     assert named & allowed, (named, allowed, res.output)
     if required is not None:
@@ -400,7 +400,7 @@ NUMBER_OPTIONS = {
 def test_run_numeric_options(option, value):
     expectation, extra = NUMBER_OPTIONS[option]
     res = invoke(*run_args(**{**extra, option: value}))
-    named = check_fails_naming(res, {option, "--out"})
+    named = assert_fails_naming(res, {option, "--out"})
     assert_expectation(named, expectation(value), option, "--out")
 
 
@@ -408,7 +408,7 @@ def test_run_numeric_options(option, value):
 @given(value=st.one_of(fuzz_text(), name_text(gnipy.model_names())))
 def test_run_model_argument(value):
     res = invoke(*run_args(model=value))
-    named = check_fails_naming(res, {"MODEL", "--out"})
+    named = assert_fails_naming(res, {"MODEL", "--out"})
     assert_expectation(
         named,
         "sentinel" if value in gnipy.model_names() else "fuzzed",
@@ -421,7 +421,7 @@ def test_run_model_argument(value):
 @given(value=st.one_of(fuzz_text(), name_text(gnipy.method_names())))
 def test_run_method_option(value):
     res = invoke(*run_args(**{"--method": value}))
-    named = check_fails_naming(res, {"--method", "--out"})
+    named = assert_fails_naming(res, {"--method", "--out"})
     assert_expectation(
         named,
         "sentinel" if value in gnipy.method_names() else "fuzzed",
@@ -434,7 +434,7 @@ def test_run_method_option(value):
 @given(values=st.lists(st.one_of(fuzz_text(), set_text()), min_size=1, max_size=3))
 def test_run_set_option(values):
     res = invoke(*run_args(**{"--set": values}))
-    named = check_fails_naming(res, {"--set", "--out"})
+    named = assert_fails_naming(res, {"--set", "--out"})
     parts = [p.strip() for v in values for p in v.split(",") if p.strip()]
     if any("=" not in p for p in parts):  # a part that is not NAME=VALUE
         assert "--set" in named, named
@@ -449,7 +449,7 @@ def test_run_set_option(values):
 def test_run_vector_options(option, model, n, data):
     value = data.draw(st.one_of(fuzz_text(), vector_text(n)), label="value")
     res = invoke(*run_args(model=model, **{option: value}))
-    named = check_fails_naming(res, {option, "--out"})
+    named = assert_fails_naming(res, {option, "--out"})
     assert_expectation(named, expectation_for_vector(value, n), option, "--out")
 
 
@@ -472,7 +472,7 @@ def scratch_dir():
 def test_run_out_option(value):
     with scratch_dir():
         res = invoke(*run_args(**{"--out": value, "--checkpoint-every": "0"}))
-    check_fails_naming(res, {"--out", "--checkpoint-every"})
+    assert_fails_naming(res, {"--out", "--checkpoint-every"})
 
 
 @fuzz_settings(40)
@@ -484,7 +484,7 @@ def test_run_plot_option(value):
                 **{"--out": str(d / "x.nc"), "--plot": value, "--checkpoint-every": "0"}
             )
         )
-    check_fails_naming(res, {"--plot", "--checkpoint-every"})
+    assert_fails_naming(res, {"--plot", "--checkpoint-every"})
 
 
 @fuzz_settings(40)
@@ -502,7 +502,7 @@ def test_run_checkpoint_every_option(value):
         )
     # an invalid K, or a valid one that the continuous reference refuses: both about
     # this option
-    check_fails_naming(res, {"--checkpoint-every"}, required="--checkpoint-every")
+    assert_fails_naming(res, {"--checkpoint-every"}, required="--checkpoint-every")
 
 
 @fuzz_settings(30)
@@ -514,7 +514,7 @@ def test_run_stray_arguments(args):
         res = invoke(*run_args()[:-2], *args)
     # an error names an option of `run`, a stray word ("No such option: -0") or an extra
     # argument
-    check_clean(res, computation_ok=True)
+    assert_clean(res, computation_ok=True)
 
 
 # --------------------------------------------------------------------------------------
@@ -712,7 +712,7 @@ def _run_config(content: bytes):
             "run", "--config", path, "--out", MISSING_OUT
         )  # --out beats the file's `out`
         path.unlink()
-    return check_fails_naming(res, RUN_OPTIONS), res.output
+    return assert_fails_naming(res, RUN_OPTIONS), res.output
 
 
 @fuzz_settings(40)
@@ -776,7 +776,7 @@ def test_convergence_options(option, existing_file, value):
         # GBs for ~1e7-1e8)
         assume(not (_PLAIN_INTEGER.fullmatch(value.strip()) and len(value.strip()) > 5))
     res = invoke("convergence", option, value, "--out", existing_file, "--", MODEL)
-    named = check_fails_naming(res, CONVERGENCE_OPTIONS[option] | {"--out"})
+    named = assert_fails_naming(res, CONVERGENCE_OPTIONS[option] | {"--out"})
     if option in ("--h-max", "--h-min", "--t-final"):
         x = _float_or_none(value)
         if x is None or not math.isfinite(x) or x <= 0:
@@ -789,7 +789,7 @@ def test_convergence_options(option, existing_file, value):
 @given(value=fuzz_text())
 def test_convergence_model_argument(existing_file, value):
     res = invoke("convergence", "--out", existing_file, "--", value)
-    named = check_fails_naming(res, {"MODEL", "--out"})
+    named = assert_fails_naming(res, {"MODEL", "--out"})
     if value not in gnipy.model_names():
         assert "MODEL" in named
 
@@ -801,7 +801,7 @@ def test_convergence_out_option(value):
         res = invoke(
             "convergence", "--v0", OFF_CONSTRAINTS_V0, "--out", value, "--", MODEL
         )
-    check_fails_naming(res, {"--out", "--v0"})
+    assert_fails_naming(res, {"--out", "--v0"})
 
 
 # --------------------------------------------------------------------------------------
@@ -824,7 +824,7 @@ if HAS_SWEEP:
             res = invoke("sweep", *args, "--out", d / "s.zarr", "--", MODEL)
         if isinstance(res.exception, ReachedComputation):
             return
-        named = check_fails_naming(res, {option, "--steps"})
+        named = assert_fails_naming(res, {option, "--steps"})
         if option != "--set":
             expectation = (
                 expectation_for_positive_integer
@@ -844,7 +844,7 @@ def test_demo_out_option(value):
     # two levels below the missing directory: "/missing/" + "" is "/missing", whose
     # parent exists
     res = invoke("demo", "--out", f"{MISSING_DIR}/sub/{value}")
-    check_fails_naming(res, {"--out"}, required="--out")
+    assert_fails_naming(res, {"--out"}, required="--out")
 
 
 MAGIC = [
@@ -867,7 +867,7 @@ def test_info_on_random_file_contents(magic, tail):
         path = Path(d) / "f.nc"
         path.write_bytes(magic + tail)
         res = invoke("info", path)
-    named = check_clean(res)
+    named = assert_clean(res)
     if named is not None:
         assert "FILE" in named, res.output
 
@@ -888,7 +888,7 @@ def test_stray_arguments_of_other_commands(command, existing_file, args):
     }.get(command, [])
     with scratch_dir():
         res = invoke(command, *sentinel, *args)
-    check_clean(res, computation_ok=True)
+    assert_clean(res, computation_ok=True)
 
 
 @fuzz_settings(30)
@@ -906,13 +906,13 @@ def test_unknown_commands(args):
     }
     if args[0] in commands:
         args = ["x" + args[0], *args[1:]]
-    check_clean(invoke(*args))
+    assert_clean(invoke(*args))
 
 
 # ---------------------------------------------------------------------------------------------
 # Regressions: inputs the fuzzing found that used to end in a traceback
 # ---------------------------------------------------------------------------------------------
-def _one_error_naming(res, option: str) -> None:
+def assert_one_error_naming(res, option: str) -> None:
     assert res.exit_code == 2, res.output
     assert "Traceback" not in res.output
     errors = [line for line in res.output.splitlines() if line.startswith("Error")]
@@ -922,8 +922,8 @@ def _one_error_naming(res, option: str) -> None:
 def test_reproduce_out_that_is_a_file(tmp_path):
     afile = tmp_path / "afile"
     afile.write_text("x")
-    _one_error_naming(invoke("reproduce", "--out", str(afile)), "--out")
-    _one_error_naming(invoke("reproduce", "--out", str(afile / "sub")), "--out")
+    assert_one_error_naming(invoke("reproduce", "--out", str(afile)), "--out")
+    assert_one_error_naming(invoke("reproduce", "--out", str(afile / "sub")), "--out")
 
 
 @pytest.mark.parametrize(
@@ -938,7 +938,7 @@ def test_info_on_foreign_attributes(tmp_path, attrs):
     ds.attrs.update(attrs)
     path = tmp_path / "foreign.nc"
     ds.to_netcdf(path)
-    _one_error_naming(invoke("info", str(path)), "FILE")
+    assert_one_error_naming(invoke("info", str(path)), "FILE")
 
 
 def test_info_params_not_an_object(tmp_path):
@@ -953,7 +953,7 @@ def test_info_params_not_an_object(tmp_path):
 def test_config_out_with_nul(tmp_path):
     cfg = tmp_path / "nul.toml"
     cfg.write_text('model = "vertical-disk"\nh = 0.1\nsteps = 2\nout = "x\\u0000.nc"\n')
-    _one_error_naming(invoke("run", "--config", str(cfg)), "--out")
+    assert_one_error_naming(invoke("run", "--config", str(cfg)), "--out")
 
 
 @pytest.mark.parametrize(
@@ -965,4 +965,4 @@ def test_convergence_huge_values(tmp_path, args, option):
     for k, v in zip(args[::2], args[1::2]):
         base[k] = v
     flat = [x for kv in base.items() for x in kv]
-    _one_error_naming(invoke("convergence", "vertical-disk", *flat, "--out", str(tmp_path / "c")), option)
+    assert_one_error_naming(invoke("convergence", "vertical-disk", *flat, "--out", str(tmp_path / "c")), option)

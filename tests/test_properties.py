@@ -271,7 +271,7 @@ def regular_matrices(draw, n: int):
 SOLVE_SIZES = [2, 5, 7]
 
 
-def _check_solution(x, A, b):
+def assert_solves(x, A, b):
     x_ref = np.linalg.solve(A, b)
     assert np.shape(x) == np.shape(b)
     assert np.all(np.isfinite(x))
@@ -291,7 +291,7 @@ def test_solve_agrees_with_numpy(data):
     if needs_pivoting:
         assert np.all(np.abs(np.diag(A)) <= 0.1 * np.max(np.abs(A)))
     for rhs in (b, B):  # (the elimination turns NumPy input into one JAX array at once)
-        _check_solution(np.asarray(solve(A, rhs)), A, rhs)
+        assert_solves(np.asarray(solve(A, rhs)), A, rhs)
 
 
 @property_settings(20)
@@ -311,8 +311,8 @@ def test_solve_spd_agrees_with_numpy(data):
     b = data.draw(vectors(n, 10.0), label="b")
     B = data.draw(matrices(n, 2, 10.0), label="B")
     for rhs in (b, B):
-        _check_solution(np.asarray(solve_spd(A, rhs)), A, rhs)
-        _check_solution(
+        assert_solves(np.asarray(solve_spd(A, rhs)), A, rhs)
+        assert_solves(
             np.asarray(solve_spd(jnp.asarray(A), jnp.asarray(rhs))), A, rhs
         )  # op by op in JAX
 
@@ -378,7 +378,7 @@ def random_systems(draw, n: int, m: int, affine: bool):
     return system, (M, MU, c, B), q0, v0
 
 
-def _check_gni_run(system, data, q0, v0, method, h):
+def assert_gni_run_keeps_the_constraints(system, data, q0, v0, method, h):
     M, MU, c, B = data
     sol = gnipy.simulate(system, method, q0, v0, h=h, steps=20, project_v0=True)
     q, v, p = np.asarray(sol.q), np.asarray(sol.v), np.asarray(sol.p)
@@ -401,14 +401,14 @@ def _check_gni_run(system, data, q0, v0, method, h):
 @given(random_systems(4, 2, affine=False), st.floats(0.01, 0.1))
 def test_gni_trapezoid_keeps_linear_constraints(drawn, h):
     system, data, q0, v0 = drawn
-    _check_gni_run(system, data, q0, v0, "gni-trapezoid", h)
+    assert_gni_run_keeps_the_constraints(system, data, q0, v0, "gni-trapezoid", h)
 
 
 @property_settings(5)
 @given(random_systems(3, 1, affine=True), st.floats(0.01, 0.1))
 def test_gni_midpoint_keeps_affine_constraints(drawn, h):
     system, data, q0, v0 = drawn
-    _check_gni_run(system, data, q0, v0, "gni-midpoint", h)
+    assert_gni_run_keeps_the_constraints(system, data, q0, v0, "gni-midpoint", h)
 
 
 # --------------------------------------------------------------------------------------

@@ -227,7 +227,7 @@ def simulate_to_file(
             raise OutputError(f"cannot write {parts}: {e.strerror or e}") from e
     resumed = done
 
-    hj = jnp.asarray(h)
+    hj = np.float64(h)  # as in simulate (the same compiled program)
     core = system.without_metadata()
     state = _init_one(method, core, b0, jnp.asarray(v0), hj)
     leaves, treedef = jax.tree_util.tree_flatten(state)
@@ -247,8 +247,7 @@ def simulate_to_file(
         length = min(chunk_steps, steps - k_start)
         n_blocks, remainder = divmod(length, save_every)
         b, v, p, energy, residual, fail_k, fail_res, its, state = _integrate(
-            method, core, state, hj, n_blocks, jnp.asarray(save_every, jnp.int32),
-            jnp.asarray(remainder, jnp.int32), bool(remainder),
+            method, core, state, hj, n_blocks, np.int32(save_every), np.int32(remainder), bool(remainder),
         )
         k_local = np.concatenate([np.arange(n_blocks + 1) * save_every, [length] if remainder else []]).astype(np.int64)
         fail_k = int(fail_k)
