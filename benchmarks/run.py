@@ -14,7 +14,8 @@ command, every table, and a summary of how far each target is met.
 
 What is measured (all gnipy runs in float64, the step size is h = 0.01 unless said otherwise):
 
-1. **per-step** -- the time per step of one trajectory, in µs/step: ``gnipy.simulate(...,
+1. **per-step** -- the time per step of one trajectory, in µs/step (on the CPU, the median over
+   several fresh processes: see the section's note): ``gnipy.simulate(...,
    steps=S, save_every=S)`` (so only the first and last nodes are saved) for the rolling ball
    example 2 (gni-trapezoid, Cayley), the contact oscillator (rattle, gni-midpoint) and the
    physical Chaplygin sphere (gni-trapezoid), after a warm-up call with the same step count (which
@@ -86,6 +87,7 @@ class Config:
     name: str
     reps: int  # timed repetitions of each timed case, after one warm-up call
     per_step_steps: int  # steps of one timed gnipy run (section 1, and B = 1 in section 2)
+    per_step_processes: int  # fresh processes that time the gnipy side of section 1 on the CPU
     numpy_steps: int  # steps of one timed run of the NumPy baseline
     batch_sizes: tuple[int, ...]
     batch_work: int  # trajectory-steps per timed batched call: steps = batch_work // B
@@ -101,13 +103,13 @@ class Config:
 
 
 FULL = Config(
-    name="full", reps=5, per_step_steps=2_000, numpy_steps=2_000, batch_sizes=(1_000, 10_000, 100_000),
+    name="full", reps=5, per_step_steps=2_000, per_step_processes=5, numpy_steps=2_000, batch_sizes=(1_000, 10_000, 100_000),
     batch_work=4_000_000, compile_runs=5, compile_steps=1_000, memory_steps=10_000_000, memory_stride=1_000,
     memory_chunk_steps=1_000_000, accuracy_T=(1000.0, 100.0), accuracy_h=(0.02, 0.01, 0.005), dop_reps=5,
     idle_sample_s=1.0,
 )
 QUICK = Config(
-    name="quick", reps=3, per_step_steps=200, numpy_steps=200, batch_sizes=(1_000,), batch_work=200_000,
+    name="quick", reps=3, per_step_steps=200, per_step_processes=1, numpy_steps=200, batch_sizes=(1_000,), batch_work=200_000,
     compile_runs=1, compile_steps=1_000, memory_steps=100_000, memory_stride=1_000, memory_chunk_steps=20_000,
     accuracy_T=(100.0,), accuracy_h=(0.01,), dop_reps=3, idle_sample_s=0.3,
 )
@@ -497,15 +499,20 @@ def bench_per_step(cfg: Config, rep: Report, devices, results: dict, load) -> No
 
     from benchmarks import numpy_gni
 
+    P = cfg.per_step_processes
     sec = rep.open(
         "per-step", "1. Per-step time of one trajectory",
         f"One trajectory, h = {H}. **gnipy**: wall time of `gnipy.simulate(system, method, q0, v0, h={H}, "
         f"steps=S, save_every=S)` with S = {cfg.per_step_steps:,} (only the first and last nodes saved; the same "
-        f"horizon T = S·h as the NumPy baseline), median (min) of {cfg.reps} timed calls after one warm-up call "
-        "with the same S (the warm-up compiles; its wall time is the 'first call' column). 'Call cost' is the "
-        "median wall time of a call with steps = 1 (the same compiled program): the fixed cost of a `simulate` "
-        "call (validation, dispatch). The µs/step is the marginal cost of a step, (median(S) − median(1))/(S − 1), "
-        "and in brackets (min(S) − min(1))/(S − 1); 'with call cost' is median(S)/S. "
+        f"horizon T = S·h as the NumPy baseline), {cfg.reps} timed calls after one warm-up call "
+        "with the same S (the warm-up compiles; its wall time is the 'first call' column), and as many calls with "
+        "steps = 1 (the same compiled program: the fixed cost of a `simulate` call, validation and dispatch, "
+        "'call cost'). A process's µs/step is the marginal cost of a step, (median(S) − median(1))/(S − 1). "
+        f"On the CPU this is measured in {P} fresh processes and the table gives the **median over the "
+        "processes** and, in brackets, each process's value: on this 2-core virtual machine a process runs either "
+        "in a fast or in a slow mode for its whole life (about 1.5× apart, with the same compiled code; not "
+        "explained by core pinning or address-space layout), so one process is not a measurement. 'With call cost' "
+        "is median(S)/S (median over the processes). "
         f"**NumPy**: the baseline `benchmarks.numpy_gni` (hand-derived NumPy, one `scipy.optimize.root` per step, "
         f"Python loop) for the same case and method, {cfg.numpy_steps:,} steps per run, median (min) of "
         f"{cfg.reps} runs after a 20-step warm-up. **Speed-up** = NumPy median µs/step ÷ gnipy median µs/step "
@@ -513,25 +520,44 @@ def bench_per_step(cfg: Config, rep: Report, devices, results: dict, load) -> No
         "'Newton its/step' is gnipy's mean number of Newton iterations per step (`Solution.iterations`), "
         "'NumPy nfev/step' the mean number of residual evaluations of `scipy.optimize.root` per step "
         "(0: explicit RATTLE).",
-        ["device", "case", "method", "gnipy µs/step median (min)", "with call cost µs/step", "call cost µs",
+        ["device", "case", "method", "gnipy µs/step median (per process)", "with call cost µs/step", "call cost µs",
          "first call s",
          "Newton its/step", "NumPy µs/step median (min)", "NumPy nfev/step", "speed-up ×"],
         background_load=load,
     )
     numpy_times: dict[tuple[str, str], Timing] = {}
+    S = cfg.per_step_steps
+    children: list[dict] = []
+    if any(dev.platform == "cpu" for dev in devices):
+        spec = {"cases": [list(c) for c in PER_STEP_CASES], "steps": S, "reps": cfg.reps, "h": H}
+        for i in range(P):
+            rep.say(f"[per-step] gnipy on the CPU: process {i + 1} of {P}")
+            children.append(run_child(_CHILD_PER_STEP, spec)[0])
     for dev in devices:
         for name, method in PER_STEP_CASES:
             label = f"{LABELS[name]} {method} on {device_name(dev)}"
             with rep.case(sec, label), jax.default_device(dev):
-                system, q0, v0 = case_system(name)
-                S = cfg.per_step_steps
-                first, t, t1, sol = measure(gnipy_runner(system, method, q0, v0), S, cfg.reps)
-                its = float(np.asarray(sol.iterations)[0]) / S
                 # the marginal cost of a step: the fixed cost of a call (steps = 1) taken out, so that
                 # gnipy runs the same horizon as the NumPy baseline (T = S·h) without the call
                 # overhead dominating a short run
-                us = (t.median - t1.median) / (S - 1) * 1e6
-                us_min = (t.min - t1.min) / (S - 1) * 1e6
+                if dev.platform == "cpu" and children:
+                    runs = [c[f"{name} {method}"] for c in children]
+                    per_process = [(statistics.median(r["S"]) - statistics.median(r["one"])) / (S - 1) * 1e6
+                                   for r in runs]
+                    us = statistics.median(per_process)
+                    with_call = statistics.median(statistics.median(r["S"]) for r in runs) / S * 1e6
+                    call = statistics.median(statistics.median(r["one"]) for r in runs)
+                    first = statistics.median(r["first_s"] for r in runs)
+                    its = runs[0]["its"]
+                    shown = f"{g(us)} ({', '.join(g(x) for x in per_process)})"
+                else:
+                    system, q0, v0 = case_system(name)
+                    first, t, t1, sol = measure(gnipy_runner(system, method, q0, v0), S, cfg.reps)
+                    its = float(np.asarray(sol.iterations)[0]) / S
+                    us = (t.median - t1.median) / (S - 1) * 1e6
+                    per_process = [us]
+                    with_call, call = t.median / S * 1e6, t1.median
+                    shown = g(us)
                 if (name, method) not in numpy_times:  # the baseline does not depend on the JAX device
                     case = numpy_gni.get_case(name, method)
                     case.run(20, H)
@@ -542,13 +568,13 @@ def bench_per_step(cfg: Config, rep: Report, devices, results: dict, load) -> No
                 results.setdefault("numpy_us", {})[(name, method)] = np_us
                 speedup = np_us / us
                 results.setdefault("per_step", {})[(device_name(dev), name, method)] = {
-                    "us": us, "us_min": us_min, "np_us": np_us, "speedup": speedup}
+                    "us": us, "us_processes": per_process, "np_us": np_us, "speedup": speedup}
                 rep.row(
                     sec,
-                    [device_name(dev), LABELS[name], method, f"{g(us)} ({g(us_min)})", g(t.median / S * 1e6),
-                     g(t1.median * 1e6), g(first), g(its), med_min(tn, 1e6 / cfg.numpy_steps),
+                    [device_name(dev), LABELS[name], method, shown, g(with_call),
+                     g(call * 1e6), g(first), g(its), med_min(tn, 1e6 / cfg.numpy_steps),
                      g(tn.last["nfev"] / cfg.numpy_steps), g(speedup)],
-                    f"{label}: {g(us)} µs/step (min {g(us_min)}), call cost {g(t1.median * 1e6)} µs, "
+                    f"{label}: {shown} µs/step, call cost {g(call * 1e6)} µs, "
                     f"first call {g(first)} s | NumPy {g(np_us)} µs/step | {g(speedup)}× faster",
                 )
     rep.note(sec, "The rolling ball ex. 2 gains energy from the turntable (its speed grows steadily, by a factor "
@@ -657,6 +683,37 @@ first_spent = dict(spent)
 t = time.perf_counter(); run(); second = time.perf_counter() - t
 print(json.dumps({"import_s": t_import, "first_s": first, "second_s": second, **first_spent}))
 '''
+
+_CHILD_PER_STEP = r'''
+import json, statistics, sys, time
+import gnipy
+import jax
+spec = json.loads(sys.argv[1])
+out = {}
+for name, method in spec["cases"]:
+    system, q0, v0 = build(name)
+
+    def run(steps):
+        sol = gnipy.simulate(system, method, q0, v0, h=spec["h"], steps=steps, save_every=steps)
+        jax.block_until_ready(sol.q)
+        return sol
+
+    def times(steps):
+        ts = []
+        for _ in range(spec["reps"]):
+            t = time.perf_counter()
+            run(steps)
+            ts.append(time.perf_counter() - t)
+        return ts
+
+    t = time.perf_counter()
+    sol = run(spec["steps"])
+    first = time.perf_counter() - t
+    out[name + " " + method] = {"first_s": first, "S": times(spec["steps"]), "one": times(1),
+                                "its": float(jax.numpy.asarray(sol.iterations)[0]) / spec["steps"]}
+print(json.dumps(out))
+'''
+
 
 _CHILD_MEMORY = r'''
 import json, os, resource, sys, tempfile, time
