@@ -245,6 +245,16 @@ def cpu_busy_fraction(interval: float) -> float | None:
     return None if t1 == t0 else 1.0 - (i1 - i0) / (t1 - t0)
 
 
+def cpu_ticks() -> tuple[int, int] | None:
+    """`(all ticks, steal ticks)` of all cores so far (from /proc/stat), or None. Steal is the time the
+    hypervisor gave this virtual machine's cores to someone else: invisible to the load average."""
+    try:
+        vals = [int(v) for v in _read("/proc/stat").splitlines()[0].split()[1:]]
+        return sum(vals[:8]), vals[7]
+    except (IndexError, ValueError):
+        return None
+
+
 def git_revision() -> str:
     """The commit of the checkout, and whether the working tree has uncommitted changes."""
     try:
@@ -321,6 +331,7 @@ class Section:
     errors: list[str] = field(default_factory=list)
     background_load: float | None = None
     elapsed_s: float = 0.0
+    steal: float | None = None  # the fraction of the cores' time stolen by the hypervisor during the section
     skipped: str | None = None
 
 
@@ -1120,7 +1131,10 @@ def write_markdown(path: Path, rep: Report, info: dict, meta: dict, results: dic
         out += [sec.intro, ""]
         if sec.background_load is not None:
             out += [(f"Background CPU load just before this section (other processes; the suite idle): "
-                     f"{100 * sec.background_load:.0f}% of all cores. Section wall time: {sec.elapsed_s:.0f} s."), ""]
+                     f"{100 * sec.background_load:.0f}% of all cores. Section wall time: {sec.elapsed_s:.0f} s."
+                     + ("" if sec.steal is None else
+                        f" Time stolen by the hypervisor during the section: {100 * sec.steal:.1f}% of the cores' "
+                        "time.")), ""]
         if sec.rows:
             out += [Report.md_table(sec.columns, sec.rows), ""]
         out += [f"- {n}" for n in sec.notes]
@@ -1191,6 +1205,7 @@ def main(argv=None) -> int:
         if load is not None:
             loads.append(load)
         t = time.perf_counter()
+        ticks = cpu_ticks()
         n_before = len(rep.sections)
         try:
             runners[key](load)
@@ -1203,6 +1218,10 @@ def main(argv=None) -> int:
                 rep.sections[-1].errors.append(f"section aborted: {type(e).__name__}: {e}")
         if len(rep.sections) > n_before:
             rep.sections[-1].elapsed_s = time.perf_counter() - t
+            after = cpu_ticks()
+            if ticks is not None and after is not None and after[0] > ticks[0]:
+                rep.sections[-1].steal = (after[1] - ticks[1]) / (after[0] - ticks[0])
+                rep.say(f"   (hypervisor steal during the section: {100 * rep.sections[-1].steal:.0f}% of the cores' time)")
 
     elapsed = time.perf_counter() - start
     load_end = os.getloadavg()
