@@ -541,10 +541,10 @@ def bench_per_step(cfg: Config, rep: Report, devices, results: dict, load) -> No
     S = cfg.per_step_steps
     children: list[dict] = []
     if any(dev.platform == "cpu" for dev in devices):
-        spec = {"cases": [list(c) for c in PER_STEP_CASES], "steps": S, "reps": cfg.reps, "h": H}
+        spec = {"runs": [[name, method, 1, S] for name, method in PER_STEP_CASES], "reps": cfg.reps, "h": H}
         for i in range(P):
             rep.say(f"[per-step] gnipy on the CPU: process {i + 1} of {P}")
-            children.append(run_child(_CHILD_PER_STEP, spec)[0])
+            children.append(run_child(_CHILD_TIMING, spec)[0])
     for dev in devices:
         for name, method in PER_STEP_CASES:
             label = f"{LABELS[name]} {method} on {device_name(dev)}"
@@ -553,7 +553,9 @@ def bench_per_step(cfg: Config, rep: Report, devices, results: dict, load) -> No
                 # gnipy runs the same horizon as the NumPy baseline (T = S·h) without the call
                 # overhead dominating a short run
                 if dev.platform == "cpu" and children:
-                    runs = [c[f"{name} {method}"] for c in children]
+                    runs = [c[f"{name} {method} 1"] for c in children]
+                    if any(r["failed"] for r in runs):
+                        raise RuntimeError("a step failed")
                     per_process = [(statistics.median(r["S"]) - statistics.median(r["one"])) / (S - 1) * 1e6
                                    for r in runs]
                     us = statistics.median(per_process)
@@ -632,7 +634,7 @@ def bench_batched(cfg: Config, rep: Report, devices, results: dict, load) -> Non
                          for B in (1, *cfg.batch_sizes)], "reps": cfg.reps, "h": H}
         for i in range(cfg.batch_processes):
             rep.say(f"[batched] on the CPU: process {i + 1} of {cfg.batch_processes}")
-            children.append(run_child(_CHILD_BATCHED, spec, timeout=1800.0)[0])
+            children.append(run_child(_CHILD_TIMING, spec, timeout=1800.0)[0])
     for dev in devices:
         for name, method in BATCH_CASES:
             base = None
@@ -716,39 +718,8 @@ t = time.perf_counter(); run(); second = time.perf_counter() - t
 print(json.dumps({"import_s": t_import, "first_s": first, "second_s": second, **first_spent}))
 '''
 
-_CHILD_PER_STEP = r'''
-import json, statistics, sys, time
-import gnipy
-import jax
-spec = json.loads(sys.argv[1])
-out = {}
-for name, method in spec["cases"]:
-    system, q0, v0 = build(name)
-
-    def run(steps):
-        sol = gnipy.simulate(system, method, q0, v0, h=spec["h"], steps=steps, save_every=steps)
-        jax.block_until_ready(sol.q)
-        return sol
-
-    def times(steps):
-        ts = []
-        for _ in range(spec["reps"]):
-            t = time.perf_counter()
-            run(steps)
-            ts.append(time.perf_counter() - t)
-        return ts
-
-    t = time.perf_counter()
-    sol = run(spec["steps"])
-    first = time.perf_counter() - t
-    out[name + " " + method] = {"first_s": first, "S": times(spec["steps"]), "one": times(1),
-                                "its": float(jax.numpy.asarray(sol.iterations)[0]) / spec["steps"]}
-print(json.dumps(out))
-'''
-
-
-_CHILD_BATCHED = r'''
-import json, statistics, sys, time
+_CHILD_TIMING = r'''
+import json, sys, time
 import numpy as np
 import gnipy
 import jax
@@ -775,7 +746,8 @@ for name, method, B, S in spec["runs"]:
     sol = run(S)
     first = time.perf_counter() - t
     failed = int(np.sum(np.asarray(sol.results) != 0)) if B > 1 else int(sol.result != 0)
-    out[f"{name} {method} {B}"] = {"first_s": first, "S": times(S), "one": times(1), "failed": failed}
+    its = float(np.asarray(sol.iterations)[0]) / (B * S)  # Newton iterations per trajectory-step
+    out[f"{name} {method} {B}"] = {"first_s": first, "S": times(S), "one": times(1), "failed": failed, "its": its}
 print(json.dumps(out))
 '''
 

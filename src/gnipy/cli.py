@@ -725,13 +725,7 @@ def _run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, 
                   extra) -> None:
     """`gni run` in chunks through :func:`gnipy.streaming.simulate_to_file`, with a progress bar."""
     import numpy as np
-    from rich.progress import (
-        BarColumn,
-        Progress,
-        TextColumn,
-        TimeElapsedColumn,
-        TimeRemainingColumn,
-    )
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
     from rich.table import Table
 
     from gnipy.streaming import simulate_to_file

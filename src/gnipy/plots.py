@@ -32,6 +32,7 @@ __all__ = [
     "plot_solution",
     "plot_convergence",
     "fitted_order",
+    "fit_points",
     "ROUND_OFF",
 ]
 
@@ -236,6 +237,17 @@ def plot_solution(obj, path=None, *, title: str | None = None):
     return fig
 
 
+def fit_points(h, errors, floor: float = ROUND_OFF, *, stop_at_minimum: bool = False) -> np.ndarray:
+    """The mask of the points :func:`fitted_order` fits on: finite, h > 0, error above `floor`, and
+    with `stop_at_minimum` no step size smaller than the one with the smallest error."""
+    h = np.asarray(h, dtype=float)
+    e = np.asarray(errors, dtype=float)
+    keep = np.isfinite(e) & np.isfinite(h) & (e > floor) & (h > 0)
+    if stop_at_minimum and keep.any():
+        keep &= h >= h[keep][np.argmin(e[keep])]
+    return keep
+
+
 def fitted_order(h, errors, floor: float = ROUND_OFF, *, min_points: int = 2,
                  stop_at_minimum: bool = False) -> float:
     """The least-squares slope of log(error) against log(h), on the points above `floor`.
@@ -257,9 +269,7 @@ def fitted_order(h, errors, floor: float = ROUND_OFF, *, min_points: int = 2,
     """
     h = np.asarray(h, dtype=float)
     e = np.asarray(errors, dtype=float)
-    keep = np.isfinite(e) & np.isfinite(h) & (e > floor) & (h > 0)
-    if stop_at_minimum and keep.any():
-        keep &= h >= h[keep][np.argmin(e[keep])]
+    keep = fit_points(h, e, floor, stop_at_minimum=stop_at_minimum)
     if np.unique(h[keep]).size < max(2, min_points):
         return float("nan")
     return float(np.polyfit(np.log(h[keep]), np.log(e[keep]), 1)[0])

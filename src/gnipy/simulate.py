@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -292,12 +291,7 @@ def _is_batch(system: System, q0, v0, R0) -> bool:
 
 def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks, remainder, k_saved, times, t0,
                     project_v0, throw, meta):
-    from .ensembles import (
-        broadcast_initial_conditions,
-        check_batch,
-        member_params,
-        stack_systems,
-    )
+    from .ensembles import broadcast_initial_conditions, check_batch, member_params, stack_systems
 
     system = systems[0]
     size = len(systems) if len(systems) > 1 else None

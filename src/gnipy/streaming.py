@@ -229,7 +229,7 @@ def simulate_to_file(
 
     hj = np.float64(h)  # as in simulate (the same compiled program)
     core = system.without_metadata()
-    state = _init_one(method, core, b0, jnp.asarray(v0), hj)
+    state = _init_one(method, core, b0, np.asarray(v0, dtype=np.float64), hj)
     leaves, treedef = jax.tree_util.tree_flatten(state)
     if done:
         with xr.open_dataset(_part_path(parts, done - 1)) as last:

@@ -43,6 +43,7 @@ from ..discrete_lagrangians import EulerA
 from ..integrators.comparators import DiscreteLagrangeDAlembert
 from ..integrators.gni import GNI, GNIState
 from ..models import rolling_ball as rb
+from ..plots import fit_points as _plots_fit_points
 from ..plots import fitted_order as _plots_fitted_order
 from ..spaces import Point
 
@@ -97,12 +98,7 @@ class FigureResult:
 def fit_mask(hs: Sequence[float], errors: Sequence[float], floor: float = ROUNDOFF_FLOOR) -> np.ndarray:
     """The points a slope is fitted on: finite errors above `floor`, and no point at a smaller h than
     the smallest error (past it the error grows as h shrinks: round-off, not truncation)."""
-    hs, errors = np.asarray(hs, dtype=np.float64), np.asarray(errors, dtype=np.float64)
-    keep = np.isfinite(errors) & (errors > floor)
-    if keep.any():
-        h_min_error = hs[keep][np.argmin(errors[keep])]
-        keep &= hs >= h_min_error
-    return keep
+    return _plots_fit_points(hs, errors, floor, stop_at_minimum=True)
 
 
 def fitted_order(hs: Sequence[float], errors: Sequence[float], floor: float = ROUNDOFF_FLOOR) -> float:
