@@ -45,8 +45,10 @@ def test_legendre_transforms_match_hand_formulas(ld, minus, plus):
     def fn(a, b):
         return ld(s, a, b, h)
 
-    fm = np.asarray(s.space.legendre_minus(fn, jnp.asarray(q0), jnp.asarray(q1)))
-    fp = np.asarray(s.space.legendre_plus(fn, jnp.asarray(q0), jnp.asarray(q1)))
+    dq = jnp.asarray(q1 - q0)  # the step unknown is the increment (gnipy.spaces)
+    fm = np.asarray(s.space.legendre_minus(fn, jnp.asarray(q0), dq))
+    fp = np.asarray(s.space.legendre_plus(fn, jnp.asarray(q0), dq))
+    np.testing.assert_allclose(np.asarray(s.space.legendre_jump(fn, jnp.asarray(q0), dq)), fp - fm, rtol=1e-12, atol=1e-13)
     np.testing.assert_allclose(fm, minus(d, q0, q1, h, g), rtol=1e-13, atol=1e-13)
     np.testing.assert_allclose(fp, plus(d, q0, q1, h, g), rtol=1e-13, atol=1e-13)
 

@@ -11,7 +11,7 @@ import pytest
 
 import gnipy
 from gnipy import GNI, Midpoint, System
-from gnipy.ensembles import model_systems, stack_systems
+from gnipy.ensembles import member_initial_conditions, model_systems, stack_systems
 from gnipy.io import read_netcdf, write_netcdf
 from gnipy.models import rolling_ball
 
@@ -83,6 +83,41 @@ def test_batch_of_initial_conditions_broadcasts_one_system():
     for i in range(2):
         one = gnipy.simulate(particle, "gni-midpoint", q0[i], v0, h=0.1, steps=10, project_v0=True)
         np.testing.assert_allclose(np.asarray(sol.q[i]), np.asarray(one.q), rtol=0, atol=1e-14)
+
+
+@pytest.mark.parametrize(
+    "name, params",
+    [
+        ("rolling-ball", {"Omega": np.linspace(0.0, 1.0, 5)}),  # the README's parameter batch
+        ("chaplygin-top", {"r": np.array([0.5, 1.0, 2.0])}),  # R-dependent constraints, default R0 ≠ I
+    ],
+)
+def test_parameter_batch_starts_each_member_from_its_own_default(name, params):
+    """Without q0/v0, every member of a parameter batch starts from its own documented initial
+    condition (`System.defaults`, built for its parameter values), on its own constraints; the first
+    member's default would violate the others' constraints."""
+    systems = model_systems(name, **params)
+    sol = gnipy.simulate(systems, "gni-trapezoid", h=0.01, steps=1)
+    residual = np.abs(np.asarray(sol.constraint_residual[:, 0]))
+    assert residual.max() <= 1e-12, residual
+    for i, s in enumerate(systems):
+        q0, v0, *R0 = s.defaults
+        np.testing.assert_array_equal(np.asarray(sol.q[i, 0]), q0)
+        np.testing.assert_allclose(np.asarray(sol.v[i, 0]), v0, rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(np.asarray(sol.R[i, 0]).ravel(), R0[0] if R0 else np.eye(3).ravel())
+        # the failure this replaces: the first member's default initial velocity is off member i's constraints
+        if i:
+            b0 = s.check(q0, None, R0=R0[0] if R0 else None)[0]
+            assert np.max(np.abs(np.asarray(s.constraint_residual(b0, np.asarray(systems[0].defaults[1]))))) > 1e-3
+
+
+def test_member_initial_conditions_fill_only_what_is_missing():
+    systems = model_systems("veselova", I1=[1.0, 1.5])  # on SO(3) alone: q0 is empty
+    q0, v0, R0 = member_initial_conditions(systems, None, None, None)
+    assert q0.shape == (2, 0) and v0.shape == (2, 3) and R0 is None
+    given = np.array([[0.0, 0.0, 1.0]])
+    q0, v0, R0 = member_initial_conditions(systems, None, given, np.eye(3))
+    assert q0.shape == (2, 0) and v0 is given and R0.shape == (3, 3)
 
 
 def test_batch_to_xarray_and_netcdf(ball_batch, tmp_path):

@@ -153,6 +153,8 @@ def report(rname, gname):
             "eq_dtauAd": _maxabs(D @ eta - group.Ad(T) @ (Dm @ eta)),
             "eq_dtauinverseAd": _maxabs(Di @ eta - Dim @ (group.Ad(Tm) @ eta)),
             "dtau_at_0_is_I": _maxabs(D - jnp.eye(d)),
+            # the closed-form jump dτ⁻¹_{−ξ} − dτ⁻¹_ξ (= ad_ξ) against the difference of the two
+            "dtau_inv_jump_vs_difference": _maxabs(retraction.dtau_inv_jump(group, xi) - (Dim - Di)),
         }
         finite = [T, D, Di]
         if gname in FULL:
@@ -199,6 +201,7 @@ BASIC = {
     "dtau_dtau_inv_is_I": 1e-14,
     "eq_dtauAd": 1e-13,
     "eq_dtauinverseAd": 1e-13,
+    "dtau_inv_jump_vs_difference": 1e-13,
 }
 DERIVATIVES = {
     "tau_inv_of_tau_rel": 1e-13,

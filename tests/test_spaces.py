@@ -57,13 +57,15 @@ def test_legendre_transforms_reduced_euler_a(seed):
     sigma = 0.3 * rng.standard_normal(3)
     R0 = _cay(rng.standard_normal(3))
     b0 = Point(jnp.asarray(x0), jnp.asarray(R0))
-    z = jnp.concatenate([jnp.asarray(x1), jnp.asarray(sigma)])
+    z = jnp.concatenate([jnp.asarray(x1 - x0), jnp.asarray(sigma)])  # the unknowns are increments
 
     def ld(b, zz):
         return EulerA()(reduced, b, zz, h)
 
     fm = np.asarray(reduced.space.legendre_minus(ld, b0, z))
     fp = np.asarray(reduced.space.legendre_plus(ld, b0, z))
+    # the jump FL⁺ − FL⁻, computed without the difference (GNI momentum update)
+    np.testing.assert_allclose(np.asarray(reduced.space.legendre_jump(ld, b0, z)), fp - fm, rtol=1e-12, atol=1e-13)
     # l_d = h[½Δ² + ½ξᵀIξ + 0.3 Δ ξ₂ − ½x_k²] with Δ = (x1 − x0)/h, ξ = σ/h
     d, xi = (x1 - x0) / h, sigma / h
     dl_dsigma = INERTIA @ xi + np.array([0.0, 0.3 * d[0], 0.0])
@@ -82,12 +84,14 @@ def test_legendre_minus_includes_the_left_gradient_in_R():
     R0 = _cay(rng.standard_normal(3))
     sigma = 0.2 * rng.standard_normal(3)
     b0 = Point(jnp.asarray([0.4]), jnp.asarray(R0))
-    z = jnp.concatenate([jnp.asarray([0.5]), jnp.asarray(sigma)])
+    z = jnp.concatenate([jnp.asarray([0.5 - 0.4]), jnp.asarray(sigma)])  # x1 = 0.5
 
     def ld(b, zz):
         return EulerA()(groupoid, b, zz, h)
 
     fm = np.asarray(groupoid.space.legendre_minus(ld, b0, z))
+    fp = np.asarray(groupoid.space.legendre_plus(ld, b0, z))
+    np.testing.assert_allclose(np.asarray(groupoid.space.legendre_jump(ld, b0, z)), fp - fm, rtol=1e-12, atol=1e-13)
     # ∇ᴸ_R V = d/dε e₃ᵀ R exp(εη) s = η·(s × γ), γ = Rᵀe₃, and −∇ᴸ_R l_d = h ∇ᴸ_R V
     gamma = R0[2]
     expected = _dcay_inv(sigma).T @ (INERTIA @ sigma / h) + h * np.cross(S, gamma)
@@ -101,8 +105,9 @@ def test_step_points_and_reconstruction():
     R0 = _cay(rng.standard_normal(3))
     sigma = 0.3 * rng.standard_normal(3)
     b0 = Point(jnp.asarray([1.0]), jnp.asarray(R0))
-    z = jnp.concatenate([jnp.asarray([2.0]), jnp.asarray(sigma)])
+    z = jnp.concatenate([jnp.asarray([1.0]), jnp.asarray(sigma)])  # x1 − x0 = 1
     b1, bm, vel = reduced.space.step_points(b0, z, 0.5)
+    np.testing.assert_allclose(np.asarray(b1.x), [2.0], atol=0)
     np.testing.assert_allclose(np.asarray(b1.R), R0 @ _cay(sigma), atol=1e-14)
     np.testing.assert_allclose(np.asarray(bm.R), R0 @ _cay(sigma / 2), atol=1e-14)
     np.testing.assert_allclose(np.asarray(vel), np.concatenate([[2.0], sigma / 0.5]), atol=1e-14)

@@ -24,7 +24,7 @@ __all__ = [
 
 class DiscreteLagrangian(eqx.Module):
     """Base class: `ld(system, b0, z, h)` is the discrete Lagrangian of the step from `b0` with
-    unknowns `z` ($z = q_{k+1}$ on $\\mathbb{R}^n$).
+    unknowns `z` (the increment $z = q_{k+1} - q_k$ on $\\mathbb{R}^n$, see :mod:`gnipy.spaces`).
 
     `explicit_if_flat` says that $FL^-$ is affine in the unknowns whenever the metric is constant,
     so that the GNI step is explicit (one linear solve, no Newton iteration).
@@ -87,7 +87,10 @@ class CustomDiscreteLagrangian(DiscreteLagrangian):
     """A discrete Lagrangian supplied by the user.
 
     Arguments:
-        fn: `fn(q0, q1, h) -> scalar`, smooth, with $\\partial^2 l_d/\\partial q_0 \\partial q_1$ regular.
+        fn: `fn(q0, q1, h) -> scalar`, smooth, with $\\partial^2 l_d/\\partial q_0 \\partial q_1$ regular
+            (on $\\mathbb{R}^n \\times G$: `fn(b0, z1, h)` with `b0` a :class:`~gnipy.spaces.Point`
+            and `z1` $= (x_1, \\sigma)$). It receives $q_1 = q_0 + \\Delta q$: a function that forms
+            $(q_1 - q_0)/h$ itself loses $\\varepsilon|q|/h$ there (the built-in families do not).
         explicit: declare that $-\\partial l_d / \\partial q_0$ is affine in `q1` (then the GNI step is
             one linear solve); leave False when unsure: the Newton solve is always correct.
     """
@@ -97,7 +100,7 @@ class CustomDiscreteLagrangian(DiscreteLagrangian):
     name: ClassVar[str] = "custom"
 
     def __call__(self, system, b0, z, h):
-        return self.fn(b0, z, h)
+        return self.fn(b0, system.space.end_coordinates(b0, z), h)
 
 
 DISCRETE_LAGRANGIANS: dict[str, type[DiscreteLagrangian]] = {

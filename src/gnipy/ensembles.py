@@ -25,7 +25,8 @@ from .compilation import jit
 from .spaces import Point
 from .system import System, SystemError
 
-__all__ = ["stack_systems", "model_systems", "broadcast_initial_conditions", "check_batch", "member_params"]
+__all__ = ["stack_systems", "model_systems", "broadcast_initial_conditions", "check_batch", "member_initial_conditions",
+           "member_params"]
 
 
 def stack_systems(systems: Sequence[System]) -> System:
@@ -264,6 +265,22 @@ def check_batch(system: System, batched: bool, q0, v0, R0, *, project_v0: bool =
             )
         v0 = np.where(bad[:, None], d["projected"], v0)
     return b0, jnp.asarray(v0)
+
+
+def member_initial_conditions(systems: Sequence[System], q0, v0, R0):
+    """`(q0, v0, R0)` for a batch of systems: each of q0, v0, R0 that is None is filled with every
+    member's own documented default (its `System.defaults`, built for its parameter values, so on
+    its own constraints), stacked along a leading member axis; what is given is returned as given."""
+    from .simulate import default_initial_condition
+
+    filled = [default_initial_condition(s, q0, v0, R0) for s in systems]
+
+    def stacked(j):
+        return np.stack([np.asarray(ic[j], dtype=np.float64) for ic in filled])
+
+    R_missing = R0 is None and any(ic[2] is None for ic in filled)
+    return (stacked(0) if q0 is None else filled[0][0], stacked(1) if v0 is None else v0,
+            R0 if R0 is not None or R_missing else stacked(2))
 
 
 def member_params(systems: Sequence[System]) -> dict[str, np.ndarray]:

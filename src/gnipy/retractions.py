@@ -126,6 +126,32 @@ class Retraction(eqx.Module):
             return jnp.zeros((0, 0), dtype=xi.dtype)
         return self._dtau_inv(group, xi)
 
+    def dtau_inv_jump(self, group: MatrixLieGroup, xi):
+        """$\\mathrm{d}\\tau^{-1}_{-\\xi} - \\mathrm{d}\\tau^{-1}_\\xi$ as a matrix, without the cancellation
+        of the two (the jump $FL^+ - FL^-$ of the group momentum, :meth:`gnipy.spaces.GroupSpace.legendre_jump`).
+
+        For the Cayley map and the exponential it is $\\mathrm{ad}_\\xi$ exactly: the odd part of
+        $\\mathrm{dcay}^{-1}_x y = (I - x/2)\\,y\\,(I + x/2)$ and of the Bernoulli series of
+        $\\mathrm{dexp}^{-1}$ is $-\\tfrac12\\mathrm{ad}_x$.
+
+        Arguments:
+            group: the group $G$.
+            xi: shape (d,).
+
+        Returns:
+            shape (d, d).
+        """
+        _check_group(group)
+        xi = _check_vector(xi, group.dim)
+        if isinstance(group, ProductGroup):
+            return block_diag(*[self.dtau_inv_jump(f, x) for f, x in zip(group.factors, group.split(xi))])
+        if group.dim == 0:
+            return jnp.zeros((0, 0), dtype=xi.dtype)
+        return self._dtau_inv_jump(group, xi)
+
+    def _dtau_inv_jump(self, group, xi):
+        return group.ad(xi)
+
     def tau_inv(self, group: MatrixLieGroup, g):
         """The local inverse $\\tau^{-1}(g)$, e.g. to recover $\\sigma_k = \\tau^{-1}(R_k^{-1}R_{k+1})$.
 

@@ -49,7 +49,12 @@ def resolve_steps(h, steps=None, t_final=None) -> tuple[float, int]:
 
 
 def default_initial_condition(system: System, q0, v0, R0):
-    """`(q0, v0, R0)` with the system's documented defaults filling what is None."""
+    """`(q0, v0, R0)` with the system's documented defaults filling what is None; for a sequence of
+    systems (a parameter batch), each member's own defaults (see :func:`gnipy.ensembles.member_initial_conditions`)."""
+    if isinstance(system, (list, tuple)):
+        from .ensembles import member_initial_conditions
+
+        return member_initial_conditions(system, q0, v0, R0)
     if q0 is None and system.n == 0:
         q0 = ()
     if q0 is None or v0 is None:
@@ -225,7 +230,7 @@ def simulate(
         raise SystemError(f"t0: expected a number, got {t0!r}") from e
     if not math.isfinite(t0):
         raise SystemError(f"t0: must be finite, got {t0!r}")
-    q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
+    q0, v0, R0 = default_initial_condition(systems if systems and len(systems) > 1 else system, q0, v0, R0)
 
     n_blocks, remainder = divmod(steps, save_every)
     k_saved = np.concatenate([np.arange(n_blocks + 1) * save_every, [steps] if remainder else []]).astype(np.int64)

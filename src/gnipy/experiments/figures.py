@@ -215,18 +215,18 @@ def paper_start(system, q0, omega0, h: float, R0=None) -> GNIState:
     i.e. the constraints (Cona), (Conb) at node 0:
     $(x_1 - x_0)/h + \\Omega y_0 - r\\omega^0_2 = 0$, $(y_1 - y_0)/h - \\Omega x_0 + r\\omega^0_1 = 0$;
     $\\sigma_0 = h\\omega^0$ and $R_1 = R_0\\,\\mathrm{cay}(\\sigma_0)$; the post-momentum is
-    $p^+_1 = FL^+(b_0, (x_1, \\sigma_0))$ with the paper's $l_d = h\\,l(q_k, \\Delta, \\omega_k)$
+    $p^+_1 = FL^+(b_0, (x_1 - x_0, \\sigma_0))$ with the paper's $l_d = h\\,l(q_k, \\Delta, \\omega_k)$
     (Euler A), computed by the space's `legendre_plus`. The GNI continues from $(b_1, p^+_1)$.
     """
     p = system.parameters
     r, W = p["r"], p["Omega"]
     x0, y0 = (float(c) for c in q0)
     w = np.asarray(omega0, dtype=np.float64)
-    x1 = x0 + h * (r * w[1] - W * y0)
-    y1 = y0 + h * (W * x0 - r * w[0])
+    dx1 = h * (r * w[1] - W * y0)  # x_1 − x_0
+    dy1 = h * (W * x0 - r * w[0])
     R0 = jnp.eye(3) if R0 is None else jnp.asarray(R0, jnp.float64).reshape(3, 3)
     b0 = Point(jnp.asarray([x0, y0]), R0)
-    z = jnp.asarray([x1, y1, *(h * w)])
+    z = jnp.asarray([dx1, dy1, *(h * w)])  # the step unknowns: increments (gnipy.spaces)
     return _start_from_step(system, b0, z, jnp.asarray(h, jnp.float64))
 
 
@@ -246,7 +246,7 @@ def _start_from_step(system, b0, z, h):
         return ld(system, b, zz, h)
 
     p1 = system.space.legendre_plus(l_d, b0, z)
-    return GNIState(system.space.advance(b0, z), p1)
+    return GNIState(system.space.advance(b0, z), p1, jnp.zeros_like(b0.x))
 
 
 def _initial_point(system, q0, v0):

@@ -527,7 +527,7 @@ def _project_tilde(system, q, p, h, sign):
 def _max_rel(out, states) -> jax.Array:
     """max over the components of max|out − s| / max(1, max|s|)."""
     return jnp.max(jnp.stack([jnp.max(jnp.abs(a - b)) / jnp.maximum(1.0, jnp.max(jnp.abs(b)))
-                              for a, b in zip(out, states)]))
+                              for a, b in zip(out, states) if b is not None]))
 
 
 def _manifold_residual(system, s, h):

@@ -21,16 +21,19 @@ import jax.numpy as jnp
 
 from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
 from ..discrete_lagrangians import DiscreteLagrangian, EulerA, EulerB, Midpoint, Trapezoid
+from ..spaces import compensated_add
 from .base import Integrator, require_constant_metric, solve_step
 
 __all__ = ["DiscreteLagrangeDAlembert", "DLAState", "McLachlanPerlmutter", "MPState"]
 
 
 class DLAState(NamedTuple):
-    """DLA state at node k: the configuration $q_k$ and the post-momentum $p^+_k$."""
+    """DLA state at node k: the configuration $q_k$, the post-momentum $p^+_k$ and the rounding
+    error of the Euclidean coordinates (compensated summation)."""
 
     b: jax.Array
     p_plus: jax.Array
+    x_err: jax.Array
 
 
 class DiscreteLagrangeDAlembert(Integrator):
@@ -91,11 +94,11 @@ class DiscreteLagrangeDAlembert(Integrator):
 
     def init(self, system, q0, v0, h):
         """$(q_0, p^+_0 = \\mathbb{G}(q_0)v_0)$."""
-        return DLAState(q0, system.momentum(q0, v0))
+        return DLAState(q0, system.momentum(q0, v0), jnp.zeros_like(system.space.coordinates(q0)))
 
     def step(self, system, state, h):
         """One DLA step: Newton on $(q_{k+1}, \\lambda_k)$; returns `(DLAState, StepInfo)`."""
-        b, p_plus = state
+        b, p_plus, x_err = state
         space = system.space
         mu_k = system.mu(b)
         m = mu_k.shape[0]
@@ -113,23 +116,31 @@ class DiscreteLagrangeDAlembert(Integrator):
 
         v = system.velocity(b, p_plus)
         guess = jnp.concatenate([space.initial_guess(b, v, h), jnp.zeros(m, dtype=p_plus.dtype)])
-        w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps)
-        z = w[:n]
-        b1 = space.advance(b, z)
-        p1 = space.legendre_plus(ld, b, z)
-        return DLAState(b1, p1), info
+        # the terms of the residual: momenta in the first n rows, μ(vel − Y) in the last m
+        scale = jnp.concatenate([
+            jnp.full(n, jnp.max(jnp.abs(p_plus))),
+            jnp.max(jnp.abs(mu_k)) * (jnp.max(jnp.abs(v)) + jnp.max(jnp.abs(system.Y(b)))) * jnp.ones(m),
+        ])
+        w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
+                             floor_scale=scale)
+        z, lam = w[:n], w[n:]
+        b1, x_err = space.advance_compensated(b, x_err, z)
+        p1 = p_plus - mu_k.T @ lam + space.legendre_jump(ld, b, z)  # FL⁺ = p⁻ + (FL⁺ − FL⁻)
+        return DLAState(b1, p1, x_err), info
 
     def observe(self, system, state, h):
         """$(q_k,\\ \\mathbb{G}^{-1}p^+_k,\\ p^+_k)$ (see the class docstring on the velocity)."""
-        b, p_plus = state
+        b, p_plus, _ = state
         return b, system.velocity(b, p_plus), p_plus
 
 
 class MPState(NamedTuple):
-    """McLachlan–Perlmutter state at node k: configuration and velocity (on the constraints)."""
+    """McLachlan–Perlmutter state at node k: configuration, velocity (on the constraints) and
+    the rounding error of q (compensated summation)."""
 
     q: jax.Array
     v: jax.Array
+    q_err: jax.Array
 
 
 class McLachlanPerlmutter(Integrator):
@@ -165,11 +176,11 @@ class McLachlanPerlmutter(Integrator):
 
     def init(self, system, q0, v0, h):
         """$(q_0, v_0)$."""
-        return MPState(q0, v0)
+        return MPState(q0, v0, jnp.zeros_like(q0))
 
     def step(self, system, state, h):
         """One step of (4.18): Newton on λ; returns `(MPState, StepInfo)`."""
-        q0, v0 = state
+        q0, v0, q_err = state
         q_half = q0 + 0.5 * h * v0
         M = system.metric(q_half)  # constant by `check`
         mu_half = system.mu(q_half)
@@ -184,13 +195,19 @@ class McLachlanPerlmutter(Integrator):
             q1 = q_half + 0.5 * h * v1
             return system.mu(q1) @ (v1 - system.Y(q1))
 
+        # the residual μ(v₁ − Y) has terms of the size |μ|(|v| + |Y|), but ∂/∂λ = O(h): λ itself is
+        # only determined to ~ε|v|/h, so the round-off floor of the residual decides convergence
+        scale = jnp.max(jnp.abs(mu_half)) * (jnp.max(jnp.abs(v0)) + jnp.max(jnp.abs(system.Y(q_half))))
         lam, info = solve_step(
-            residual, jnp.zeros(m, dtype=v0.dtype), explicit=False, solver=self.root_finder, max_steps=self.max_steps
+            residual, jnp.zeros(m, dtype=v0.dtype), explicit=False, solver=self.root_finder, max_steps=self.max_steps,
+            floor_scale=scale,
         )
         v1 = velocity(lam)
-        return MPState(q_half + 0.5 * h * v1, v1), info
+        # q_1 = q_{1/2} + (h/2)v_1 = q_0 + (h/2)(v_0 + v_1), summed onto q_0 with compensation
+        q1, q_err = compensated_add(q0, 0.5 * h * (v0 + v1), q_err)
+        return MPState(q1, v1, q_err), info
 
     def observe(self, system, state, h):
         """$(q_k, v_k, Mv_k)$."""
-        q, v = state
+        q, v, _ = state
         return q, v, system.momentum(q, v)

@@ -4,7 +4,10 @@ One step from $(b_k, p^+_k)$:
 
 1. reflect: $p^-_k = (P^* - Q^*) p^+_k + 2 Q^* \\Pi(b_k)$  ((Comb), (GNIintAffa/b));
 2. solve $FL^-(b_k, z) = p^-_k$ for the step unknowns $z$ (explicit when $FL^-$ is affine in $z$);
-3. advance $b_{k+1}$ and compute $p^+_{k+1} = FL^+(b_k, z)$.
+3. advance $b_{k+1}$ and compute $p^+_{k+1} = FL^+(b_k, z)$, as $p^-_k + (FL^+ - FL^-)(b_k, z)$.
+
+The unknowns z are increments and positions are summed with compensation (:mod:`gnipy.spaces`), so
+round-off stays at the floor over $10^7$ steps.
 
 The reported momentum is $\\bar p_k = (p^-_k + p^+_k)/2 = P^* p^+_k + Q^* \\Pi(b_k)$, which satisfies
 the constraints exactly.
@@ -17,6 +20,7 @@ from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
+import jax.numpy as jnp
 
 from ..discrete_lagrangians import CustomDiscreteLagrangian, DiscreteLagrangian, EulerA, EulerB, Midpoint, Trapezoid
 from ..projectors import reflect_and_report
@@ -26,10 +30,13 @@ __all__ = ["GNI", "GNIState"]
 
 
 class GNIState(NamedTuple):
-    """GNI state at node k: the configuration and the post-momentum $p^+_k$."""
+    """GNI state at node k: the configuration, the post-momentum $p^+_k$ and the rounding error
+    of the Euclidean coordinates (compensated summation, :func:`gnipy.spaces.compensated_add`;
+    None: plain summation)."""
 
     b: jax.Array
     p_plus: jax.Array
+    x_err: jax.Array | None = None
 
 
 class GNI(Integrator):
@@ -77,13 +84,14 @@ class GNI(Integrator):
         return dataclasses.replace(self, explicit=explicit)
 
     def init(self, system, q0, v0, h):
-        return GNIState(q0, system.momentum(q0, v0))
+        x = system.space.coordinates(q0)
+        return GNIState(q0, system.momentum(q0, v0), jnp.zeros_like(x))
 
     def _node(self, system, b):
         return system.metric(b), system.mu(b), system.Pi(b)
 
     def step(self, system, state, h):
-        b, p_plus = state
+        b, p_plus, x_err = state
         G, mu, Pi = self._node(system, b)
         # (Comb) p⁻ = p⁺ − 2Q*(p⁺ − Π); the reported p̄ = p⁺ − Q*(p⁺ − Π) gives the first guess
         p_minus, _, v_bar = reflect_and_report(G, mu, Pi, p_plus)
@@ -97,14 +105,20 @@ class GNI(Integrator):
 
         guess = space.initial_guess(b, v_bar, h)
         z, info = solve_step(
-            residual, guess, explicit=bool(self.explicit), solver=self.root_finder, max_steps=self.max_steps
+            residual, guess, explicit=bool(self.explicit), solver=self.root_finder, max_steps=self.max_steps,
+            floor_scale=jnp.max(jnp.abs(p_minus)),  # FL⁻ − p⁻: terms of the size of the momentum
         )
-        b1 = space.advance(b, z)
-        p1 = space.legendre_plus(ld, b, z)
-        return GNIState(b1, p1), info
+        if x_err is None:
+            b1 = space.advance(b, z)
+        else:
+            b1, x_err = space.advance_compensated(b, x_err, z)
+        # p⁺_{k+1} = FL⁺ = p⁻_k + (FL⁺ − FL⁻) at the solution of FL⁻ = p⁻: the momentum is carried,
+        # not rebuilt from the increment (gnipy.spaces: rebuilding rounds with a bias that adds up)
+        p1 = p_minus + space.legendre_jump(ld, b, z)
+        return GNIState(b1, p1, x_err), info
 
     def observe(self, system, state, h):
-        b, p_plus = state
+        b, p_plus, _ = state
         G, mu, Pi = self._node(system, b)
         _, p_bar, v_bar = reflect_and_report(G, mu, Pi, p_plus)
         return b, v_bar, p_bar

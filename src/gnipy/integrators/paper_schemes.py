@@ -50,6 +50,7 @@ import jax
 import jax.numpy as jnp
 
 from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
+from ..spaces import compensated_add
 from .base import Integrator, StepInfo, require_constant_metric
 
 __all__ = [
@@ -80,33 +81,54 @@ class TildeState(NamedTuple):
         q: configuration $q_k$, shape (n,).
         p_tilde: momentum $\\tilde p_k$, shape (n,).
         lambda_tilde: scaled multiplier $\\tilde\\lambda_k = \\lambda_k/h$, shape (m,).
+        q_err: the rounding error of $q_k$ carried by compensated summation
+            (:func:`gnipy.spaces.compensated_add`), shape (n,); None: plain summation.
     """
 
     q: jax.Array
     p_tilde: jax.Array
     lambda_tilde: jax.Array
+    q_err: jax.Array | None = None
 
 
 class ShakeState(NamedTuple):
-    """The two-step SHAKE state held at node k: $(q_{k-1}, q_k, q_{k+1})$.
+    """The two-step SHAKE state held at node k, in summed form: $q_k$ and the increments
+    $d_{k-1} = q_k - q_{k-1}$, $d_k = q_{k+1} - q_k$.
+
+    The two-step recurrence $q_{k+1} = 2q_k - q_{k-1} + \\dots$ on positions loses $\\varepsilon|q|$ in
+    each second difference, which is $\\varepsilon|q|/h^2$ in the acceleration; written on the
+    increments ($d_k = d_{k-1} + h^2(\\dots)$, Hairer–Lubich–Wanner, *Geometric Numerical
+    Integration*, VIII.5) it is the same map in exact arithmetic with round-off at the floor.
 
     Attributes:
-        q_prev: $q_{k-1}$.
         q: $q_k$, the node reported.
-        q_next: $q_{k+1}$.
+        d_prev: $q_k - q_{k-1}$.
+        d_next: $q_{k+1} - q_k$.
+        q_err: the rounding error of $q_k$ (compensated summation).
     """
 
-    q_prev: jax.Array
     q: jax.Array
-    q_next: jax.Array
+    d_prev: jax.Array
+    d_next: jax.Array
+    q_err: jax.Array
+
+    @property
+    def q_prev(self):
+        """$q_{k-1}$."""
+        return self.q - self.d_prev
+
+    @property
+    def q_next(self):
+        """$q_{k+1}$."""
+        return self.q + self.d_next
 
 
 def _finite(*arrays) -> jax.Array:
-    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in arrays]))
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in arrays if a is not None]))
 
 
 def _explicit_info(*arrays) -> StepInfo:
-    dtype = jnp.result_type(*arrays)
+    dtype = jnp.result_type(*[a for a in arrays if a is not None])
     return StepInfo(_finite(*arrays), jnp.asarray(0, dtype=jnp.int32), jnp.asarray(0.0, dtype=dtype))
 
 
@@ -122,10 +144,14 @@ def _kick_drift_kick(system, state: TildeState, h, s: float) -> TildeState:
     Returns:
         $(q_{k+1}, \\tilde p_{k+1}, \\tilde\\lambda_{k+1})$.
     """
-    q, p, lam = state
+    q, p, lam, q_err = state
     M = system.metric(q)  # constant metric: the same at q_k and q_{k+1}
     p_half = p - 0.5 * h * (system.potential_gradient(q) + system.mu(q).T @ lam)  # (EuAHama)
-    q1 = q + h * solve_spd(M, p_half)  # (EuAHamb)
+    dq = h * solve_spd(M, p_half)  # (EuAHamb)
+    if q_err is None:
+        q1 = q + dq
+    else:
+        q1, q_err = compensated_add(q, dq, q_err)
     mu1 = system.mu(q1)
     Vq1 = system.potential_gradient(q1)
     Pi1 = system.Pi(q1)
@@ -134,7 +160,7 @@ def _kick_drift_kick(system, state: TildeState, h, s: float) -> TildeState:
     rhs = mu1 @ solve_spd(M, p_half + (s - 1.0) * 0.5 * h * Vq1 - Pi1)
     lam1 = (2.0 / h) * solve_spd(C1, rhs)
     p1 = p_half - 0.5 * h * (Vq1 + mu1.T @ lam1)  # (EuAHamd)
-    return TildeState(q1, p1, lam1)
+    return TildeState(q1, p1, lam1, q_err)
 
 
 def euler_a_map(system, state: TildeState, h) -> TildeState:
@@ -207,22 +233,25 @@ def shake_map(system, state: ShakeState, h) -> ShakeState:
 
     Arguments:
         system: a :class:`~gnipy.System` with a constant metric $M$.
-        state: a :class:`ShakeState` $(q_{k-1}, q_k, q_{k+1})$.
+        state: a :class:`ShakeState` at node k (summed form: $q_k$, $q_k - q_{k-1}$, $q_{k+1} - q_k$).
         h: step size, nonzero.
 
     Returns:
-        The :class:`ShakeState` $(q_k, q_{k+1}, q_{k+2})$.
+        The :class:`ShakeState` at node k+1.
     """
-    # state = (q_{k-1}, q_k, q_{k+1}): the new node is k+1
-    q0, q1 = state[1], state[2]
+    # the new node is k+1: q_{k+1} = q_k + d_k, and (Afina) in increments,
+    # d_{k+1} = d_k − h²M⁻¹(V_q + μᵀλ̃) at q_{k+1}; (Afinb) μ((d_{k+1} + d_k)/2h − Y) = 0 is linear in λ̃:
+    # h²C λ̃ = μ(2d_k − h²M⁻¹V_q − 2hY)
+    q0, _, d0, q_err = state
+    q1, q_err = compensated_add(q0, d0, q_err)
     M = system.metric(q1)
     mu = system.mu(q1)
     Minv_muT = solve_spd(M, mu.T)
     C = mu @ Minv_muT
-    a = 2.0 * q1 - q0 - h * h * solve_spd(M, system.potential_gradient(q1))
-    lam = solve_spd(C, mu @ (a - q0 - 2.0 * h * system.Y(q1))) / (h * h)  # (Afinb)
-    q2 = a - h * h * (Minv_muT @ lam)  # (Afina)
-    return ShakeState(q0, q1, q2)
+    a = d0 - h * h * solve_spd(M, system.potential_gradient(q1))  # d_{k+1} before the constraint force
+    lam = solve_spd(C, mu @ (a + d0 - 2.0 * h * system.Y(q1))) / (h * h)  # (Afinb)
+    d1 = a - h * h * (Minv_muT @ lam)  # (Afina)
+    return ShakeState(q1, d0, d1, q_err)
 
 
 def tilde_state_from_gni(system, q, p_plus, h, s: float) -> TildeState:
@@ -250,7 +279,7 @@ def tilde_state_from_gni(system, q, p_plus, h, s: float) -> TildeState:
     p_bar = p_plus - mu.T @ w  # P*p⁺ + Q*Π
     lam = (2.0 / h) * w
     p_tilde = p_bar - s * 0.5 * h * system.potential_gradient(q)
-    return TildeState(q, p_tilde, lam)
+    return TildeState(q, p_tilde, lam, jnp.zeros_like(q))
 
 
 class _TildeScheme(Integrator):
@@ -290,7 +319,7 @@ class _TildeScheme(Integrator):
         Returns:
             `(q, v, p)`.
         """
-        q, p_tilde, _ = state
+        q, p_tilde = state[0], state[1]
         p_bar = p_tilde + self._s * 0.5 * (self._fraction * h) * system.potential_gradient(q)
         return q, solve_spd(system.metric(q), p_bar), p_bar
 
@@ -387,11 +416,11 @@ class EulerABComposition(_TildeScheme):
             `(TildeState, StepInfo)`, no iterations.
         """
         half = 0.5 * h
-        q, p_tilde, lam = state
+        q, p_tilde, lam, q_err = state
         # Euler A reads p̄ = p̃ + (h/4)V_q; Euler B reads p̄ = p̃_B − (h/4)V_q: p̃_B = p̃ + (h/2)V_q
-        mid = euler_b_map(system, TildeState(q, p_tilde + half * system.potential_gradient(q), lam), half)
+        mid = euler_b_map(system, TildeState(q, p_tilde + half * system.potential_gradient(q), lam, q_err), half)
         # and back at the middle node: p̃_A = p̃_B − (h/2)V_q
-        mid = TildeState(mid.q, mid.p_tilde - half * system.potential_gradient(mid.q), mid.lambda_tilde)
+        mid = mid._replace(p_tilde=mid.p_tilde - half * system.potential_gradient(mid.q))
         new = euler_a_map(system, mid, half)
         return new, _explicit_info(*new)
 
@@ -399,7 +428,8 @@ class EulerABComposition(_TildeScheme):
 class Shake(Integrator):
     """Nonholonomic SHAKE in two-step form, (Afin) / Remark 5.1, linear and affine (order 2).
 
-    The state at node k is $(q_{k-1}, q_k, q_{k+1})$, so that the reported velocity is
+    The state at node k is $(q_{k-1}, q_k, q_{k+1})$ (held as $q_k$ and the two increments, see
+    :class:`ShakeState`), so that the reported velocity is
     $v_k = (q_{k+1} - q_{k-1})/2h$ (which satisfies the discrete constraint (Afinb) exactly) and
     $p_k = M v_k$ (RATTLE's $\\tilde p_k$). Start: $q_{\\pm 1} = q_0 \\pm h v_0 - (h^2/2) M^{-1} V_q(q_0)$,
     which is RATTLE from $\\tilde p_0 = M v_0$, $\\tilde\\lambda_0 = 0$. Equal to "rattle" and
@@ -426,7 +456,7 @@ class Shake(Integrator):
             A :class:`ShakeState`.
         """
         kick = 0.5 * h * h * solve_spd(system.metric(q0), system.potential_gradient(q0))
-        return ShakeState(q0 - h * v0 - kick, q0, q0 + h * v0 - kick)
+        return ShakeState(q0, h * v0 + kick, h * v0 - kick, jnp.zeros_like(q0))
 
     def step(self, system, state, h):
         """One step of :func:`shake_map`; returns `(state, StepInfo)` (no iterations)."""
@@ -444,6 +474,6 @@ class Shake(Integrator):
         Returns:
             `(q, v, p)`.
         """
-        q_prev, q, q_next = state
-        v = (q_next - q_prev) / (2.0 * h)
+        q, d_prev, d_next, _ = state
+        v = (d_next + d_prev) / (2.0 * h)
         return q, v, system.metric(q) @ v

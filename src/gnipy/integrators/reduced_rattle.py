@@ -73,14 +73,15 @@ import jax
 import jax.numpy as jnp
 
 from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
-from ..spaces import Point
+from ..spaces import Point, compensated_add
 from .base import Integrator, MethodError, solve_step
 
 __all__ = ["RATState", "ReducedRattle"]
 
 
 class RATState(NamedTuple):
-    """State of (RAT) at node k: $(x_k, R_k, \\tilde p_k, \\xi_k, \\tilde M_k, \\tilde\\lambda_k)$."""
+    """State of (RAT) at node k: $(x_k, R_k, \\tilde p_k, \\xi_k, \\tilde M_k, \\tilde\\lambda_k)$ and the
+    rounding error of $x_k$ (compensated summation, :func:`gnipy.spaces.compensated_add`)."""
 
     x: jax.Array
     R: jax.Array
@@ -88,6 +89,7 @@ class RATState(NamedTuple):
     xi: jax.Array
     M_tilde: jax.Array
     lam_tilde: jax.Array
+    x_err: jax.Array
 
 
 class ReducedRattle(Integrator):
@@ -150,12 +152,14 @@ class ReducedRattle(Integrator):
         return r if r.shape[0] == 0 else solve_spd(Gxx, r)
 
     def _ld(self, system, R, h):
-        """The retracted trapezoid $l_d(x_k, x_{k+1}, \\sigma_k)$ of §7.2."""
+        """The retracted trapezoid $l_d(x_k, x_k + \\Delta x, \\sigma_k)$ of §7.2, as a function of
+        $(x_k, \\Delta x, \\sigma_k)$ (the increment keeps the step velocity at full precision)."""
         G, Gxx, Gxs = self._blocks(system, R)
         Gss = G[system.n :, system.n :]
 
-        def ld(x0, x1, sigma):
-            D = (x1 - x0) / h
+        def ld(x0, dx, sigma):
+            D = dx / h
+            x1 = x0 + dx
             w = sigma / h
             return (
                 0.5 * h * D @ Gxx @ D
@@ -176,12 +180,13 @@ class ReducedRattle(Integrator):
         ld = self._ld(system, R1, h)
 
         def residual(xi):
-            x2 = x1 + h * self._solve_xx(Gxx, p_half - Gxs @ xi)  # (RATc), one step ahead
+            dx2 = h * self._solve_xx(Gxx, p_half - Gxs @ xi)  # (RATc), one step ahead: x_{k+2} − x_{k+1}
             sigma = h * xi
-            d3 = jax.grad(ld, argnums=2)(x1, x2, sigma)
+            d3 = jax.grad(ld, argnums=2)(x1, dx2, sigma)
             return space.retraction.dtau_inv(space.group, sigma).T @ d3 - M1
 
-        return solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps)
+        return solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
+                          floor_scale=jnp.max(jnp.abs(M1)) + jnp.max(jnp.abs(pt1)))
 
     def _multipliers(self, system, b, p_hat, h):
         """$\\tilde\\lambda$ with $\\mu\\mathbb{G}^{-1}(\\hat p - \\tfrac h2\\mu^T\\tilde\\lambda - \\Pi) = 0$ ((RATd))."""
@@ -206,17 +211,17 @@ class ReducedRattle(Integrator):
         pt, M = p_bar[:n], p_minus[n:]
         xi, info = self._solve_xi(system, b.x, b.R, pt, lam, M, v0[n:], h)
         xi = jnp.where(info.ok, xi, jnp.nan)  # a failed start surfaces as a failed first step
-        return RATState(b.x, b.R, pt, xi, M, lam)
+        return RATState(b.x, b.R, pt, xi, M, lam, jnp.zeros_like(b.x))
 
     def step(self, system, state, h):
         """One step (RATa)–(RATf), then $\\xi_{k+1}$; returns `(RATState, StepInfo)`."""
-        x, R, pt, xi, M, lam = state
+        x, R, pt, xi, M, lam, x_err = state
         space = system.space
         n = system.n
         _, Gxx, Gxs = self._blocks(system, R)
         mu = system.mu(Point(x, R))[:, :n]
         p_half = pt - 0.5 * h * (self._Vx(system, x, R) + mu.T @ lam)  # (RATa)
-        x1 = x + h * self._solve_xx(Gxx, p_half - Gxs @ xi)  # (RATc)
+        x1, x_err = compensated_add(x, h * self._solve_xx(Gxx, p_half - Gxs @ xi), x_err)  # (RATc)
         g = space.tau(h * xi)
         R1 = R @ g  # reconstruction R_{k+1} = R_k τ(hξ_k)
         AdM = space.group.Ad(g).T @ M  # Ad*_{τ(hξ_k)} M̃_k
@@ -230,11 +235,11 @@ class ReducedRattle(Integrator):
         M_half = AdM - 0.5 * h * eta1.T @ lam1  # (RATb): ½λ_{k+1}η with λ = hλ̃
         M1 = M_half - 0.5 * h * eta1.T @ lam1  # (RATf)
         xi1, info = self._solve_xi(system, x1, R1, pt1, lam1, M1, xi, h)
-        return RATState(x1, R1, pt1, xi1, M1, lam1), info
+        return RATState(x1, R1, pt1, xi1, M1, lam1, x_err), info
 
     def observe(self, system, state, h):
         """`(Point(x_k, R_k), v̄_k, p̄_k)` with $\\bar p_k = (\\tilde p_k, \\tilde M_k + \\tfrac h2\\tilde\\lambda_k\\eta(x_k))$."""
-        x, R, pt, _, M, lam = state
+        x, R, pt, _, M, lam, _ = state
         n = system.n
         b = Point(x, R)
         eta = system.mu(b)[:, n:]

@@ -1,0 +1,314 @@
+"""Every code block of README.md and of docs/**/*.md runs as written.
+
+The blocks are found, not listed: a page's fenced blocks run in the order of the page, in one
+temporary directory per page (files written by a block are there for the later ones):
+
+- ```python blocks are executed in one namespace per page (a later block uses the names of the
+  earlier ones);
+- ```bash, ```sh, ```shell, ```console (the `$ ` lines) and unlabelled blocks are shell commands:
+  each command line (with its `\\` continuations) runs with bash, the virtual environment's `gni`
+  and `python` first on PATH; it must exit with 0 and print no Python traceback;
+- ```toml blocks are parsed; one whose first line is a comment naming a file (`# disk.toml`) is
+  written to that file, which later commands of the page read;
+- ```text blocks are not commands (usage synopses with placeholders such as MODEL); a ```text block
+  holding a `gni` line without a placeholder is an error.
+
+The only commands that do not run are those of :data:`NOT_RUN`, each with the test that covers it.
+A few pages get an input file from a documented command first (:data:`PAGE_INPUTS`).
+"""
+
+from __future__ import annotations
+
+import os
+import pathlib
+import re
+import shlex
+import subprocess
+import sys
+import time
+import tomllib
+
+import numpy as np
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+
+PYTHON = {"python", "py"}
+SHELL = {"bash", "sh", "shell", "console", ""}
+DATA = {"toml"}
+NOT_CODE = {"text"}
+
+#: Commands of the docs that are not run here, with the test that covers each.
+NOT_RUN = {
+    "python3 -m venv .venv && . .venv/bin/activate && pip install . && gni reproduce":
+        "set-up on a fresh machine: .ci/run installs from scratch the same way (with the [test] extra); "
+        "the reproduction runs, in its quick form, in tests/experiments/test_reproduce.py::test_gni_reproduce_quick",
+    "python3 -m venv .venv && . .venv/bin/activate && pip install '.[test]' && pytest":
+        "the CI job itself: .ci/run is this line, and runs this test among the others "
+        "(tests/test_doc_examples.py::test_page_runs_as_written)",
+    "python3 -m venv .venv && . .venv/bin/activate && pip install .":
+        "set-up: .ci/run installs from scratch the same way; the installed `gni` runs in "
+        "tests/test_doc_examples.py::test_page_runs_as_written",
+    "pip install .":
+        "set-up: .ci/run installs the package the same way; the installed `gni` runs in "
+        "tests/test_doc_examples.py::test_page_runs_as_written",
+    "gni reproduce --out report/":
+        "the full reproduction takes about 2 minutes; the same command with --quick runs in "
+        "tests/experiments/test_reproduce.py::test_gni_reproduce_quick",
+    "gni reproduce --out gnipy-reproduction/":
+        "the full reproduction takes about 2 minutes; the same command with --quick runs in "
+        "tests/experiments/test_reproduce.py::test_gni_reproduce_quick",
+    "gni reproduce --out quick/ --quick":
+        "about a minute: this very command (with --out in a temporary directory) runs in "
+        "tests/experiments/test_reproduce.py::test_gni_reproduce_quick",
+    "mkdocs build --strict":
+        "tests/test_docs.py::test_site_builds_strict builds the site with --strict",
+    "python -m benchmarks":
+        "writes the repository's BENCHMARKS.md and takes many minutes; the benchmark baselines are "
+        "checked against gnipy in tests/test_benchmark_baselines.py::test_numpy_gni_matches_gnipy",
+    "dask scheduler":
+        "a server for a cluster of several machines (runs until stopped); gni sweep on an existing cluster "
+        "(--scheduler) runs in tests/test_sweep.py::test_interrupted_cli_sweep_resumes_without_recomputing",
+    "dask worker tcp://HOST:8786 --nthreads 1":
+        "a worker of that cluster, HOST is the user's scheduler machine; gni sweep --scheduler runs in "
+        "tests/test_sweep.py::test_interrupted_cli_sweep_resumes_without_recomputing",
+    "gni sweep rolling-ball --grid Omega=0:2:200 --grid q0.x=-1:1:500 --h 0.01 --t-final 10 "
+    "--scheduler tcp://HOST:8786 --out ball-sweep.zarr":
+        "needs the cluster above (HOST); gni sweep --scheduler runs in "
+        "tests/test_sweep.py::test_interrupted_cli_sweep_resumes_without_recomputing",
+}
+
+#: Input files a page reads without writing them: made first by the documented command shown.
+PAGE_INPUTS = {
+    # files.md reads disk.nc: the file of README.md's and getting-started.md's `gni run vertical-disk`
+    "docs/user-guide/files.md": [
+        "gni run vertical-disk --method gni-midpoint --h 0.05 --steps 400 --set I_rot=2 --save-every 10 --out disk.nc",
+    ],
+}
+
+
+# ------------------------------------------------------------------------------------------------
+# Finding the blocks and their commands
+# ------------------------------------------------------------------------------------------------
+FENCE = re.compile(r"^(?P<indent>[ \t]*)(?P<fence>```+|~~~+)[ \t]*(?P<info>[^\n`]*)\n(?P<body>.*?)^(?P=indent)(?P=fence)[ \t]*$",
+                   re.M | re.S)
+
+
+def _blocks(page: pathlib.Path) -> list[tuple[str, int, str]]:
+    """`(language, line of the block's first line, code)` for each fenced block of the page."""
+    text = page.read_text()
+    out = []
+    for m in FENCE.finditer(text):
+        lang = m.group("info").strip().split()[0].lower() if m.group("info").strip() else ""
+        lang = lang.lstrip("{.").rstrip("}")
+        first = text.count("\n", 0, m.start("body")) + 1
+        body = m.group("body")
+        if m.group("indent"):
+            body = "".join(line[len(m.group("indent")):] for line in body.splitlines(keepends=True))
+        out.append((lang, first, body))
+    return out
+
+
+def _commands(lang: str, code: str, first: int) -> list[tuple[int, str]]:
+    """`(line, command)` for each command line of a shell block: `\\` continuations joined, blank
+    and comment-only lines dropped; in a console block only the `$ ` lines are commands."""
+    lines = code.splitlines()
+    if lang == "console":
+        lines = [line[2:] if line.startswith("$ ") else "#" for line in lines]
+    out, current, start = [], "", None
+    for i, line in enumerate(lines):
+        if start is None:
+            start = first + i
+        if line.rstrip().endswith("\\"):
+            current += line.rstrip()[:-1] + " "
+            continue
+        current += line
+        if current.strip() and not current.strip().startswith("#"):
+            out.append((start, current.strip()))
+        current, start = "", None
+    assert not current, f"a command ends with a line continuation at line {start}"
+    return out
+
+
+def _key(command: str) -> str:
+    """The command without its trailing comment and with single spaces (for :data:`NOT_RUN`); the
+    comment is cut only where shell-splitting the command agrees that it is one."""
+    plain = re.sub(r"\s+#.*$", "", command)
+    if shlex.split(plain) != shlex.split(command, comments=True):
+        plain = command
+    return " ".join(plain.split())
+
+
+def _rel(page: pathlib.Path) -> str:
+    return page.relative_to(ROOT).as_posix()
+
+
+def _is_synopsis(line: str) -> bool:
+    """A usage line: it has placeholders (MODEL, FILE.nc, N, ...) or optional parts ([...], a | b)."""
+    return bool(re.search(r"\[|\||\b[A-Z][A-Z0-9_]*\b", line))
+
+
+RUNNABLE_PAGES = [p for p in PAGES if any(lang not in NOT_CODE for lang, _, _ in _blocks(p))]
+
+
+# ------------------------------------------------------------------------------------------------
+# Running a page
+# ------------------------------------------------------------------------------------------------
+def _shell_env() -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith(("GNIPY_", "PYTEST_"))}
+    env["PATH"] = os.pathsep.join([str(pathlib.Path(sys.executable).parent), env.get("PATH", "")])
+    env.pop("VIRTUAL_ENV", None)
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def _run_shell(command: str, where: str, cwd: pathlib.Path) -> None:
+    start = time.perf_counter()
+    res = subprocess.run(
+        ["bash", "-o", "pipefail", "-c", command], cwd=cwd, env=_shell_env(), stdin=subprocess.DEVNULL,
+        capture_output=True, text=True, timeout=300, check=False,
+    )
+    output = res.stdout + res.stderr
+    print(f"{where}: {time.perf_counter() - start:.1f} s  {command}")
+    assert res.returncode == 0, f"{where}: `{command}` exited with {res.returncode}:\n{output[-4000:]}"
+    assert "Traceback" not in output, f"{where}: `{command}` printed a traceback:\n{output[-4000:]}"
+
+
+def run_page(page: pathlib.Path, cwd: pathlib.Path) -> dict:
+    """Run every block of `page` in order in `cwd` (the current directory); return the namespace of
+    its Python blocks."""
+    rel = _rel(page)
+    for command in PAGE_INPUTS.get(rel, []):
+        _run_shell(command, f"{rel} (input)", cwd)
+    namespace: dict = {"__name__": "__main__"}
+    for lang, first, code in _blocks(page):
+        where = f"{rel}:{first}"
+        if lang in PYTHON:
+            # blank lines in front: tracebacks give the page's own line numbers
+            exec(compile("\n" * (first - 1) + code, str(page), "exec"), namespace)  # noqa: S102
+        elif lang in SHELL:
+            for line, command in _commands(lang, code, first):
+                if _key(command) not in NOT_RUN:
+                    _run_shell(command, f"{rel}:{line}", cwd)
+        elif lang in DATA:
+            data = tomllib.loads(code)
+            name = re.match(r"#\s*(\S+\.toml)\s*$", code.splitlines()[0])
+            if name:
+                (cwd / name.group(1)).write_text(code)
+            assert data, where
+        else:
+            assert lang in NOT_CODE, f"{where}: a ```{lang} block: run it here or label it ```text"
+    return namespace
+
+
+# ------------------------------------------------------------------------------------------------
+# What some pages promise beyond running
+# ------------------------------------------------------------------------------------------------
+def _orthogonal(R) -> None:
+    R = np.asarray(R)
+    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+
+
+def _check_readme(ns, cwd):
+    assert (cwd / "particle.nc").is_file()  # the first example writes its file
+    _orthogonal(ns["sol"].R[-1])  # the second reconstructs orientations
+    ensemble = ns["ensemble"]  # the parameter batch: each member on its own constraints
+    assert ensemble.batch_size == 50 and ensemble.q.shape == (50, 11, 2)
+    assert np.max(np.abs(np.asarray(ensemble.constraint_residual))) <= 1e-12
+    np.testing.assert_allclose(ensemble.member_params["Omega"], np.linspace(0.0, 1.0, 50))
+    assert (cwd / "disk.png").is_file() and (cwd / "conv").is_dir() and (cwd / "sweep.zarr").is_dir()
+
+
+def _check_getting_started(ns, cwd):
+    assert (cwd / "ball.png").is_file() and (cwd / "particle.nc").is_file()
+    _orthogonal(ns["sol"].R[-1])
+
+
+def _check_systems(ns, cwd):
+    _orthogonal(ns["sol"].R[-1])
+    assert ns["disk"].name == "my-disk"
+
+
+def _check_files(ns, cwd):
+    ns["ds"].close()
+    assert (cwd / "disk.png").is_file()
+
+
+def _check_performance(ns, cwd):
+    sol = ns["sol"]
+    assert sol.batch_size == 50 and sol.q.shape == (50, 1001, 2)
+    np.testing.assert_allclose(sol.member_params["Omega"], np.linspace(0.0, 1.0, 50))
+    assert ns["first"].q.shape == (21, 2)
+    assert ns["result"].nodes == 20001 and (cwd / "ball.nc").is_file()
+
+
+def _check_sweeps(ns, cwd):
+    assert ns["ds"]["q"].dims == ("Omega", "q0.x", "time", "coordinate")
+    assert ns["report"].failed_members == 0
+
+
+def _check_cli(ns, cwd):
+    for name in ("disk.nc", "disk.png", "fine.nc", "study/convergence.csv", "study2/convergence.csv"):
+        assert (cwd / name).is_file(), name
+
+
+CHECKS = {
+    "README.md": _check_readme,
+    "docs/getting-started.md": _check_getting_started,
+    "docs/user-guide/systems.md": _check_systems,
+    "docs/user-guide/files.md": _check_files,
+    "docs/user-guide/performance.md": _check_performance,
+    "docs/user-guide/sweeps.md": _check_sweeps,
+    "docs/user-guide/cli.md": _check_cli,
+}
+
+
+@pytest.mark.parametrize("page", RUNNABLE_PAGES, ids=_rel)
+def test_page_runs_as_written(page, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    namespace = run_page(page, tmp_path)
+    check = CHECKS.get(_rel(page))
+    if check is not None:
+        check(namespace, tmp_path)
+
+
+# ------------------------------------------------------------------------------------------------
+# The bookkeeping: nothing escapes, nothing is skipped without a reason
+# ------------------------------------------------------------------------------------------------
+def test_every_block_is_found_and_run_or_declared():
+    langs = {}
+    for page in PAGES:
+        for lang, first, code in _blocks(page):
+            where = f"{_rel(page)}:{first}"
+            assert lang in PYTHON | SHELL | DATA | NOT_CODE, f"{where}: unknown block language {lang!r}"
+            langs[lang] = langs.get(lang, 0) + 1
+            if lang in NOT_CODE:  # a synopsis, not a command
+                for line in code.splitlines():
+                    if line.strip().startswith("gni "):
+                        assert _is_synopsis(line), f"{where}: a runnable command in a ```text block: {line}"
+    assert langs.get("python", 0) >= 10 and langs.get("bash", 0) >= 10, langs
+    # every opening fence of every page was found (an odd fence count would hide blocks)
+    for page in PAGES:
+        fences = re.findall(r"^[ \t]*(?:```|~~~)", page.read_text(), flags=re.M)
+        assert len(fences) == 2 * len(_blocks(page)), _rel(page)
+
+
+def test_commands_not_run_are_in_the_docs_and_covered_elsewhere():
+    commands = {_key(command) for page in PAGES for lang, first, code in _blocks(page) if lang in SHELL
+                for _, command in _commands(lang, code, first)}
+    for command, reason in NOT_RUN.items():
+        assert command in commands, f"not in the docs any more: {command}"
+        tests = re.findall(r"(tests/[\w/]+\.py)::(\w+)", reason)
+        assert tests, f"no covering test named for: {command}"
+        for path, name in tests:
+            assert re.search(rf"^def {name}\(", (ROOT / path).read_text(), flags=re.M), f"{path}::{name}"
+    assert all(command in commands for cmds in PAGE_INPUTS.values() for command in cmds)
+
+
+def test_command_lines_are_split_as_bash_reads_them():
+    code = "gni run a \\\n    --h 1   # comment\n# only a comment\n\ngni info x.nc\n"
+    assert _commands("bash", code, 10) == [(10, "gni run a      --h 1   # comment"), (14, "gni info x.nc")]
+    assert _key("gni run a      --h 1   # comment") == "gni run a --h 1"
+    assert _key("echo '# not a comment'") == "echo '# not a comment'"
+    assert _commands("console", "$ gni models\nname  params\n", 1) == [(1, "gni models")]
