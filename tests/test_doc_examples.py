@@ -14,19 +14,28 @@ temporary directory per page (files written by a block are there for the later o
   holding a `gni` line without a placeholder is an error.
 
 The only commands that do not run are those of :data:`NOT_RUN`, each with the test that covers it.
-A few pages get an input file from a documented command first (:data:`PAGE_INPUTS`).
+A few pages get an input file from a documented command first (:data:`PAGE_INPUTS`), and some
+pages' results are checked beyond running (:data:`CHECKS`).
+
+Each page runs in a fresh Python process of its own (as a reader would run it), in its own
+temporary directory; two pages run at a time (most of the time goes into the `gni` processes, each
+of which imports JAX and compiles: about 3-12 s a command on 2 cores). A failure names the page
+and the line of the block (a Python traceback points into the page itself).
 """
 
 from __future__ import annotations
 
 import os
 import pathlib
+import signal
 import re
 import shlex
 import subprocess
 import sys
+import threading
 import time
 import tomllib
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 import pytest
@@ -170,7 +179,7 @@ def _run_shell(command: str, where: str, cwd: pathlib.Path) -> None:
         capture_output=True, text=True, timeout=300, check=False,
     )
     output = res.stdout + res.stderr
-    print(f"{where}: {time.perf_counter() - start:.1f} s  {command}")
+    print(f"{where}: {time.perf_counter() - start:.1f} s  {command}", flush=True)
     assert res.returncode == 0, f"{where}: `{command}` exited with {res.returncode}:\n{output[-4000:]}"
     assert "Traceback" not in output, f"{where}: `{command}` printed a traceback:\n{output[-4000:]}"
 
@@ -185,8 +194,10 @@ def run_page(page: pathlib.Path, cwd: pathlib.Path) -> dict:
     for lang, first, code in _blocks(page):
         where = f"{rel}:{first}"
         if lang in PYTHON:
+            start = time.perf_counter()
             # blank lines in front: tracebacks give the page's own line numbers
             exec(compile("\n" * (first - 1) + code, str(page), "exec"), namespace)  # noqa: S102
+            print(f"{where}: {time.perf_counter() - start:.1f} s  (python block)", flush=True)
         elif lang in SHELL:
             for line, command in _commands(lang, code, first):
                 if _key(command) not in NOT_RUN:
@@ -264,13 +275,86 @@ CHECKS = {
 }
 
 
-@pytest.mark.parametrize("page", RUNNABLE_PAGES, ids=_rel)
-def test_page_runs_as_written(page, tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
-    namespace = run_page(page, tmp_path)
-    check = CHECKS.get(_rel(page))
+def page_main(rel: str, cwd: str) -> None:
+    """The child process of one page: run it in `cwd`, then its :data:`CHECKS`."""
+    cwd_path = pathlib.Path(cwd)
+    os.chdir(cwd_path)
+    namespace = run_page(ROOT / rel, cwd_path)
+    check = CHECKS.get(rel)
     if check is not None:
-        check(namespace, tmp_path)
+        check(namespace, cwd_path)
+    print(f"{rel}: all blocks ran", flush=True)
+
+
+LANES = 2  # pages run at the same time
+
+
+def _cost(page: pathlib.Path) -> int:
+    """A rough cost (most first keeps both lanes busy to the end): the commands and Python blocks."""
+    return sum(len(_commands(lang, code, first)) if lang in SHELL else lang in PYTHON
+               for lang, first, code in _blocks(page))
+
+
+class _PageRuns:
+    """The selected pages, each run by `page_main` in a child process, `LANES` at a time."""
+
+    def __init__(self, pages: list[str], base: pathlib.Path):
+        self.base, self.procs, self.closed = base, {}, False
+        self.lock = threading.Lock()
+        self.pool = ThreadPoolExecutor(LANES)
+        order = sorted(pages, key=lambda rel: -_cost(ROOT / rel))
+        self.futures = {rel: self.pool.submit(self._run, rel) for rel in order}
+
+    def _run(self, rel: str) -> tuple[int, str, float]:
+        cwd = self.base / re.sub(r"[^\w.-]", "_", rel)
+        cwd.mkdir()
+        code = f"import sys; sys.path.insert(0, {str(ROOT / 'tests')!r}); import test_doc_examples as t; t.page_main(*sys.argv[1:])"
+        start = time.perf_counter()
+        with self.lock:
+            if self.closed:
+                return -1, "not run: the session ended", 0.0
+            proc = subprocess.Popen(
+                [sys.executable, "-c", code, rel, str(cwd)], cwd=cwd, env=_shell_env(), stdin=subprocess.DEVNULL,
+                stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
+            )
+            self.procs[rel] = proc
+        try:
+            output, _ = proc.communicate(timeout=900)
+        except subprocess.TimeoutExpired:
+            os.killpg(proc.pid, signal.SIGKILL)
+            output = proc.communicate()[0] + "\n(killed after 900 s)"
+        return proc.returncode, output, time.perf_counter() - start
+
+    def result(self, rel: str) -> tuple[int, str, float]:
+        return self.futures[rel].result()
+
+    def close(self) -> None:
+        with self.lock:
+            self.closed = True
+            for proc in self.procs.values():
+                if proc.poll() is None:
+                    try:
+                        os.killpg(proc.pid, signal.SIGKILL)  # the page's process and its commands
+                    except ProcessLookupError:
+                        pass
+        self.pool.shutdown(wait=True, cancel_futures=True)
+
+
+@pytest.fixture(scope="module")
+def page_runs(request, tmp_path_factory):
+    """Starts every page selected in this session (`-k` respected) at the first page's test."""
+    pages = [item.callspec.params["page"] for item in request.session.items
+             if getattr(item, "originalname", None) == "test_page_runs_as_written" and item.module is request.module]
+    runs = _PageRuns([_rel(p) for p in pages], tmp_path_factory.mktemp("doc-pages"))
+    yield runs
+    runs.close()
+
+
+@pytest.mark.parametrize("page", RUNNABLE_PAGES, ids=_rel)
+def test_page_runs_as_written(page, page_runs):
+    returncode, output, seconds = page_runs.result(_rel(page))
+    print(output)
+    assert returncode == 0, f"{_rel(page)} (its own process, {seconds:.0f} s) failed:\n{output[-12000:]}"
 
 
 # ------------------------------------------------------------------------------------------------

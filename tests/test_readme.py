@@ -1,21 +1,31 @@
-"""The README's Python examples run as written (the README is the contract)."""
+"""The README is the contract. Its examples run as written, with every other code block of the
+docs, in tests/test_doc_examples.py (README.md is one of its pages, with the README's own checks:
+the particle file written, orthonormal orientations, the parameter batch on its constraints);
+here, what the README must keep."""
 
 import pathlib
 import re
 
-import numpy as np
+from test_doc_examples import PYTHON, RUNNABLE_PAGES, SHELL, _blocks
 
 README = pathlib.Path(__file__).resolve().parents[1] / "README.md"
 
+SET_UP = [
+    "python3 -m venv .venv && . .venv/bin/activate && pip install . && gni reproduce",
+    "python3 -m venv .venv && . .venv/bin/activate && pip install '.[test]' && pytest",
+]
 
-def test_readme_python_blocks_run(tmp_path, monkeypatch):
-    blocks = re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.S)
-    assert len(blocks) >= 2
-    monkeypatch.chdir(tmp_path)
-    namespace: dict = {}
-    for block in blocks:
-        exec(compile(block, str(README), "exec"), namespace)  # noqa: S102
-    # the first example writes its file; the second reconstructs orientations
-    assert (tmp_path / "particle.nc").exists()
-    R = np.asarray(namespace["sol"].R[-1])
-    np.testing.assert_allclose(R.T @ R, np.eye(3), atol=1e-12)
+
+def test_readme_examples_are_run_as_written():
+    blocks = _blocks(README)
+    assert README in RUNNABLE_PAGES
+    assert sum(lang in PYTHON for lang, _, _ in blocks) >= 3
+    assert sum(lang in SHELL for lang, _, _ in blocks) >= 4
+
+
+def test_readme_set_up_commands_are_the_two_documented_lines():
+    """A fresh machine: the reproduction, and the test suite (.ci/run runs the second line)."""
+    shell = [code.strip() for lang, _, code in _blocks(README) if lang in SHELL]
+    assert shell[:2] == SET_UP
+    ci = (README.parent / ".ci" / "run").read_text()
+    assert re.search(r"^" + re.escape(SET_UP[1]) + r"$", ci, flags=re.M)

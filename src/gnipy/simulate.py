@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .compilation import jit
+from .diagnostics import node_diagnostics
 from .integrators.base import Integrator, MethodError
 from .solution import RESULT_SOLVER_FAILED, Solution, SolverFailure
 from .system import System, SystemError
@@ -96,7 +97,8 @@ def _integrate_core(method, system, state0, h, n_blocks: int, block, remainder, 
         return jax.lax.fori_loop(0, length, one_step, carry)
 
     def observe(state):
-        return method.observe(system, state, h)
+        b, v, p = method.observe(system, state, h)
+        return b, v, p, method.hidden_momentum(system, state, h)
 
     carry = (state0, jnp.asarray(0, int_t), jnp.asarray(-1, int_t), jnp.asarray(0.0), jnp.asarray(0, int_t),
              jnp.asarray(0, int_t))
@@ -111,11 +113,14 @@ def _integrate_core(method, system, state0, h, n_blocks: int, block, remainder, 
         carry = block_loop(carry, remainder)
         last = observe(carry[0])
         obs = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]), obs, last)
-    b, v, p = obs
+    b, v, p, hidden = obs
     energy = jax.vmap(system.energy)(b, v)
     residual = jax.vmap(system.constraint_residual)(b, v)
+    diag = None
+    if hidden is not None:  # the GNI family: hidden momentum, its expected size, the energy of p⁺
+        diag = jax.vmap(lambda b_, v_, p_, x_: node_diagnostics(system, b_, v_, p_, x_, h))(b, v, p, hidden)
     _, _, fail_k, fail_res, it_tot, it_max = carry
-    return b, v, p, energy, residual, fail_k, fail_res, jnp.stack([it_tot, it_max]), carry[0]
+    return b, v, p, energy, residual, fail_k, fail_res, jnp.stack([it_tot, it_max]), carry[0], diag
 
 
 _integrate = jit(_integrate_core)
@@ -254,14 +259,16 @@ def simulate(
     hj = np.float64(h)  # NumPy scalars: the compiled call converts them (cheaper than a jnp.asarray each)
     core = system.without_metadata()
     state0 = _init_one(method, core, b0, np.asarray(v0, dtype=np.float64), hj)
-    b, v, p, energy, residual, fail_k, fail_res, its, _ = _integrate(
+    b, v, p, energy, residual, fail_k, fail_res, its, _, diag = _integrate(
         method, core, state0, hj, n_blocks, np.int32(save_every), np.int32(remainder), bool(remainder),
     )
+    meta |= _diagnostic_meta(system, method, b0, diag)
     q, R = system.space.coordinates(b), system.space.orientation(b)
     fail_k = int(fail_k)
     if fail_k < 0:
         return Solution(jnp.asarray(times), q, v, p, energy, residual, its, R=R, **meta)
     good = int(np.searchsorted(k_saved, fail_k, side="right"))  # saved nodes with index <= fail_k
+    meta |= {k: meta[k][:good] for k in _DIAGNOSTIC_ARRAYS if meta.get(k) is not None}
     partial = Solution(
         jnp.asarray(times[:good]), q[:good], v[:good], p[:good], energy[:good], residual[:good], its,
         R=None if R is None else R[:good], result=RESULT_SOLVER_FAILED, failed_step=fail_k, **meta,
@@ -273,6 +280,22 @@ def simulate(
     if throw:
         raise SolverFailure(msg, step=fail_k, time=t0 + h * fail_k, residual=float(fail_res), solution=partial)
     return partial
+
+
+_DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
+
+
+def _diagnostic_meta(system, method, b0, diag) -> dict:
+    """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
+    the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved."""
+    from .diagnostics import conserved_quantity
+    from .models.registry import registered_invariants
+
+    out = {"conserved": conserved_quantity(system, b0, gni_family=diag is not None,
+                                           invariants=registered_invariants(system.name))}
+    if diag is not None:
+        out |= dict(zip(_DIAGNOSTIC_ARRAYS, diag))
+    return out
 
 
 def _is_batch(system: System, q0, v0, R0) -> bool:
@@ -312,9 +335,10 @@ def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks,
     method = method.prepare(system, first_b0)
     hj = np.float64(h)
     state0 = _init_batch(method, core, sys_batched, b0, v0, hj)
-    b, v, p, energy, residual, fail_k, fail_res, its, _ = _integrate_batch(
+    b, v, p, energy, residual, fail_k, fail_res, its, _, diag = _integrate_batch(
         method, core, sys_batched, state0, hj, n_blocks, np.int32(save_every), np.int32(remainder), bool(remainder),
     )
+    batch_diag = _diagnostic_meta(system, method, first_b0, diag)
     space = system.space
     q, R = space.coordinates(b), space.orientation(b)
     fail_k = np.asarray(fail_k)
@@ -329,7 +353,7 @@ def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks,
         result=RESULT_SOLVER_FAILED if failed.any() else 0, failed_step=int(fail_k[failed].min()) if failed.any() else -1,
         results=jnp.asarray(results), failed_steps=jnp.asarray(fail_k),
         member_params=member_params(systems) if sys_batched else None,
-        **batch_meta,
+        **batch_meta, **batch_diag,
     )
     if failed.any() and throw:
         i = int(np.argmax(failed))

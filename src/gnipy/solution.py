@@ -49,6 +49,13 @@ class Solution(eqx.Module):
         results, failed_steps: in a batch, each member's result code and failed step, (B,);
             None for a single trajectory.
         member_params: in a parameter batch, each member's parameter values, name -> (B,).
+        hidden_momentum: the GNI family's hidden momentum $\\|p^+ - \\bar p\\|/\\|\\bar p\\|$ (norms in
+            $\\mathbb{G}^{-1}$) at each saved node, (T,); None for other methods
+            (:mod:`gnipy.diagnostics`; its verdict is :attr:`hidden_verdict`).
+        hidden_expected: the size it should have, $\\frac{|h|}2\\|\\mu^T\\lambda\\|/\\|\\bar p\\|$, (T,).
+        energy_plus: the energy of the post-momentum, $\\tfrac12 p^{+T}\\mathbb{G}^{-1}p^+ + V$ (the
+            quantity of the paper's energy theorem), (T,); None for other methods.
+        conserved: which quantity the motion (or the scheme) conserves, a sentence.
         system, method, h, coordinates: metadata.
 
     **Batches.** A solution of B trajectories (from :func:`gnipy.simulate` with batched
@@ -78,6 +85,20 @@ class Solution(eqx.Module):
     results: jax.Array | None = None
     failed_steps: jax.Array | None = None
     member_params: dict | None = None
+    hidden_momentum: jax.Array | None = None
+    hidden_expected: jax.Array | None = None
+    energy_plus: jax.Array | None = None
+    conserved: str = eqx.field(static=True, default="")
+
+    @property
+    def hidden_verdict(self):
+        """The :class:`~gnipy.diagnostics.HiddenMomentumVerdict` of a GNI-family run (None for other
+        methods; for a batch, read it per member: ``sol.member(i).hidden_verdict``)."""
+        from .diagnostics import hidden_momentum_verdict
+
+        if self.hidden_momentum is None or self.batch_size is not None:
+            return None
+        return hidden_momentum_verdict(self.t, self.hidden_momentum, self.hidden_expected, self.h)
 
     @property
     def batch_size(self) -> int | None:
@@ -106,12 +127,18 @@ class Solution(eqx.Module):
         if self.member_params is not None:
             params = tuple((k, float(np.asarray(v)[i])) for k, v in self.member_params.items())
         fs = int(np.asarray(self.failed_steps)[i])
+
+        def row(a):
+            return None if a is None else a[i, :good]
+
         return Solution(
             self.t[:good], self.q[i, :good], self.v[i, :good], self.p[i, :good], self.energy[i, :good],
             self.constraint_residual[i, :good], self.iterations,
-            R=None if self.R is None else self.R[i, :good],
+            R=row(self.R),
             result=int(np.asarray(self.results)[i]), failed_step=fs, system=self.system, method=self.method,
             h=self.h, coordinates=self.coordinates, velocities=self.velocities, params=params, start=self.start,
+            hidden_momentum=row(self.hidden_momentum), hidden_expected=row(self.hidden_expected),
+            energy_plus=row(self.energy_plus), conserved=self.conserved,
         )
 
     @property
@@ -157,7 +184,19 @@ class Solution(eqx.Module):
         )
         if self.R is not None:
             ds["R"] = (("time", "i", "j"), np.asarray(self.R), {"long_name": "orientation R (group matrix)"})
+        self._add_diagnostics(ds, ("time",))
         return self._with_attrs(ds, attrs)
+
+    def _add_diagnostics(self, ds, dims):
+        """The GNI family's diagnostics as variables, and the verdict as attributes."""
+        if self.energy_plus is None:
+            return
+        ds["energy_plus"] = (dims, np.asarray(self.energy_plus),
+                             {"long_name": "energy of the post-momentum ½p⁺ᵀG⁻¹p⁺ + V (energy theorem)"})
+        ds["hidden_momentum"] = (dims, np.asarray(self.hidden_momentum),
+                                 {"long_name": "hidden momentum |p⁺ - p̄|/|p̄| (norms in G⁻¹)", "units": "1"})
+        ds["hidden_momentum_expected"] = (dims, np.asarray(self.hidden_expected),
+                                          {"long_name": "its expected size (|h|/2)|μᵀλ|/|p̄|", "units": "1"})
 
     def _batch_to_xarray(self, attrs):
         import xarray as xr
@@ -187,6 +226,7 @@ class Solution(eqx.Module):
             ds["R"] = ((*mt, "i", "j"), np.asarray(self.R), {"long_name": "orientation R (group matrix)"})
         for k, v in (self.member_params or {}).items():
             ds[f"param_{k}"] = (("member",), np.asarray(v), {"long_name": f"parameter {k}"})
+        self._add_diagnostics(ds, mt)
         return self._with_attrs(ds, attrs)
 
     def _with_attrs(self, ds, attrs):
@@ -204,12 +244,64 @@ class Solution(eqx.Module):
         )
         for k, v in self.params:
             ds.attrs[f"param_{k}"] = float(v)
+        if self.conserved:
+            ds.attrs["conserved"] = self.conserved
+        ds.attrs.update(self._verdict_attrs())
         if attrs:
             ds.attrs.update(attrs)
         return ds
 
+    def _member_verdicts(self):
+        if self.hidden_momentum is None:
+            return []
+        if self.batch_size is None:
+            return [self.hidden_verdict]
+        return [self.member(i).hidden_verdict for i in range(self.batch_size)]
+
+    def _verdict_attrs(self) -> dict:
+        """The hidden-momentum verdict as file attributes."""
+        verdicts = self._member_verdicts()
+        if not verdicts:
+            return {}
+        out = [i for i, v in enumerate(verdicts) if not v.in_band]
+        attrs = {"hidden_momentum_verdict": "in band" if not out else "out of band",
+                 "hidden_momentum_max": max(v.max_ratio for v in verdicts)}
+        if out:
+            first = min(out, key=lambda i: verdicts[i].first_time)
+            attrs["hidden_momentum_first_time"] = verdicts[first].first_time
+            attrs["hidden_momentum_warning"] = verdicts[first].warning(self.method, self.system)
+            if self.batch_size is not None:
+                attrs["hidden_momentum_members_out_of_band"] = len(out)
+        return attrs
+
+    def warnings(self) -> list[str]:
+        """The run-time warnings of this solution (the hidden momentum out of its band)."""
+        verdicts = self._member_verdicts()
+        out = [i for i, v in enumerate(verdicts) if not v.in_band]
+        if not out:
+            return []
+        first = min(out, key=lambda i: verdicts[i].first_time)
+        text = verdicts[first].warning(self.method, self.system)
+        if self.batch_size is not None:
+            text = f"{len(out)} of {self.batch_size} members (first: member {first}): " + text
+        return [text]
+
+    def _diagnostic_lines(self) -> list[str]:
+        lines = []
+        if self.energy_plus is not None and self.batch_size is None:
+            ep = np.asarray(self.energy_plus)
+            lines.append(f"  energy of p+: initial {ep[0]:.12g}, max |E+ - E+0| = {np.max(np.abs(ep - ep[0])):.3e}")
+        verdicts = self._member_verdicts()
+        if verdicts and all(v.in_band for v in verdicts):
+            lines.append(f"  hidden momentum |p+ - p̄|/|p̄|: max {max(v.max_ratio for v in verdicts):.3e}, "
+                         "in its O(h) band")
+        if self.conserved:
+            lines.append(f"  conserved: {self.conserved}")
+        lines.extend("  " + w for w in self.warnings())
+        return lines
+
     def summary(self) -> str:
-        """A short human-readable summary."""
+        """A short human-readable summary (with the warnings of :meth:`warnings`)."""
         if self.batch_size is not None:
             e = np.asarray(self.energy)
             valid = self.valid
@@ -222,6 +314,7 @@ class Solution(eqx.Module):
                 f"  max |E - E0| over members = {np.max(dev):.3e}",
                 f"  max constraint residual = {np.max(np.abs(r)) if r.size else 0.0:.3e}",
                 f"  Newton iterations: total {int(np.asarray(self.iterations)[0])}, max per step {int(np.asarray(self.iterations)[1])}",
+                *self._diagnostic_lines(),
             ])
         e = np.asarray(self.energy)
         r = np.asarray(self.constraint_residual)
@@ -231,5 +324,6 @@ class Solution(eqx.Module):
             f"  energy: initial {e[0]:.12g}, max |E - E0| = {np.max(np.abs(e - e[0])):.3e}",
             f"  max constraint residual = {np.max(np.abs(r)) if r.size else 0.0:.3e}",
             f"  Newton iterations: total {int(np.asarray(self.iterations)[0])}, max per step {int(np.asarray(self.iterations)[1])}",
+            *self._diagnostic_lines(),
         ]
         return "\n".join(lines)

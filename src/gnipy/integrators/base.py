@@ -242,6 +242,15 @@ class Integrator(eqx.Module):
         """The `(b, v, p)` reported at the node that `state` holds (b: the base point)."""
         raise NotImplementedError
 
+    def hidden_momentum(self, system, state, h):
+        """The GNI family's hidden momentum $p^+_k - \\bar p_k = Q^*(p^+_k - \\Pi)$ at the node that
+        `state` holds (a covector), or None for methods that carry no such state.
+
+        It should stay $\\approx -\\tfrac h2\\mu^T\\lambda$ (DESIGN §4 of the project notes; see
+        :mod:`gnipy.diagnostics`); on some problems it grows to O(1) and the motion goes wrong.
+        """
+        return None
+
 
 def require_constant_metric(method: str, system, q0) -> None:
     """Raise :class:`MethodError` unless the system lives on R^n and its metric is constant."""

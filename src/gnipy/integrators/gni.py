@@ -122,3 +122,10 @@ class GNI(Integrator):
         G, mu, Pi = self._node(system, b)
         _, p_bar, v_bar = reflect_and_report(G, mu, Pi, p_plus)
         return b, v_bar, p_bar
+
+    def hidden_momentum(self, system, state, h):
+        """$p^+_k - \\bar p_k = Q^*(p^+_k - \\Pi)$."""
+        b, p_plus, _ = state
+        G, mu, Pi = self._node(system, b)
+        _, p_bar, _ = reflect_and_report(G, mu, Pi, p_plus)
+        return p_plus - p_bar

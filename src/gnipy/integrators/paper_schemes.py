@@ -323,6 +323,12 @@ class _TildeScheme(Integrator):
         p_bar = p_tilde + self._s * 0.5 * (self._fraction * h) * system.potential_gradient(q)
         return q, solve_spd(system.metric(q), p_bar), p_bar
 
+    def hidden_momentum(self, system, state, h):
+        """The GNI's $p^+ - \\bar p = \\tfrac{h'}{2}\\mu^T\\tilde\\lambda$ ($h'$ the step of the map whose
+        output the state holds; see :func:`tilde_state_from_gni`)."""
+        q, lam = state[0], state[2]
+        return 0.5 * (self._fraction * h) * system.mu(q).T @ lam
+
 
 class NonholonomicEulerA(_TildeScheme):
     """Nonholonomic Euler A, (EuAHam), explicit on $(q, \\tilde p, \\tilde\\lambda)$ (order 1, Thm 5.1).

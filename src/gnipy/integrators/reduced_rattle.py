@@ -245,3 +245,8 @@ class ReducedRattle(Integrator):
         eta = system.mu(b)[:, n:]
         p_bar = jnp.concatenate([pt, M + 0.5 * h * eta.T @ lam])
         return b, system.velocity(b, p_bar), p_bar
+
+    def hidden_momentum(self, system, state, h):
+        """The GNI's $p^+_k - \\bar p_k = \\tfrac h2\\mu^T\\tilde\\lambda_k$ (the reflection at node k)."""
+        x, R, lam = state.x, state.R, state.lam_tilde
+        return 0.5 * h * system.mu(Point(x, R)).T @ lam

@@ -9,7 +9,7 @@ from typing import Any
 
 from ..system import System, SystemError
 
-__all__ = ["ModelSpec", "register", "get_model", "model_names", "make_system"]
+__all__ = ["ModelSpec", "register", "get_model", "model_names", "make_system", "registered_invariants"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -104,3 +104,9 @@ def model_names() -> list[str]:
 def make_system(name: str, **params) -> System:
     """Build the System of model `name` with parameters overriding the defaults."""
     return get_model(name).system(**params)
+
+
+def registered_invariants(name: str) -> tuple[str, ...]:
+    """The names of the invariants registered for the model called `name` (none for other systems)."""
+    spec = _REGISTRY.get(name)
+    return tuple(spec.invariants) if spec is not None else ()
