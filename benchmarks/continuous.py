@@ -9,7 +9,8 @@ $$\\mathbb{G}\\dot v = F + \\mu^T\\lambda, \\qquad F = (-\\nabla_x V,\\ \\mathrm
 
 with λ from the differentiated constraints $\\mu\\dot v = c := \\mu\\,\\dot Y - \\dot\\mu(v - Y)$:
 $\\lambda = C^{-1}(c - \\mu\\mathbb{G}^{-1}F)$, $C = \\mu\\mathbb{G}^{-1}\\mu^T$, and the reconstruction
-$\\dot R = R\\hat\\Omega$ integrated entrywise (9 entries of R; R drifts off SO(3) at the level of the
+$\\dot R = R\\hat\\Omega$ ($\\dot R = \\hat\\Omega R$ for the rolling ball, whose Ω is the space angular
+velocity) integrated entrywise (9 entries of R; R drifts off SO(3) at the level of the
 tolerance, as it does in any researcher's script). The right-hand sides are written by hand for
 each model (NumPy, no JAX): that is the work this baseline stands for.
 
@@ -170,6 +171,7 @@ class ContinuousBall(_ContinuousCase):
         self.Gdiag = np.array([self.m, self.m, *self.inertia])
         self._mu = d.mu
         self.Omega_t = self.params["Omega"]
+        self.space_angular_velocity = d.space_angular_velocity
 
     def y0(self):
         """$(x_0, \\mathrm{vec}\\,R_0, v_0)$."""
@@ -184,7 +186,8 @@ class ContinuousBall(_ContinuousCase):
         raise NotImplementedError
 
     def rhs(self, t, y):
-        """$(\\dot x, \\mathrm{vec}(R\\hat\\Omega), \\dot v)$ with $\\dot v$ from the Lagrange–d'Alembert–Poincaré equations."""
+        """$(\\dot x, \\mathrm{vec}(R\\hat\\Omega), \\dot v)$ with $\\dot v$ from the Lagrange–d'Alembert–Poincaré equations
+        ($\\hat\\Omega R$ for a space angular velocity)."""
         x, R, v = y[:2], y[2:11].reshape(3, 3), y[11:]
         Om = v[2:]
         W = self.Omega_t
@@ -197,7 +200,8 @@ class ContinuousBall(_ContinuousCase):
         Ginv_muT = mu.T / self.Gdiag[:, None]
         lam = np.linalg.solve(mu @ Ginv_muT, c - mu @ Ginv_F)
         v_dot = Ginv_F + Ginv_muT @ lam
-        return np.concatenate([v[:2], (R @ hat(Om)).reshape(-1), v_dot])
+        R_dot = hat(Om) @ R if self.space_angular_velocity else R @ hat(Om)
+        return np.concatenate([v[:2], R_dot.reshape(-1), v_dot])
 
 
 class ContinuousRollingBallEx2(ContinuousBall):

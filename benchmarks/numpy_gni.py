@@ -15,7 +15,8 @@ One GNI step from $(b_k, p^+_k)$ (DESIGN §2):
 2. solve $FL^-(b_k, z) = p^-_k$ for $z$ ($z = q_{k+1}$ on $\\mathbb{R}^n$;
    $z = (x_{k+1}, \\sigma_k)$ on $\\mathbb{R}^n\\times SO(3)$) with `scipy.optimize.root`, from the
    first guess $z_0 = (x_k + h\\dot{\\bar x}_k, h\\bar\\xi_k)$ that gnipy uses too;
-3. $R_{k+1} = R_k\\,\\mathrm{cay}(\\sigma_k)$ and $p^+_{k+1} = FL^+(b_k, z)$.
+3. $R_{k+1} = R_k\\,\\mathrm{cay}(\\sigma_k)$ ($\\mathrm{cay}(\\sigma_k)\\,R_k$ for the rolling ball, whose ω is the
+   space angular velocity, as in gnipy's model) and $p^+_{k+1} = FL^+(b_k, z)$.
 
 The reported node values are $\\bar p_k = p^+_k - Q^*(p^+_k - \\Pi)$ and $\\bar v_k = \\mathbb{G}^{-1}\\bar p_k$
 (what `gnipy.Solution.p` and `.v` hold). The start is $p^+_0 = \\mathbb{G}v_0$.
@@ -163,6 +164,8 @@ class _BallTrapezoid:
 
     name = "ball"
     method = "gni-trapezoid"
+    #: True when the angular velocity is the space one: R_{k+1} = cay(σ_k) R_k (else R_k cay(σ_k)).
+    space_angular_velocity = False
 
     def __init__(self, params, q0, v0, R0=None, *, jac=True):
         self.params = {k: float(v) for k, v in params.items()}
@@ -232,7 +235,8 @@ class _BallTrapezoid:
         jacobian = (lambda z: self.legendre_minus_jacobian(z, h)) if self.jac else None
         guess = np.concatenate([x + h * v_bar[:2], h * v_bar[2:]])
         z, nfev = _root(residual, jacobian, guess, np.max(np.abs(p_minus)))
-        x1, R1 = z[:2], R @ cayley(z[2:])
+        g = cayley(z[2:])
+        x1, R1 = z[:2], (g @ R if self.space_angular_velocity else R @ g)
         return (x1, R1, self.legendre_plus(x, R, z, h)), nfev
 
     def observe(self, state):
@@ -254,8 +258,9 @@ class _BallTrapezoid:
 class RollingBallEx2(_BallTrapezoid):
     """The paper's rolling ball, example 2 (§7.4, Fig. 3; gnipy's `rolling_ball.example_2()`).
 
-    Reduced on $\\mathbb{R}^2\\times SO(3)$: $\\mu = [[1, 0, 0, -r, 0], [0, 1, r, 0, 0]]$ (body angular
-    velocities, the paper's model), $Y = (-\\Omega y, \\Omega x, 0, 0, 0)$; $m = 3$, $r = 1$,
+    Reduced on $\\mathbb{R}^2\\times SO(3)$: $\\mu = [[1, 0, 0, -r, 0], [0, 1, r, 0, 0]]$ (the paper's model;
+    ω the space angular velocity, so $R_{k+1} = \\mathrm{cay}(\\sigma_k)R_k$),
+    $Y = (-\\Omega y, \\Omega x, 0, 0, 0)$; $m = 3$, $r = 1$,
     $I = (1, 1.1, 1.2)$, $\\Omega = 0.2$; $q_0 = (1, 0)$, $v_0 = (0, 0.4, -0.2, 0, 0.4)$, $R_0 = I$.
     Method "gni-trapezoid".
 
@@ -265,6 +270,7 @@ class RollingBallEx2(_BallTrapezoid):
     """
 
     name = "rolling_ball_ex2"
+    space_angular_velocity = True
     PARAMS: ClassVar[dict[str, float]] = {"m": 3.0, "r": 1.0, "I1": 1.0, "I2": 1.1, "I3": 1.2, "Omega": 0.2}
     Q0 = (1.0, 0.0)
     V0 = (0.0, 0.4, -0.2, 0.0, 0.4)  # (ẋ, ẏ) = (rω₂ − Ωy, Ωx − rω₁) from ω₀ = (−0.2, 0, 0.4)

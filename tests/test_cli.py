@@ -37,7 +37,7 @@ def test_run_writes_netcdf_with_variables_and_provenance(tmp_path):
     assert res.exit_code == 0, res.output
     assert "vertical-disk" in res.output and "gni-trapezoid" in res.output and "error vs exact" in res.output
     ds = xr.load_dataset(out)
-    assert ds["t"].dims == ("time",) and ds["q"].dims == ("time", "coordinate")
+    assert ds["time"].dtype == np.float64 and ds["q"].dims == ("time", "coordinate")
     assert ds["v"].dims == ("time", "velocity") and ds["energy"].dims == ("time",)
     assert ds["constraint_residual"].dims == ("time", "constraint")
     assert ds.sizes["time"] == 11 and list(ds["coordinate"].values) == ["x", "y", "phi", "theta"]
@@ -51,7 +51,7 @@ def test_run_writes_netcdf_with_variables_and_provenance(tmp_path):
     np.testing.assert_array_equal(a["v0"], v0)
     # the run is the GNI's: constraints to round-off, O(h²) from the exact solution
     assert np.max(np.abs(ds["constraint_residual"].values)) < 1e-12
-    qe, _ = spec.exact(dict(spec.params), q0, v0, ds["t"].values)
+    qe, _ = spec.exact(dict(spec.params), q0, v0, ds["time"].values)
     err = np.max(np.abs(ds["q"].values - qe))
     assert err == pytest.approx(a["max_error_q_vs_exact"], rel=1e-12)
     assert 1e-6 < err < 0.1**2
@@ -65,7 +65,10 @@ def test_run_with_overrides_initial_condition_and_save_stride(tmp_path):
     assert res.exit_code == 0, res.output
     ds = xr.load_dataset(out)
     assert ds.attrs["param_r"] == 2.0 and ds.attrs["param_I_rot"] == 3.0 and ds.attrs["param_m"] == 0.5
-    np.testing.assert_allclose(ds["t"].values, [0.0, 0.4, 0.8, 1.0])  # nodes 0, 4, 8 and the last
+    np.testing.assert_allclose(ds["time"].values, [0.0, 0.4, 0.8, 1.0])  # steps 0, 4, 8 and the last
+    np.testing.assert_array_equal(ds["node"].values, [0, 1, 2, 3])
+    np.testing.assert_array_equal(ds["step"].values, [0, 4, 8, 10])
+    np.testing.assert_array_equal(ds["q"].sel(time=0.8).values, ds["q"].values[2])
     np.testing.assert_array_equal(ds["q"].values[0], [1.0, -2.0, 0.5, 0.0])
     vp = ds["v"].values[0]  # the projected v0 is on the constraints ẋ = r cosφ θ̇, ẏ = r sinφ θ̇
     assert vp[0] == pytest.approx(2 * np.cos(0.5) * vp[3]) and vp[1] == pytest.approx(2 * np.sin(0.5) * vp[3])
@@ -95,7 +98,7 @@ def test_demo_runs_and_writes(tmp_path):
     assert err < 1e-3  # second order, h = 0.01, t = 10
     # the exact solution stored in the file is the model's
     spec = gnipy.get_model("rotating-table-ball")
-    qe, ve = spec.exact(dict(spec.params), *spec.initial_condition(spec.params), ds["t"].values)
+    qe, ve = spec.exact(dict(spec.params), *spec.initial_condition(spec.params), ds["time"].values)
     np.testing.assert_allclose(ds["q_exact"].values, qe, rtol=0, atol=1e-14)
 
 
@@ -245,10 +248,11 @@ def test_solver_and_method_errors(exc, code, option, tmp_path, monkeypatch):
 # gni run --plot and --config
 # --------------------------------------------------------------------------------------------
 def _same_run(a: xr.Dataset, b: xr.Dataset):
-    """The same data and the same run attributes (not the creation time or the config file)."""
+    """The same data and the same run attributes (not the creation time, in `created` and `history`,
+    or the config file)."""
     for name in a.data_vars:
         np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
-    skip = {"created", "config_file"}
+    skip = {"created", "history", "config_file"}
     assert {k for k in a.attrs if k not in skip} == {k for k in b.attrs if k not in skip}
     for k in a.attrs:
         if k not in skip:
@@ -356,6 +360,19 @@ def test_info_summarizes_a_run_file(tmp_path):
     assert f"{drift:.3e}" in text
 
 
+def test_info_reads_files_of_the_earlier_layout(tmp_path):
+    """A file from before the times moved into `time` (`time` the node index, the times in `t`)."""
+    out = tmp_path / "run.nc"
+    assert invoke(*BASE, "--out", out).exit_code == 0
+    ds = xr.load_dataset(out)
+    old = ds.drop_vars(["time", "node", "step"]).assign(t=(("time",), ds["time"].values, {"units": "time units"}))
+    old.assign_coords(time=np.arange(ds.sizes["time"])).to_netcdf(tmp_path / "old.nc")
+    res = invoke("info", tmp_path / "old.nc")
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    assert "t = 0 .. 1 time units, 11 saved nodes" in text and "variable q" in text
+
+
 @pytest.mark.parametrize("what", ["missing", "junk", "directory"])
 def test_info_on_unreadable_file(what, tmp_path):
     path = tmp_path / "f.nc"
@@ -375,8 +392,11 @@ def test_files_carry_units_and_plot_from_the_file(tmp_path):
     out = tmp_path / "run.nc"
     assert invoke(*BASE, "--out", out).exit_code == 0
     with xr.open_dataset(out) as ds:
-        assert ds["t"].attrs["units"] == "time units" and ds["energy"].attrs["units"] == "energy units"
-        assert "nondimensional" in ds.attrs["units_convention"] and ds.attrs["jax_version"]
+        assert ds["time"].attrs["units"] == "s" and ds["time"].attrs["standard_name"] == "time"
+        assert "units" not in ds["energy"].attrs  # no model states an energy unit: none is invented
+        assert "time in s" in ds.attrs["units_convention"] and ds.attrs["jax_version"]
+        assert ds.attrs["Conventions"] == "CF-1.8" and ds.attrs["source"] == f"gnipy {gnipy.__version__}"
+        assert ds.attrs["title"] and ds.attrs["history"]
         plots.plot_solution(ds, tmp_path / "again.png")
     assert (tmp_path / "again.png").stat().st_size > 10_000
 
@@ -419,7 +439,7 @@ def test_convergence_against_the_exact_solution(tmp_path):
     assert invoke(*BASE, "--out", out).exit_code == 0
     ds = xr.load_dataset(out)
     spec = gnipy.get_model(MODEL)
-    qe, _ = spec.exact(dict(spec.params), ds.attrs["q0"], ds.attrs["v0"], ds["t"].values)
+    qe, _ = spec.exact(dict(spec.params), ds.attrs["q0"], ds.attrs["v0"], ds["time"].values)
     err = np.max(np.abs(ds["q"].values[-1] - qe[-1]))
     row = next(r for r in rows if r["method"] == "gni-trapezoid" and r["steps"] == "10")
     assert float(row["error"]) == pytest.approx(err, rel=1e-10, abs=1e-15)

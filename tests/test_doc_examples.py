@@ -27,9 +27,9 @@ from __future__ import annotations
 
 import os
 import pathlib
-import signal
 import re
 import shlex
+import signal
 import subprocess
 import sys
 import threading
@@ -51,36 +51,38 @@ NOT_CODE = {"text"}
 #: Commands of the docs that are not run here, with the test that covers each.
 NOT_RUN = {
     "python3 -m venv .venv && . .venv/bin/activate && pip install . && gni reproduce":
-        "set-up on a fresh machine: .ci/run installs from scratch the same way (with the [test] extra); "
-        "the reproduction runs, in its quick form, in tests/experiments/test_reproduce.py::test_gni_reproduce_quick",
+        "set-up on a fresh machine: .ci/run installs from scratch the same way, with the [test] extra "
+        "(tests/test_readme.py::test_readme_set_up_commands_are_the_two_documented_lines); the reproduction "
+        "(about 2 minutes) runs in its quick form in tests/experiments/test_reproduce.py::test_gni_reproduce_quick",
     "python3 -m venv .venv && . .venv/bin/activate && pip install '.[test]' && pytest":
-        "the CI job itself: .ci/run is this line, and runs this test among the others "
-        "(tests/test_doc_examples.py::test_page_runs_as_written)",
+        "the CI job itself: .ci/run is this line "
+        "(tests/test_readme.py::test_readme_set_up_commands_are_the_two_documented_lines)",
     "python3 -m venv .venv && . .venv/bin/activate && pip install .":
-        "set-up: .ci/run installs from scratch the same way; the installed `gni` runs in "
-        "tests/test_doc_examples.py::test_page_runs_as_written",
+        "set-up on a fresh machine: .ci/run installs from scratch the same way "
+        "(tests/test_readme.py::test_readme_set_up_commands_are_the_two_documented_lines)",
     "pip install .":
-        "set-up: .ci/run installs the package the same way; the installed `gni` runs in "
-        "tests/test_doc_examples.py::test_page_runs_as_written",
+        "set-up: .ci/run installs the package the same way "
+        "(tests/test_readme.py::test_readme_set_up_commands_are_the_two_documented_lines)",
     "gni reproduce --out report/":
-        "the full reproduction takes about 2 minutes; the same command with --quick runs in "
+        "the full reproduction takes about 2 minutes; with --quick it runs in "
         "tests/experiments/test_reproduce.py::test_gni_reproduce_quick",
     "gni reproduce --out gnipy-reproduction/":
-        "the full reproduction takes about 2 minutes; the same command with --quick runs in "
+        "the full reproduction takes about 2 minutes; with --quick it runs in "
         "tests/experiments/test_reproduce.py::test_gni_reproduce_quick",
     "gni reproduce --out quick/ --quick":
-        "about a minute: this very command (with --out in a temporary directory) runs in "
+        "about a minute: this very command (--out in a temporary directory) runs in "
         "tests/experiments/test_reproduce.py::test_gni_reproduce_quick",
     "mkdocs build --strict":
         "tests/test_docs.py::test_site_builds_strict builds the site with --strict",
     "python -m benchmarks":
-        "writes the repository's BENCHMARKS.md and takes many minutes; the benchmark baselines are "
-        "checked against gnipy in tests/test_benchmark_baselines.py::test_numpy_gni_matches_gnipy",
+        "rewrites the repository's BENCHMARKS.md and takes many minutes; the benchmark baselines are "
+        "checked against gnipy in tests/test_benchmark_baselines.py::test_numpy_gni_matches_gnipy and "
+        "tests/test_benchmark_baselines.py::test_dop853_rhs_matches_gnipy_equations",
     "dask scheduler":
-        "a server for a cluster of several machines (runs until stopped); gni sweep on an existing cluster "
+        "a server of a cluster of several machines (runs until stopped); gni sweep on an existing cluster "
         "(--scheduler) runs in tests/test_sweep.py::test_interrupted_cli_sweep_resumes_without_recomputing",
     "dask worker tcp://HOST:8786 --nthreads 1":
-        "a worker of that cluster, HOST is the user's scheduler machine; gni sweep --scheduler runs in "
+        "a worker of that cluster (HOST: the user's scheduler); gni sweep --scheduler runs in "
         "tests/test_sweep.py::test_interrupted_cli_sweep_resumes_without_recomputing",
     "gni sweep rolling-ball --grid Omega=0:2:200 --grid q0.x=-1:1:500 --h 0.01 --t-final 10 "
     "--scheduler tcp://HOST:8786 --out ball-sweep.zarr":
@@ -154,8 +156,8 @@ def _rel(page: pathlib.Path) -> str:
 
 
 def _is_synopsis(line: str) -> bool:
-    """A usage line: it has placeholders (MODEL, FILE.nc, N, ...) or optional parts ([...], a | b)."""
-    return bool(re.search(r"\[|\||\b[A-Z][A-Z0-9_]*\b", line))
+    """A usage line: it has placeholders (MODEL, FILE.nc, ...) or optional parts ([...], a | b)."""
+    return bool(re.search(r"\[|\||\b[A-Z]{2,}[A-Z0-9_]*\b", line))
 
 
 RUNNABLE_PAGES = [p for p in PAGES if any(lang not in NOT_CODE for lang, _, _ in _blocks(p))]
@@ -167,7 +169,6 @@ RUNNABLE_PAGES = [p for p in PAGES if any(lang not in NOT_CODE for lang, _, _ in
 def _shell_env() -> dict[str, str]:
     env = {k: v for k, v in os.environ.items() if not k.startswith(("GNIPY_", "PYTEST_"))}
     env["PATH"] = os.pathsep.join([str(pathlib.Path(sys.executable).parent), env.get("PATH", "")])
-    env.pop("VIRTUAL_ENV", None)
     env["PYTHONUNBUFFERED"] = "1"
     return env
 
@@ -286,13 +287,16 @@ def page_main(rel: str, cwd: str) -> None:
     print(f"{rel}: all blocks ran", flush=True)
 
 
-LANES = 2  # pages run at the same time
+#: Pages run at the same time (two on the 2-core machine; `DOC_EXAMPLES_LANES=1` runs them one by one).
+LANES = max(1, int(os.environ.get("DOC_EXAMPLES_LANES", "2")))
 
 
 def _cost(page: pathlib.Path) -> int:
-    """A rough cost (most first keeps both lanes busy to the end): the commands and Python blocks."""
-    return sum(len(_commands(lang, code, first)) if lang in SHELL else lang in PYTHON
-               for lang, first, code in _blocks(page))
+    """A rough cost (most first keeps the lanes busy to the end): the commands run and the Python blocks."""
+    rel = _rel(page)
+    commands = [c for lang, first, code in _blocks(page) if lang in SHELL for _, c in _commands(lang, code, first)]
+    python = sum(lang in PYTHON for lang, _, _ in _blocks(page))
+    return len(PAGE_INPUTS.get(rel, [])) + sum(_key(c) not in NOT_RUN for c in commands) + python
 
 
 class _PageRuns:

@@ -35,11 +35,12 @@ def test_round_trip_variables_and_provenance(tmp_path):
     assert write_netcdf(sol, path, attrs={"q0": (0, 0, 0, 1), "note": "hello", "flag": True}) == path
     ds = read_netcdf(path)
     assert isinstance(ds, xr.Dataset)
-    for name, dims in [("t", ("time",)), ("q", ("time", "coordinate")), ("v", ("time", "velocity")),
+    for name, dims in [("time", ("time",)), ("q", ("time", "coordinate")), ("v", ("time", "velocity")),
                        ("energy", ("time",)), ("constraint_residual", ("time", "constraint"))]:
         assert ds[name].dims == dims
     np.testing.assert_array_equal(ds["q"].values, np.asarray(sol.q))
-    np.testing.assert_array_equal(ds["t"].values, np.asarray(sol.t))
+    np.testing.assert_array_equal(ds["time"].values, np.asarray(sol.t))
+    assert "t" not in ds.variables  # the times are the coordinate, not a second copy
     assert list(ds["coordinate"].values) == ["x", "y", "phi", "theta"]
     a = ds.attrs
     assert a["gnipy_version"] == gnipy.__version__
@@ -50,6 +51,70 @@ def test_round_trip_variables_and_provenance(tmp_path):
     np.testing.assert_array_equal(a["q0"], [0.0, 0.0, 0.0, 1.0])
     assert a["note"] == "hello" and a["flag"] == 1
     assert _leftovers(tmp_path, ["out.nc"]) == []
+
+
+def test_time_is_the_physical_time_with_cf_attributes(tmp_path):
+    """`time` holds t (float64, seconds), so selecting by time selects by time; `node` and `step`
+    hold the indices; CF global and variable attributes."""
+    sys_ = gnipy.make_system("vertical-disk")
+    sol = gnipy.simulate(sys_, "gni-trapezoid", h=0.5, steps=20, save_every=2)
+    write_netcdf(sol, tmp_path / "run.nc")
+    ds = read_netcdf(tmp_path / "run.nc")
+    assert ds["time"].dtype == np.float64
+    np.testing.assert_array_equal(ds["time"].values, np.asarray(sol.t))
+    node = ds.sel(time=5.0)
+    assert float(node["time"]) == 5.0 and int(node["node"]) == 5 and int(node["step"]) == 10
+    np.testing.assert_array_equal(node["q"].values, np.asarray(sol.q)[5])  # not the node of t = 1.0
+    np.testing.assert_array_equal(ds["node"].values, np.arange(11))
+    np.testing.assert_array_equal(ds["step"].values, 2 * np.arange(11))
+    assert ds["node"].dtype.kind == "i" and ds["step"].dtype.kind == "i"
+    assert ds["time"].attrs == {"standard_name": "time", "long_name": "time", "units": "s", "axis": "T"}
+    assert ds["node"].attrs["long_name"] == "saved node index"
+    a = ds.attrs
+    assert a["Conventions"] == "CF-1.8" and a["source"] == f"gnipy {gnipy.__version__}"
+    assert "vertical-disk" in a["title"] and "gni-trapezoid" in a["title"]
+    assert a["history"].startswith(a["created"])
+    for name in ds.data_vars:
+        assert ds[name].attrs["long_name"], name
+    assert ds["q"].attrs["components"] == "x, y, phi, theta"
+    assert ds["v"].attrs["components"] == ds["p"].attrs["components"] == ", ".join(sys_.velocities)
+    assert ds["hidden_momentum"].attrs["units"] == "1" and ds["hidden_momentum_expected"].attrs["units"] == "1"
+    assert "units" not in ds["energy"].attrs and "units" not in ds["energy_plus"].attrs
+    assert "orientation" not in a  # no group part
+
+
+def test_batch_dataset_has_the_same_time_coordinate():
+    sys_ = gnipy.make_system("vertical-disk")
+    spec = gnipy.get_model("vertical-disk")
+    q0, v0 = spec.initial_condition(spec.params)
+    sol = gnipy.simulate(sys_, "gni-trapezoid", np.stack([q0, q0]), np.stack([v0, v0]), h=0.5, steps=4)
+    ds = sol.to_xarray()
+    np.testing.assert_array_equal(ds["time"].values, [0.0, 0.5, 1.0, 1.5, 2.0])
+    np.testing.assert_array_equal(ds["node"].values, np.arange(5))
+    assert ds["q"].sel(time=1.0).dims == ("member", "coordinate")
+    assert ds["valid"].attrs["long_name"] and ds.attrs["Conventions"] == "CF-1.8"
+
+
+def test_files_of_the_earlier_layout_still_read(tmp_path):
+    """A file written when `time` was the node index and the times were a variable `t`: read_netcdf
+    and the plots give it the present layout."""
+    from gnipy import plots
+
+    old = _solution().to_xarray().drop_vars(["node", "step"])
+    t = old["time"].values
+    old = old.drop_vars("time").assign(t=(("time",), t, {"long_name": "time", "units": "time units"}))
+    old = old.assign_coords(time=np.arange(len(t)))
+    old.to_netcdf(tmp_path / "old.nc")
+    ds = read_netcdf(tmp_path / "old.nc")
+    assert "t" not in ds.variables
+    np.testing.assert_array_equal(ds["time"].values, t)
+    np.testing.assert_array_equal(ds["node"].values, np.arange(len(t)))
+    np.testing.assert_array_equal(ds["step"].values, np.arange(len(t)))  # h = 0.1 in the attributes
+    assert ds["time"].attrs["units"] == "time units"  # what the file says
+    np.testing.assert_array_equal(ds.sel(time=0.2)["q"].values, old["q"].values[2])
+    with xr.open_dataset(tmp_path / "old.nc") as lazy:
+        np.testing.assert_array_equal(gnipy.io.result_times(lazy), t)
+        plots.plot_energy_error(lazy)
 
 
 def test_dataset_is_written_with_provenance_added(tmp_path):

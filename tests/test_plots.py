@@ -99,7 +99,7 @@ def test_plot_solution_from_a_file_read_back(tmp_path):
 def test_rejects_other_objects():
     with pytest.raises(TypeError):
         plots.plot_path({"q": 1})
-    with pytest.raises(ValueError, match="'t'"):
+    with pytest.raises(ValueError, match="'time'"):
         plots.plot_energy_error(xr.Dataset({"a": ("i", [1.0])}))
 
 

@@ -114,6 +114,46 @@ def test_step_points_and_reconstruction():
     np.testing.assert_allclose(np.asarray(bm.x), [1.5], atol=1e-15)
 
 
+def test_right_reconstruction_moves_R_from_the_left_and_nothing_else():
+    """reconstruction="right" (ξ the space velocity): R_{k+1} = τ(σ)R_k, the midpoint τ(σ/2)R_k,
+    Ṙ = ξ̂R; x and the step velocity as on the left; a GNI run changes only R."""
+    reduced, _ = _systems()
+    right = gnipy.System(reduced.lagrangian, reduced.constraints, n=1, group=SO3(), reconstruction="right")
+    assert right.reconstruction == "right" and reduced.reconstruction == "left"
+    rng = np.random.default_rng(4)
+    R0 = _cay(rng.standard_normal(3))
+    sigma = 0.3 * rng.standard_normal(3)
+    b0 = Point(jnp.asarray([1.0]), jnp.asarray(R0))
+    z = jnp.concatenate([jnp.asarray([1.0]), jnp.asarray(sigma)])
+    b1, bm, vel = right.space.step_points(b0, z, 0.5)
+    np.testing.assert_allclose(np.asarray(b1.R), _cay(sigma) @ R0, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(bm.R), _cay(sigma / 2) @ R0, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(right.space.advance(b0, z).R), _cay(sigma) @ R0, atol=1e-14)
+    np.testing.assert_array_equal(np.asarray(b1.x), [2.0])
+    np.testing.assert_allclose(np.asarray(vel), np.concatenate([[2.0], sigma / 0.5]), atol=1e-14)
+    w = np.concatenate([[0.0], sigma])
+    packed = np.asarray(right.space.pack_velocity(b0, jnp.asarray(w)))
+    np.testing.assert_allclose(packed[1:].reshape(3, 3), _hat(sigma) @ R0, atol=1e-15)
+    v0 = [0.2, 0.5, 0.3, 0.2]
+    a = gnipy.simulate(reduced, gnipy.GNI(Trapezoid()), [0.3], v0, h=0.05, steps=40, save_every=10)
+    b = gnipy.simulate(right, gnipy.GNI(Trapezoid()), [0.3], v0, h=0.05, steps=40, save_every=10)
+    for name in ("q", "v", "p"):
+        np.testing.assert_array_equal(np.asarray(getattr(a, name)), np.asarray(getattr(b, name)), err_msg=name)
+    assert np.max(np.abs(np.asarray(a.R) - np.asarray(b.R))) > 1e-3
+    assert "dR/dt = hat(xi) R" in b.orientation and "dR/dt = R hat(xi)" in a.orientation
+
+
+def test_right_reconstruction_is_refused_where_the_system_depends_on_R():
+    _, groupoid = _systems()
+    with pytest.raises(gnipy.SystemError, match=r"^reconstruction: 'right' .*\(depends_on_orientation=True\)"):
+        gnipy.System(groupoid.lagrangian, groupoid.constraints, n=1, group=SO3(), depends_on_orientation=True,
+                     reconstruction="right")
+    with pytest.raises(gnipy.SystemError, match=r"^reconstruction: expected 'left' or 'right'"):
+        gnipy.System(groupoid.lagrangian, groupoid.constraints, n=1, group=SO3(), reconstruction="space")
+    with pytest.raises(gnipy.SystemError, match=r"^reconstruction: only meaningful with a group"):
+        gnipy.System(lambda q, v: 0.5 * v @ v, lambda q: jnp.ones((1, 2)), n=2, reconstruction="right")
+
+
 def test_gni_on_a_group_keeps_R_orthogonal_and_constraints_exact():
     reduced, groupoid = _systems()
     # reduced: ẋ = ξ₃; groupoid: ⟨ξ, γ⟩ = 0 with γ = e₃ at R = I

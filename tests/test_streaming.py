@@ -49,7 +49,21 @@ def test_streamed_file_equals_the_in_memory_run(plain, streamed):
     result, ds = streamed
     assert result.complete and result.chunks == 6 and result.nodes == len(plain.t) == 102
     for name in ("t", "q", "v", "p", "R"):  # the state: bit for bit
-        np.testing.assert_array_equal(ds[name].values, np.asarray(getattr(plain, name)), err_msg=name)
+        np.testing.assert_array_equal(ds["time" if name == "t" else name].values, np.asarray(getattr(plain, name)),
+                                      err_msg=name)
+    # the same time axis and labels as the in-memory file: `time` holds t, `node` and `step` the indices
+    mem = plain.to_xarray()
+    for name in ("time", "node", "step"):
+        np.testing.assert_array_equal(ds[name].values, mem[name].values, err_msg=name)
+        assert ds[name].attrs == mem[name].attrs, name
+    np.testing.assert_array_equal(ds["node"].values, np.arange(102))
+    assert ds["step"].values[-1] == STEPS and ds["time"].attrs["units"] == "s"
+    np.testing.assert_array_equal(ds["q"].sel(time=5.0).values, np.asarray(plain.q)[50])  # t = 5.0: step 500
+    for name in mem.data_vars:  # the GNI diagnostics too, with the same attributes
+        assert ds[name].attrs == mem[name].attrs, name
+    np.testing.assert_allclose(ds["hidden_momentum"].values, np.asarray(plain.hidden_momentum), rtol=1e-14)
+    for key in ("Conventions", "source", "title", "orientation"):
+        assert ds.attrs[key] == mem.attrs[key], key
     # diagnostics derived from it in differently shaped programs: to rounding
     np.testing.assert_allclose(ds["energy"].values, np.asarray(plain.energy), rtol=1e-15, atol=0)
     np.testing.assert_allclose(ds["constraint_residual"].values, np.asarray(plain.constraint_residual), rtol=0, atol=1e-15)
@@ -69,7 +83,7 @@ def test_resume_after_an_interruption_gives_the_same_file(ball, streamed, tmp_pa
     second = _run(ball, path, resume=True)
     assert second.complete and second.chunks_resumed == 2
     ds = xr.load_dataset(path)
-    for name in ("q", "v", "p", "R", "energy", "t"):
+    for name in ("q", "v", "p", "R", "energy", "time", "node", "step"):
         np.testing.assert_array_equal(ds[name].values, streamed[1][name].values, err_msg=name)
 
 
@@ -135,8 +149,9 @@ def test_sigkill_then_resume_equals_an_uninterrupted_run(tmp_path):
     assert fresh.exit_code == 0, fresh.output
     a, b = xr.load_dataset(killed), xr.load_dataset(whole)
     assert a.sizes["time"] == 6001
-    for name in ("t", "q", "v", "p", "energy", "constraint_residual"):
+    for name in ("time", "node", "step", "q", "v", "p", "energy", "constraint_residual"):
         np.testing.assert_array_equal(a[name].values, b[name].values, err_msg=name)
+    assert a["time"].values[-1] == 6000.0 and a.sel(time=3000.0)["node"] == 3000
 
 
 @pytest.mark.parametrize(

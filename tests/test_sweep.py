@@ -138,7 +138,7 @@ def test_every_member_equals_its_own_simulation(ball_store):
                     err_msg=f"{name}, member {i}",
                 )
             i += 1
-    np.testing.assert_allclose(ds["t"].values, [0.0, 0.5, 1.0])
+    np.testing.assert_allclose(ds["time"].values, [0.0, 0.5, 1.0])
     assert (ds["result"].values == 0).all() and ds["valid"].values.all()
     assert ds["chunk_done"].values.all()
 
@@ -160,6 +160,18 @@ def test_open_sweep_gives_the_grid_as_dimensions(ball_store):
     np.testing.assert_array_equal(
         ds["q"].isel(time=0).values[..., 0], [[-1.0, 0.0, 1.0]] * 2
     )
+    # `time` holds the times (h = 0.05, saved every 10 steps), `node` and `step` the indices
+    assert ds["time"].dtype == np.float64 and ds["time"].attrs["units"] == "s"
+    assert ds["time"].attrs["standard_name"] == "time" and "t" not in ds.variables
+    np.testing.assert_array_equal(ds["node"].values, [0, 1, 2])
+    np.testing.assert_array_equal(ds["step"].values, [0, 10, 20])
+    np.testing.assert_array_equal(
+        ds["q"].sel(time=1.0).values, flat["q"].values[:, 2].reshape(2, 3, 2)
+    )
+    assert ds.attrs["Conventions"] == "CF-1.8" and ds.attrs["source"] == f"gnipy {gnipy.__version__}"
+    assert "rolling-ball" in ds.attrs["title"] and ds.attrs["history"]
+    assert "dR/dt = hat(xi) R" in ds.attrs["orientation"]
+    assert all(ds[name].attrs["long_name"] for name in ds.data_vars)
     # the zarr chunks are the sweep's chunks along member
     assert flat["q"].encoding["chunks"][0] == 4
     spec = json.loads(ds.attrs["sweep_spec"])
@@ -180,7 +192,8 @@ def test_failed_members_are_recorded_not_raised(osc_reference):
     assert 0 < failed.sum() < failed.size and report.failed_members == int(failed.sum())
     fs = ds["failed_step"].values
     assert (fs[failed] >= 0).all() and (fs[~failed] == -1).all()
-    k = np.rint(ds["t"].values / 0.5)
+    k = ds["step"].values
+    np.testing.assert_array_equal(k, np.rint(ds["time"].values / 0.5))
     np.testing.assert_array_equal(
         ds["valid"].values, (fs[..., None] < 0) | (k <= fs[..., None])
     )

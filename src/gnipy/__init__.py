@@ -10,6 +10,7 @@ _jax.config.update("jax_enable_x64", True)
 __version__ = "0.1.0"
 
 from . import models  # noqa: E402
+from .diagnostics import EnergyVerdict, HiddenMomentumVerdict  # noqa: E402
 from .discrete_lagrangians import (  # noqa: E402
     CustomDiscreteLagrangian,
     DiscreteLagrangian,
@@ -46,6 +47,8 @@ from .spaces import EuclideanSpace, GroupSpace, Point  # noqa: E402
 from .system import System, SystemError  # noqa: E402
 
 __all__ = [
+    "EnergyVerdict",
+    "HiddenMomentumVerdict",
     "__version__",
     "System",
     "SystemError",

@@ -99,10 +99,10 @@ def _rename(message: str) -> str:
     return str(message)
 
 
-def _console():
+def _console(stderr: bool = False):
     from rich.console import Console
 
-    return Console(highlight=False, soft_wrap=True)
+    return Console(highlight=False, soft_wrap=True, stderr=stderr)
 
 
 def _progress(*columns):
@@ -472,11 +472,21 @@ def _report(
         table.add_row(f"invariant {name}", f"max drift {d:.3e}")
     if exact is not None:
         table.add_row("error vs exact", f"max |q - q_exact| = {exact[2]:.3e}, max |v - v_exact| = {exact[3]:.3e}")
+    if sol.energy_plus is not None:
+        ep = np.asarray(sol.energy_plus)
+        table.add_row("energy of p+", f"initial {ep[0]:.12g}, max |E+ - E+0| = {np.max(np.abs(ep - ep[0])):.3e}")
+    verdict = sol.hidden_verdict
+    if verdict is not None and verdict.in_band:
+        table.add_row("hidden momentum", f"max |p+ - p̄|/|p̄| = {verdict.max_ratio:.3e}, in its O(h) band")
+    if sol.conserved:
+        table.add_row("conserved", sol.conserved)
     table.add_row("time", f"{seconds:.2f} s (including compilation)")
     if note:
         table.add_row("note", note)
     con = _console()
     con.print(table)
+    for warning in sol.warnings():  # the run-time diagnostics (gnipy.diagnostics): never silent
+        _console(stderr=True).print(warning, style="bold yellow", markup=False)
     if out is not None:
         con.print(f"written: {out}", markup=False)
 
@@ -558,7 +568,7 @@ def run(
         None, help="Model name (see `gni models`); or `model` in --config.", show_default=False, metavar="MODEL"
     ),
     method: str | None = typer.Option(
-        None, "--method", "-m", help="Method name (see `gni methods`). [default: gni-trapezoid]", show_default=False
+        None, "--method", "-m", help="Method name (see `gni methods`). [default: the model's, see `gni models`]", show_default=False
     ),
     h: float | None = typer.Option(None, "--h", help="Step size (> 0).", show_default=False),
     steps: int | None = typer.Option(
@@ -650,7 +660,11 @@ def run(
         model_ = pick("model", model)
         if model_ is None:
             raise _UsageError("MODEL", "missing: give MODEL (or `model` in --config)")
-        method_ = pick("method", method, "gni-trapezoid")
+        method_ = pick("method", method)
+        if method_ is None:  # the model's measured default (gni models shows it and why)
+            from .models.registry import default_method_for
+
+            method_ = default_method_for(str(model_))
         h_ = pick("h", h)
         if h_ is None:
             raise _UsageError("--h", "missing: give --h (or `h` in --config)")
@@ -760,6 +774,8 @@ def _run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, 
     table.add_row("time", f"{seconds:.2f} s (including compilation)")
     con = _console()
     con.print(table)
+    for warning in result.warnings:  # the run-time diagnostics, as for in-memory runs
+        _console(stderr=True).print(warning, style="bold yellow", markup=False)
     con.print(f"written: {out}", markup=False)
 
 
@@ -865,8 +881,9 @@ def convergence(
     that T is a whole number of steps), the error at the final time T (max-norm; of the
     configuration q by default, see --error) is measured against the model's exact solution when
     it has one, else against the continuous reference (Dopri8 at tolerance 1e-12). The order is
-    the least-squares slope of log(error) against log(h) over the points above round-off (1e-11
-    against an exact solution, 1e-10 against the reference, times max(1, |state|)). Writes
+    the least-squares slope of log(error) against log(h) over the points above round-off
+    (2·√N·ε against an exact solution, N the largest step count: the steps' round-off grows like a
+    random walk, gnipy.spaces; 1e-10 against the reference; times max(1, |state|)). Writes
     OUT/convergence.csv and OUT/convergence.png and prints the table and the fitted orders.
     """
 
@@ -898,7 +915,9 @@ def convergence(
         truth = spec.exact(params, q0, v0_used, np.array([0.0, T])) if spec.exact is not None else None
         if truth is not None:
             q_true, v_true = np.asarray(truth[0])[-1], np.asarray(truth[1])[-1]
-            yardstick, floor_rel = f"exact solution of {spec.name}", 1e-11
+            # round-off of N steps: a random walk of roundings (gnipy.spaces), at most √N·ε·scale (tested)
+            yardstick = f"exact solution of {spec.name}"
+            floor_rel = 2.0 * math.sqrt(max(counts)) * float(np.finfo(np.float64).eps)
         else:
             with _busy(f"{spec.name}: continuous reference (Dopri8, tolerance 1e-12)"):
                 ref = gnipy.simulate(system, "reference", q0, v0_used, R0=R0_, h=T, steps=1)
@@ -1085,7 +1104,10 @@ def sweep(
         "NAME is a parameter, q0.<coordinate> or v0.<velocity> (e.g. m=0.5:2:10, q0.x=-1:1:5, v0.omega3=0:1:3). "
         "Repeatable: the sweep is the Cartesian product.", show_default=False,
     ),
-    method: str = typer.Option("gni-trapezoid", "--method", "-m", help="Method name (see `gni methods`)."),
+    method: str | None = typer.Option(
+        None, "--method", "-m", help="Method name (see `gni methods`). [default: the model's, see `gni models`]",
+        show_default=False,
+    ),
     h: float | None = typer.Option(None, "--h", help="Step size (> 0).", show_default=False),
     steps: int | None = typer.Option(
         None, "--steps", help="Number of steps (give this or --t-final).", show_default=False
@@ -1246,9 +1268,9 @@ def _info_table(file, ds) -> None:
         if "start" in a:
             parts.append(f"start: {a['start']}")
         table.add_row("method", ", ".join(parts))
-    if "t" in ds.variables and ds["t"].size:
-        t = np.asarray(ds["t"].values, dtype=float)
-        units = ds["t"].attrs.get("units", "")
+    if "time" in ds.coords and ds["time"].dtype.kind == "f" and ds["time"].size:  # read_netcdf: times in `time`
+        t = np.asarray(ds["time"].values, dtype=float)
+        units = ds["time"].attrs.get("units", "")
         more = f", saved every {int(a['save_every'])} steps" if "save_every" in a else ""
         table.add_row("times", f"t = {t[0]:g} .. {t[-1]:g} {units}".rstrip() + f", {t.size} saved nodes{more}")
     for name, var in ds.data_vars.items():
@@ -1342,6 +1364,7 @@ def models():
         more = "; ".join(x for x in extras if x)
         if more:
             con.print(f"    {more}", markup=False)
+        con.print(f"    default method: {spec.default_method} ({spec.default_reason})", markup=False)
 
 
 @app.command()

@@ -1,18 +1,28 @@
 """File output: solutions as netCDF through xarray, written atomically.
 
-**Contents.** A result file holds the variables `t(time)`, `q(time, coordinate)`,
+**Contents** (CF-1.8 conventions). The coordinate `time` holds the physical times of the saved
+nodes (float64, `units = "s"`, `standard_name = "time"`), so `ds.sel(time=5.0)` is the node at
+t = 5; beside it, `node(time)` holds the saved-node index 0, 1, ... and `step(time)` the step
+index k, t = t0 + kh. A result file holds the variables `q(time, coordinate)`,
 `v(time, velocity)`, `p(time, velocity)`, `energy(time)`,
 `constraint_residual(time, constraint)`, and `R(time, i, j)` on Rⁿ × G; the coordinates
-`coordinate` and `velocity` hold the names. Global attributes record the provenance:
-`gnipy_version`, `jax_version`, `created` (UTC, ISO 8601), `model`, `params` (JSON) and one
-`param_NAME` per parameter, `method`, `h`, `steps`, `start` (how the first node was set up, e.g.
-`p+ = G v0`), and what the caller adds (`gni run` adds `q0`, `v0`, `save_every`, `command`, ...).
+`coordinate` and `velocity` hold the names (also in the attribute `components` of `q`, `v`,
+`p`). Every variable has a `long_name`. Global attributes: `Conventions`, `title`, `source`,
+`history`, and the provenance: `gnipy_version`, `jax_version`, `created` (UTC, ISO 8601),
+`model`, `params` (JSON) and one `param_NAME` per parameter, `method`, `h`, `steps`, `start`
+(how the first node was set up, e.g. `p+ = G v0`), `orientation` on Rⁿ × G (how R was
+reconstructed, and whether it is a physical attitude), and what the caller adds (`gni run` adds
+`q0`, `v0`, `save_every`, `command`, ...).
 
-**Units.** The models are nondimensional unless their documentation says otherwise: `t` carries
-`units = "time units"`, `energy` carries `units = "energy units"`, and the global attribute
-`units_convention` says so. Coordinates mix lengths and angles (radians), so `q`, `v` and `p`
-carry no single `units` attribute; their names are in the `coordinate` and `velocity`
-coordinates.
+Files written before the times moved into `time` (`time` the node index, the times in a
+variable `t`) still read: :func:`read_netcdf` gives them the present layout
+(:func:`upgrade_layout`), and :func:`result_times` reads the times of either.
+
+**Units.** Time is in seconds (`"s"`): the models' parameters are SI values or nondimensional
+unit scales unless a model states otherwise (the global attribute `units_convention` says so).
+Ratios carry `units = "1"`. Coordinates mix lengths and angles (radians), so `q`, `v`, `p`
+and the constraint residual carry no single `units` attribute, and no model states an energy
+unit, so `energy` carries none (none is invented).
 
 **Atomic writes.**
 A file either appears complete or not at all: the data go to a temporary file in the destination
@@ -31,7 +41,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["OutputError", "check_writable", "write_netcdf", "read_netcdf", "provenance", "VARIABLE_UNITS", "UNITS_CONVENTION"]
+__all__ = ["OutputError", "check_writable", "write_netcdf", "read_netcdf", "provenance", "VARIABLE_UNITS",
+           "UNITS_CONVENTION", "TIME_UNITS", "CONVENTIONS", "VARIABLE_ATTRS", "time_coordinates", "cf_attributes",
+           "result_times", "upgrade_layout"]
 
 
 class OutputError(OSError):
@@ -57,13 +69,107 @@ def _attr_value(v):
     return str(v)
 
 
-#: Units of the variables that have one (the models are nondimensional unless stated).
-VARIABLE_UNITS = {"t": "time units", "energy": "energy units"}
+#: The units of time of result files (the models state no other).
+TIME_UNITS = "s"
+
+#: The metadata conventions the result files follow.
+CONVENTIONS = "CF-1.8"
+
+#: Units of the variables that have one.
+VARIABLE_UNITS = {"time": TIME_UNITS, "hidden_momentum": "1", "hidden_momentum_expected": "1"}
 
 UNITS_CONVENTION = (
-    "nondimensional unless the model states otherwise: t in time units, lengths in length units, "
-    "angles in radians, energy in energy units"
+    "time in s; the models' parameters are SI values or nondimensional unit scales unless the model "
+    "states otherwise; angles in radians; q, v, p and the constraint residual mix lengths and angles and "
+    "carry no single units attribute; no energy unit is stated"
 )
+
+#: The attributes (long name, units where meaningful) of the variables of result files and sweep
+#: stores, by name.
+VARIABLE_ATTRS = {
+    "q": {"long_name": "configuration"},
+    "v": {"long_name": "reported velocity"},
+    "p": {"long_name": "reported momentum"},
+    "energy": {"long_name": "energy ½vᵀGv + V"},
+    "constraint_residual": {"long_name": "constraint residual mu(q)(v - Y(q))"},
+    "R": {"long_name": "orientation R (group matrix)"},
+    "energy_plus": {"long_name": "energy of the post-momentum ½p⁺ᵀG⁻¹p⁺ + V (energy theorem)"},
+    "hidden_momentum": {"long_name": "hidden momentum |p⁺ - p̄|/|p̄| (norms in G⁻¹)", "units": "1"},
+    "hidden_momentum_expected": {"long_name": "its expected size (|h|/2)|μᵀλ|/|p̄|", "units": "1"},
+    "result": {"long_name": "0: success, 1: a step failed"},
+    "failed_step": {"long_name": "first failed step or -1"},
+    "valid": {"long_name": "saved node computed (False after a failed step)"},
+    "q_exact": {"long_name": "exact configuration"},
+    "v_exact": {"long_name": "exact velocity"},
+}
+
+_NODE_ATTRS = {"long_name": "saved node index"}
+_STEP_ATTRS = {"long_name": "step index k: t = t0 + k h"}
+
+
+def _time_attrs(units: str = TIME_UNITS) -> dict[str, str]:
+    return {"standard_name": "time", "long_name": "time", "units": units, "axis": "T"}
+
+
+def time_coordinates(times, h: float | None = None, steps=None, nodes=None) -> dict[str, tuple]:
+    """The coordinates along `time` of a result dataset, for `xarray.Dataset(coords=...)`:
+    `time` (the times, float64, CF attributes), `node` (the saved-node index, or `nodes`) and
+    `step` (the step index: `steps`, or round((t - t0)/h) when `h` is finite and non-zero;
+    left out otherwise, e.g. without a step size)."""
+    import numpy as np
+
+    t = np.asarray(times, dtype=np.float64)
+    coords = {
+        "time": (("time",), t, _time_attrs()),
+        "node": (("time",), np.arange(len(t), dtype=np.int64) if nodes is None else np.asarray(nodes, np.int64),
+                 dict(_NODE_ATTRS)),
+    }
+    if steps is None and h is not None and np.isfinite(h) and h != 0 and len(t):
+        steps = np.rint((t - t[0]) / h)
+    if steps is not None:
+        coords["step"] = (("time",), np.asarray(steps).astype(np.int64), dict(_STEP_ATTRS))
+    return coords
+
+
+def cf_attributes(model: str, method: str, *, title: str | None = None, created: str | None = None) -> dict[str, str]:
+    """The CF global attributes of a result of `model` with `method`: `Conventions`, `title`,
+    `source` (gnipy and its version) and `history` (when and by what it was created)."""
+    from . import __version__
+
+    created = created or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    return {
+        "Conventions": CONVENTIONS,
+        "title": title or f"{model} integrated with {method}",
+        "source": f"gnipy {__version__}",
+        "history": f"{created} gnipy {__version__}: {method} run of {model}",
+    }
+
+
+def result_times(ds):
+    """The times of the saved nodes of a result dataset (a NumPy array): its `time` coordinate, or
+    the variable `t` of a file written when `time` held the node index."""
+    import numpy as np
+
+    if "t" in ds.variables and ds["t"].dims == ("time",):
+        return np.asarray(ds["t"].values, dtype=np.float64)
+    return np.asarray(ds["time"].values, dtype=np.float64)
+
+
+def upgrade_layout(ds):
+    """`ds` in the present layout: for a result written when `time` held the node index and the times
+    were a variable `t(time)`, the times become the `time` coordinate (keeping the file's `t`
+    attributes) with `node` (the old index) and `step` beside it; other datasets are returned as
+    they are."""
+    import numpy as np
+
+    if "t" not in ds.data_vars or ds["t"].dims != ("time",):
+        return ds
+    t = ds["t"]
+    nodes = ds["time"].values if "time" in ds.coords else np.arange(ds.sizes["time"])
+    h = ds.attrs.get("h")
+    coords = time_coordinates(t.values, float(h) if isinstance(h, (int, float, np.number)) else None, nodes=nodes)
+    coords["time"][2].update({k: v for k, v in t.attrs.items() if k in ("units", "long_name")})
+    return ds.drop_vars(["t", *(["time"] if "time" in ds.coords else [])]).assign_coords(coords)
 
 
 def _jax_version() -> str:
@@ -121,8 +227,10 @@ def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = No
     """Write a :class:`~gnipy.Solution` (via `Solution.to_xarray`) or an `xarray.Dataset` to netCDF.
 
     The write is atomic (see the module docstring). Provenance attributes are added when missing:
-    `gnipy_version`, `jax_version`, `created`, `units_convention` (Solution.to_xarray also gives
-    model, method, h, steps, start and the parameters), and `units` on `t` and `energy`.
+    `gnipy_version`, `jax_version`, `created`, `units_convention`, `Conventions`, `history`
+    (Solution.to_xarray also gives model, method, h, steps, start, the parameters and the other
+    CF attributes), and `units` on the variables of :data:`VARIABLE_UNITS` (on `time` when it
+    holds times, i.e. floats).
 
     Arguments:
         solution_or_dataset: what to write.
@@ -142,9 +250,13 @@ def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = No
     for k, v in provenance().items():
         ds.attrs.setdefault(k, v)
     ds.attrs.setdefault("units_convention", UNITS_CONVENTION)
+    ds.attrs.setdefault("Conventions", CONVENTIONS)
+    ds.attrs.setdefault("history", f"{ds.attrs['created']} gnipy {ds.attrs['gnipy_version']}: write_netcdf")
     for name, units in VARIABLE_UNITS.items():
-        if name in ds.variables and "units" not in ds[name].attrs:
+        if name in ds.variables and "units" not in ds[name].attrs and ds[name].dtype.kind == "f":
             ds[name].attrs["units"] = units
+    if "time" in ds.coords and ds["time"].dtype.kind == "f":
+        ds["time"].encoding["_FillValue"] = None  # CF: a coordinate variable has no missing values
     for k, v in (attrs or {}).items():
         ds.attrs[str(k)] = v
     ds.attrs = {k: _attr_value(v) for k, v in ds.attrs.items()}
@@ -171,6 +283,9 @@ def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = No
 def read_netcdf(path):
     """Read a netCDF file into memory as an `xarray.Dataset` (the file is closed on return).
 
+    A result file of the earlier layout (`time` the node index, the times in `t`) is returned in
+    the present one (:func:`upgrade_layout`): `ds.sel(time=...)` selects by time in both.
+
     Raises:
         OutputError: (an `OSError`) the file does not exist or cannot be read; the message names it.
     """
@@ -180,7 +295,7 @@ def read_netcdf(path):
     if not path.is_file():
         raise OutputError(f"cannot read {path}: no such file")
     try:
-        return xr.load_dataset(path)
+        return upgrade_layout(xr.load_dataset(path))
     except OSError as e:
         raise OutputError(f"cannot read {path}: {e.strerror or e}") from e
     except ValueError as e:  # xarray: no backend recognises the file

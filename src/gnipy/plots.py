@@ -46,19 +46,25 @@ _ZERO_LEVEL = 1e-18
 def as_dataset(obj):
     """The `xarray.Dataset` of a :class:`~gnipy.Solution` (via `to_xarray`), or `obj` itself.
 
+    A result file of the earlier layout (the times in a variable `t`, `time` the node index) is
+    returned in the present one (:func:`gnipy.io.upgrade_layout`).
+
     Raises:
         TypeError: `obj` is neither a Solution nor a Dataset.
-        ValueError: the Dataset lacks the variable `t` (it is not a gnipy result).
+        ValueError: the Dataset has no times (a float coordinate `time`, or a variable `t`): it is
+            not a gnipy result.
     """
     import xarray as xr
 
+    from .io import upgrade_layout
     from .solution import Solution
 
     if isinstance(obj, Solution):
         return obj.to_xarray()
     if isinstance(obj, xr.Dataset):
-        if "t" not in obj.variables:
-            raise ValueError("the dataset has no variable 't': not a gnipy result file")
+        obj = upgrade_layout(obj)
+        if "time" not in obj.coords or obj["time"].dtype.kind != "f":
+            raise ValueError("the dataset has no times (coordinate 'time'): not a gnipy result file")
         return obj
     raise TypeError(f"expected a gnipy.Solution or an xarray.Dataset, got {type(obj).__name__}")
 
@@ -112,7 +118,7 @@ def plot_path(obj, ax=None):
     """
     ds = as_dataset(obj)
     ax = _new_axes(ax)
-    t = np.asarray(ds["t"].values, dtype=float)
+    t = np.asarray(ds["time"].values, dtype=float)
     q = np.asarray(ds["q"].values, dtype=float) if "q" in ds else np.zeros((len(t), 0))
     names = _names(ds, "coordinate", q.shape[-1], "q")
     equal = False
@@ -163,7 +169,7 @@ def plot_energy_error(obj, ax=None):
     """
     ds = as_dataset(obj)
     ax = _new_axes(ax)
-    t = np.asarray(ds["t"].values, dtype=float)
+    t = np.asarray(ds["time"].values, dtype=float)
     e = np.asarray(ds["energy"].values, dtype=float)
     ax.plot(t, e - e[0], lw=1.2)
     ax.set_xlabel("t")
@@ -189,7 +195,7 @@ def plot_constraint_residual(obj, ax=None):
     """
     ds = as_dataset(obj)
     ax = _new_axes(ax)
-    t = np.asarray(ds["t"].values, dtype=float)
+    t = np.asarray(ds["time"].values, dtype=float)
     r = np.asarray(ds["constraint_residual"].values, dtype=float)
     r = np.abs(r).max(axis=-1) if r.ndim == 2 and r.shape[-1] else np.zeros_like(t)
     ax.semilogy(t, np.maximum(r, _ZERO_LEVEL), lw=1.2)

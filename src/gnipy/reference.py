@@ -75,7 +75,7 @@ class ContinuousReference(eqx.Module):
         times = np.asarray(times, dtype=np.float64)
         ys, num_steps, ok = _solve(self, system, b0, jnp.asarray(v0), jnp.asarray(times))
         meta = dict(system=system.name, method=self.name, h=float(h), coordinates=system.coordinates,
-                    params=system.params, start="continuous")
+                    params=system.params, start="continuous", orientation=system.orientation_description)
         if not bool(ok):
             raise SolverFailure(
                 f"reference: the adaptive solver failed before t = {times[-1]:.6g} (step cap {self.max_steps} "

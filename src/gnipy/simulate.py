@@ -9,10 +9,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .compilation import jit
-from .diagnostics import node_diagnostics
 from .integrators.base import Integrator, MethodError
 from .solution import RESULT_SOLVER_FAILED, Solution, SolverFailure
-from .system import System, SystemError
+from .system import System, SystemError, describe_orientations
 
 __all__ = ["simulate", "resolve_steps", "MAX_STEPS"]
 
@@ -116,11 +115,10 @@ def _integrate_core(method, system, state0, h, n_blocks: int, block, remainder, 
     b, v, p, hidden = obs
     energy = jax.vmap(system.energy)(b, v)
     residual = jax.vmap(system.constraint_residual)(b, v)
-    diag = None
-    if hidden is not None:  # the GNI family: hidden momentum, its expected size, the energy of p⁺
-        diag = jax.vmap(lambda b_, v_, p_, x_: node_diagnostics(system, b_, v_, p_, x_, h))(b, v, p, hidden)
     _, _, fail_k, fail_res, it_tot, it_max = carry
-    return b, v, p, energy, residual, fail_k, fail_res, jnp.stack([it_tot, it_max]), carry[0], diag
+    # hidden: the GNI family's p⁺ − p̄ at the saved nodes (None for other methods); what derives from
+    # it is computed apart (gnipy.diagnostics.saved_node_diagnostics), not compiled into every run
+    return b, v, p, energy, residual, fail_k, fail_res, jnp.stack([it_tot, it_max]), carry[0], hidden
 
 
 _integrate = jit(_integrate_core)
@@ -150,7 +148,7 @@ def _init_one(method, system, b0, v0, h):
 
 def simulate(
     system,
-    method: Integrator | str = "gni-trapezoid",
+    method: Integrator | str | None = None,
     q0=None,
     v0=None,
     *,
@@ -170,6 +168,8 @@ def simulate(
             values (a parameter batch, e.g. :func:`gnipy.model_systems`).
         method: an integrator object (e.g. `GNI(Midpoint())`) or a method name (see
             :func:`~gnipy.method_names`), including `"reference"` for the continuous reference.
+            Default: for a zoo model, its measured default (`gnipy.get_model(name).default_method`,
+            shown by `gni models`); for other systems `"gni-trapezoid"`.
         q0, v0: the initial coordinates and velocity (default: the system's documented ones); on
             $\\mathbb{R}^n \\times G$, `q0` holds x and `v0` the velocity $(\\dot x, \\xi)$.
             Arrays with a leading batch axis, (B, n) and (B, N), run B trajectories at once.
@@ -216,6 +216,10 @@ def simulate(
         system = systems[0]
     if not isinstance(system, System):
         raise SystemError(f"system: expected a gnipy.System or a sequence of them, got {type(system).__name__}")
+    if method is None:
+        from .models.registry import default_method_for
+
+        method = default_method_for(system.name)
     if isinstance(method, str):
         method = get_method(method)
     if not isinstance(method, (Integrator, ContinuousReference)):
@@ -241,7 +245,8 @@ def simulate(
     k_saved = np.concatenate([np.arange(n_blocks + 1) * save_every, [steps] if remainder else []]).astype(np.int64)
     times = t0 + h * k_saved
     meta = dict(system=system.name, method=method.name, h=h, coordinates=system.coordinates,
-                velocities=system.velocities, params=system.params)
+                velocities=system.velocities, params=system.params,
+                orientation=describe_orientations(systems or [system]))
 
     batched = systems is not None or _is_batch(system, q0, v0, R0)
     if batched:
@@ -259,10 +264,10 @@ def simulate(
     hj = np.float64(h)  # NumPy scalars: the compiled call converts them (cheaper than a jnp.asarray each)
     core = system.without_metadata()
     state0 = _init_one(method, core, b0, np.asarray(v0, dtype=np.float64), hj)
-    b, v, p, energy, residual, fail_k, fail_res, its, _, diag = _integrate(
+    b, v, p, energy, residual, fail_k, fail_res, its, _, hidden = _integrate(
         method, core, state0, hj, n_blocks, np.int32(save_every), np.int32(remainder), bool(remainder),
     )
-    meta |= _diagnostic_meta(system, method, b0, diag)
+    meta |= _diagnostic_meta(system, core, b0, (b, v, p, hidden), h)
     q, R = system.space.coordinates(b), system.space.orientation(b)
     fail_k = int(fail_k)
     if fail_k < 0:
@@ -285,14 +290,18 @@ def simulate(
 _DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
 
 
-def _diagnostic_meta(system, method, b0, diag) -> dict:
+def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False, batch: bool = False) -> dict:
     """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
     the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved."""
-    from .diagnostics import conserved_quantity
+    from .diagnostics import conserved_quantity, energy_is_invariant, saved_node_diagnostics
     from .models.registry import registered_invariants
 
+    diag = None
+    if nodes[3] is not None:
+        diag = saved_node_diagnostics(core, *nodes, h, batched_system=batched_system, batch=batch)
     out = {"conserved": conserved_quantity(system, b0, gni_family=diag is not None,
-                                           invariants=registered_invariants(system.name))}
+                                           invariants=registered_invariants(system.name)),
+           "energy_invariant": energy_is_invariant(system, b0)}
     if diag is not None:
         out |= dict(zip(_DIAGNOSTIC_ARRAYS, diag))
     return out
@@ -335,10 +344,11 @@ def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks,
     method = method.prepare(system, first_b0)
     hj = np.float64(h)
     state0 = _init_batch(method, core, sys_batched, b0, v0, hj)
-    b, v, p, energy, residual, fail_k, fail_res, its, _, diag = _integrate_batch(
+    b, v, p, energy, residual, fail_k, fail_res, its, _, hidden = _integrate_batch(
         method, core, sys_batched, state0, hj, n_blocks, np.int32(save_every), np.int32(remainder), bool(remainder),
     )
-    batch_diag = _diagnostic_meta(system, method, first_b0, diag)
+    batch_diag = _diagnostic_meta(system, core, first_b0, (b, v, p, hidden), h, batched_system=sys_batched,
+                                  batch=True)
     space = system.space
     q, R = space.coordinates(b), space.orientation(b)
     fail_k = np.asarray(fail_k)

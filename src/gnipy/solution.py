@@ -9,7 +9,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
-__all__ = ["Solution", "SolverFailure", "RESULT_SUCCESS", "RESULT_SOLVER_FAILED"]
+__all__ = ["Solution", "SolverFailure", "RESULT_SUCCESS", "RESULT_SOLVER_FAILED", "set_variable_attrs"]
 
 RESULT_SUCCESS = 0
 RESULT_SOLVER_FAILED = 1
@@ -30,6 +30,21 @@ class SolverFailure(RuntimeError):
         self.solution = solution
 
 
+def set_variable_attrs(ds) -> None:
+    """Give the variables of a result dataset their attributes, in place: `long_name` and `units`
+    from :data:`gnipy.io.VARIABLE_ATTRS` (where not set already), and on `q`, `v`, `p` the names
+    of their components (attribute `components`, from the `coordinate` and `velocity` coordinates)."""
+    from .io import VARIABLE_ATTRS
+
+    for name, attrs in VARIABLE_ATTRS.items():
+        if name in ds.variables:
+            for key, value in attrs.items():
+                ds[name].attrs.setdefault(key, value)
+    for name, dim in (("q", "coordinate"), ("v", "velocity"), ("p", "velocity")):
+        if name in ds.variables and dim in ds.coords:
+            ds[name].attrs["components"] = ", ".join(str(x) for x in ds[dim].values)
+
+
 class Solution(eqx.Module):
     """Saved nodes of a trajectory and their diagnostics.
 
@@ -42,7 +57,8 @@ class Solution(eqx.Module):
         constraint_residual: $\\mu(q)(v - Y(q))$, (T, m).
         iterations: total and maximum Newton iterations per step, `(total, max)`.
         R: orientations $R_k$ on $\\mathbb{R}^n \\times G$, (T, k, k) (reconstructed
-            $R_{k+1} = R_k\\tau(h\\xi_k)$, paper §7.2 Remark), else None.
+            $R_{k+1} = R_k\\tau(h\\xi_k)$, paper §7.2 Remark, or $\\tau(h\\xi_k)R_k$ for a system with
+            `reconstruction="right"`; :attr:`orientation` says which), else None.
         result: 0 on success, 1 if a step failed (then the arrays stop at the last good node;
             in a batch: 1 if any member failed).
         failed_step: index of the first failed step, or -1 (in a batch: the earliest).
@@ -56,6 +72,10 @@ class Solution(eqx.Module):
         energy_plus: the energy of the post-momentum, $\\tfrac12 p^{+T}\\mathbb{G}^{-1}p^+ + V$ (the
             quantity of the paper's energy theorem), (T,); None for other methods.
         conserved: which quantity the motion (or the scheme) conserves, a sentence.
+        energy_invariant: whether the energy is a constant of the motion (linear constraints): then
+            a drift of the reported energy is diagnosed (:attr:`energy_verdict`).
+        orientation: what R is (how it was reconstructed, and whether it is a physical attitude),
+            a sentence (:attr:`gnipy.System.orientation_description`); empty on $\\mathbb{R}^n$.
         system, method, h, coordinates: metadata.
 
     **Batches.** A solution of B trajectories (from :func:`gnipy.simulate` with batched
@@ -89,6 +109,19 @@ class Solution(eqx.Module):
     hidden_expected: jax.Array | None = None
     energy_plus: jax.Array | None = None
     conserved: str = eqx.field(static=True, default="")
+    orientation: str = eqx.field(static=True, default="")
+    energy_invariant: bool = eqx.field(static=True, default=False)
+
+    @property
+    def energy_verdict(self):
+        """The :class:`~gnipy.diagnostics.EnergyVerdict` where the energy is a constant of the motion
+        (None otherwise, and for a batch: read it per member)."""
+        from .diagnostics import energy_verdict
+
+        if not self.energy_invariant or self.batch_size is not None:
+            return None
+        kinetic = 0.5 * np.sum(np.asarray(self.v) * np.asarray(self.p), axis=-1)
+        return energy_verdict(self.t, self.energy, kinetic)
 
     @property
     def hidden_verdict(self):
@@ -139,6 +172,7 @@ class Solution(eqx.Module):
             h=self.h, coordinates=self.coordinates, velocities=self.velocities, params=params, start=self.start,
             hidden_momentum=row(self.hidden_momentum), hidden_expected=row(self.hidden_expected),
             energy_plus=row(self.energy_plus), conserved=self.conserved,
+            orientation=self.orientation, energy_invariant=self.energy_invariant,
         )
 
     @property
@@ -149,11 +183,12 @@ class Solution(eqx.Module):
         return int(round((float(self.t[-1]) - float(self.t[0])) / self.h))
 
     def to_xarray(self, attrs: dict[str, Any] | None = None):
-        """An `xarray.Dataset` with variables `t(time)`, `q(time, coordinate)`,
-        `v(time, velocity)`, `p(time, velocity)`, `energy(time)` and
-        `constraint_residual(time, constraint)`, plus provenance attributes."""
+        """An `xarray.Dataset` with the coordinate `time` (the times $t_k$, CF attributes), beside it
+        `node(time)` (the saved-node index) and `step(time)` (the step index k), the variables
+        `q(time, coordinate)`, `v(time, velocity)`, `p(time, velocity)`, `energy(time)`,
+        `constraint_residual(time, constraint)` (and `R(time, i, j)`, the GNI diagnostics), and
+        CF and provenance attributes (:mod:`gnipy.io`). A batch has a leading `member` axis."""
         import xarray as xr
-
 
         if self.batch_size is not None:
             return self._batch_to_xarray(attrs)
@@ -162,45 +197,38 @@ class Solution(eqx.Module):
         N = self.v.shape[-1]
         vel = list(self.velocities) if len(self.velocities) == N else [f"v{i}" for i in range(N)]
         m = self.constraint_residual.shape[-1]
+        t = ("time",)
         ds = xr.Dataset(
             {
-                "t": (("time",), np.asarray(self.t), {"long_name": "time"}),
-                "q": (("time", "coordinate"), np.asarray(self.q), {"long_name": "configuration"}),
-                "v": (("time", "velocity"), np.asarray(self.v), {"long_name": "reported velocity"}),
-                "p": (("time", "velocity"), np.asarray(self.p), {"long_name": "reported momentum"}),
-                "energy": (("time",), np.asarray(self.energy), {"long_name": "energy ½vᵀGv + V"}),
-                "constraint_residual": (
-                    ("time", "constraint"),
-                    np.asarray(self.constraint_residual),
-                    {"long_name": "constraint residual mu(q)(v - Y(q))"},
-                ),
+                "q": ((*t, "coordinate"), np.asarray(self.q)),
+                "v": ((*t, "velocity"), np.asarray(self.v)),
+                "p": ((*t, "velocity"), np.asarray(self.p)),
+                "energy": (t, np.asarray(self.energy)),
+                "constraint_residual": ((*t, "constraint"), np.asarray(self.constraint_residual)),
             },
-            coords={
-                "time": np.arange(len(self.t)),
-                "coordinate": coords,
-                "velocity": vel,
-                "constraint": np.arange(m),
-            },
+            coords={**self._time_coords(), "coordinate": coords, "velocity": vel, "constraint": np.arange(m)},
         )
         if self.R is not None:
-            ds["R"] = (("time", "i", "j"), np.asarray(self.R), {"long_name": "orientation R (group matrix)"})
-        self._add_diagnostics(ds, ("time",))
+            ds["R"] = ((*t, "i", "j"), np.asarray(self.R))
+        self._add_diagnostics(ds, t)
         return self._with_attrs(ds, attrs)
 
+    def _time_coords(self) -> dict:
+        """`time` (the times), `node` and `step` (:func:`gnipy.io.time_coordinates`)."""
+        from .io import time_coordinates
+
+        return time_coordinates(np.asarray(self.t), self.h)
+
     def _add_diagnostics(self, ds, dims):
-        """The GNI family's diagnostics as variables, and the verdict as attributes."""
+        """The GNI family's diagnostics as variables (their attributes: :func:`set_variable_attrs`)."""
         if self.energy_plus is None:
             return
-        ds["energy_plus"] = (dims, np.asarray(self.energy_plus),
-                             {"long_name": "energy of the post-momentum ½p⁺ᵀG⁻¹p⁺ + V (energy theorem)"})
-        ds["hidden_momentum"] = (dims, np.asarray(self.hidden_momentum),
-                                 {"long_name": "hidden momentum |p⁺ - p̄|/|p̄| (norms in G⁻¹)", "units": "1"})
-        ds["hidden_momentum_expected"] = (dims, np.asarray(self.hidden_expected),
-                                          {"long_name": "its expected size (|h|/2)|μᵀλ|/|p̄|", "units": "1"})
+        ds["energy_plus"] = (dims, np.asarray(self.energy_plus))
+        ds["hidden_momentum"] = (dims, np.asarray(self.hidden_momentum))
+        ds["hidden_momentum_expected"] = (dims, np.asarray(self.hidden_expected))
 
     def _batch_to_xarray(self, attrs):
         import xarray as xr
-
 
         n, N, m = self.q.shape[-1], self.v.shape[-1], self.constraint_residual.shape[-1]
         coords = list(self.coordinates) if len(self.coordinates) == n else [f"q{i}" for i in range(n)]
@@ -208,90 +236,103 @@ class Solution(eqx.Module):
         mt = ("member", "time")
         ds = xr.Dataset(
             {
-                "t": (("time",), np.asarray(self.t), {"long_name": "time"}),
-                "q": ((*mt, "coordinate"), np.asarray(self.q), {"long_name": "configuration"}),
-                "v": ((*mt, "velocity"), np.asarray(self.v), {"long_name": "reported velocity"}),
-                "p": ((*mt, "velocity"), np.asarray(self.p), {"long_name": "reported momentum"}),
-                "energy": (mt, np.asarray(self.energy), {"long_name": "energy ½vᵀGv + V"}),
-                "constraint_residual": ((*mt, "constraint"), np.asarray(self.constraint_residual),
-                                        {"long_name": "constraint residual mu(q)(v - Y(q))"}),
-                "result": (("member",), np.asarray(self.results), {"long_name": "0: success, 1: a step failed"}),
-                "failed_step": (("member",), np.asarray(self.failed_steps), {"long_name": "first failed step or -1"}),
-                "valid": (mt, self.valid, {"long_name": "saved node computed (False after a failed step)"}),
+                "q": ((*mt, "coordinate"), np.asarray(self.q)),
+                "v": ((*mt, "velocity"), np.asarray(self.v)),
+                "p": ((*mt, "velocity"), np.asarray(self.p)),
+                "energy": (mt, np.asarray(self.energy)),
+                "constraint_residual": ((*mt, "constraint"), np.asarray(self.constraint_residual)),
+                "result": (("member",), np.asarray(self.results)),
+                "failed_step": (("member",), np.asarray(self.failed_steps)),
+                "valid": (mt, self.valid),
             },
-            coords={"member": np.arange(self.batch_size), "time": np.arange(len(self.t)), "coordinate": coords,
+            coords={"member": np.arange(self.batch_size), **self._time_coords(), "coordinate": coords,
                     "velocity": vel, "constraint": np.arange(m)},
         )
         if self.R is not None:
-            ds["R"] = ((*mt, "i", "j"), np.asarray(self.R), {"long_name": "orientation R (group matrix)"})
+            ds["R"] = ((*mt, "i", "j"), np.asarray(self.R))
         for k, v in (self.member_params or {}).items():
             ds[f"param_{k}"] = (("member",), np.asarray(v), {"long_name": f"parameter {k}"})
         self._add_diagnostics(ds, mt)
         return self._with_attrs(ds, attrs)
 
     def _with_attrs(self, ds, attrs):
-        """The provenance attributes of a result dataset (and the caller's `attrs`)."""
+        """The variables' attributes, the global CF and provenance attributes of a result dataset
+        (and the caller's `attrs`)."""
         from . import __version__
+        from .io import cf_attributes
 
+        set_variable_attrs(ds)
+        created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+        ds.attrs.update(cf_attributes(self.system, self.method, created=created))
         ds.attrs.update(
             {
                 "gnipy_version": __version__, "model": self.system, "method": self.method, "h": float(self.h),
                 "steps": int(self.steps), "start": self.start, "result": int(self.result),
                 "newton_iterations_total": int(np.asarray(self.iterations)[0]),
                 "newton_iterations_max": int(np.asarray(self.iterations)[1]),
-                "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+                "created": created,
             }
         )
         for k, v in self.params:
             ds.attrs[f"param_{k}"] = float(v)
         if self.conserved:
             ds.attrs["conserved"] = self.conserved
+        if self.R is not None and self.orientation:
+            ds.attrs["orientation"] = self.orientation
         ds.attrs.update(self._verdict_attrs())
         if attrs:
             ds.attrs.update(attrs)
         return ds
 
-    def _member_verdicts(self):
-        if self.hidden_momentum is None:
+    def _member_verdicts(self, kind: str = "hidden"):
+        """The per-member verdicts of one kind ("hidden" or "energy"); [] where not diagnosed."""
+        if (self.hidden_momentum is None) if kind == "hidden" else (not self.energy_invariant):
             return []
+        attr = f"{kind}_verdict"
         if self.batch_size is None:
-            return [self.hidden_verdict]
-        return [self.member(i).hidden_verdict for i in range(self.batch_size)]
+            return [getattr(self, attr)]
+        return [getattr(self.member(i), attr) for i in range(self.batch_size)]
 
     def _verdict_attrs(self) -> dict:
         """The hidden-momentum verdict as file attributes."""
-        verdicts = self._member_verdicts()
-        if not verdicts:
-            return {}
-        out = [i for i, v in enumerate(verdicts) if not v.in_band]
-        attrs = {"hidden_momentum_verdict": "in band" if not out else "out of band",
-                 "hidden_momentum_max": max(v.max_ratio for v in verdicts)}
-        if out:
-            first = min(out, key=lambda i: verdicts[i].first_time)
-            attrs["hidden_momentum_first_time"] = verdicts[first].first_time
-            attrs["hidden_momentum_warning"] = verdicts[first].warning(self.method, self.system)
-            if self.batch_size is not None:
-                attrs["hidden_momentum_members_out_of_band"] = len(out)
+        attrs = {}
+        for kind, prefix, largest in (("hidden", "hidden_momentum", "max_ratio"), ("energy", "energy_drift", "max_drift")):
+            verdicts = self._member_verdicts(kind)
+            if not verdicts:
+                continue
+            out = [i for i, v in enumerate(verdicts) if not v.in_band]
+            attrs[f"{prefix}_verdict"] = "in band" if not out else "out of band"
+            attrs[f"{prefix}_max"] = max(getattr(v, largest) for v in verdicts)
+            if out:
+                first = min(out, key=lambda i: verdicts[i].first_time)
+                attrs[f"{prefix}_first_time"] = verdicts[first].first_time
+                attrs[f"{prefix}_warning"] = verdicts[first].warning(self.method, self.system)
+                if self.batch_size is not None:
+                    attrs[f"{prefix}_members_out_of_band"] = len(out)
         return attrs
 
     def warnings(self) -> list[str]:
-        """The run-time warnings of this solution (the hidden momentum out of its band)."""
-        verdicts = self._member_verdicts()
-        out = [i for i, v in enumerate(verdicts) if not v.in_band]
-        if not out:
-            return []
-        first = min(out, key=lambda i: verdicts[i].first_time)
-        text = verdicts[first].warning(self.method, self.system)
-        if self.batch_size is not None:
-            text = f"{len(out)} of {self.batch_size} members (first: member {first}): " + text
-        return [text]
+        """The run-time warnings of this solution: the GNI's hidden momentum out of its O(h) band,
+        and an energy that the motion conserves drifting away (:mod:`gnipy.diagnostics`)."""
+        texts = []
+        for kind in ("hidden", "energy"):
+            verdicts = self._member_verdicts(kind)
+            out = [i for i, v in enumerate(verdicts) if not v.in_band]
+            if not out:
+                continue
+            first = min(out, key=lambda i: verdicts[i].first_time)
+            text = verdicts[first].warning(self.method, self.system)
+            if self.batch_size is not None:
+                text = f"{len(out)} of {self.batch_size} members (first: member {first}): " + text
+            texts.append(text)
+        return texts
 
     def _diagnostic_lines(self) -> list[str]:
         lines = []
         if self.energy_plus is not None and self.batch_size is None:
             ep = np.asarray(self.energy_plus)
             lines.append(f"  energy of p+: initial {ep[0]:.12g}, max |E+ - E+0| = {np.max(np.abs(ep - ep[0])):.3e}")
-        verdicts = self._member_verdicts()
+        verdicts = self._member_verdicts("hidden")
         if verdicts and all(v.in_band for v in verdicts):
             lines.append(f"  hidden momentum |p+ - p̄|/|p̄|: max {max(v.max_ratio for v in verdicts):.3e}, "
                          "in its O(h) band")

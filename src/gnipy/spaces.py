@@ -20,6 +20,8 @@ once against them:
   bias that adds up over $10^6$ steps, measured 1.4e-11 at h = 1e-5 over T = 10);
 - `move(b, w)`: the point reached from `b` along a velocity-space vector `w` (used to
   differentiate along motions: $(x + w_x, R\\exp(w_\\xi))$);
+- `reconstruct(R, g)`: the orientation after a group increment, $Rg$, or $gR$ for a reduced
+  system whose group velocity is the *space* velocity (`reconstruction="right"`, below);
 - `lie_correction(v, p)`: the $\\mathrm{ad}^*_\\xi$ term of the Lagrange–d'Alembert–Poincaré equations.
 """
 
@@ -153,15 +155,27 @@ class GroupSpace(eqx.Module):
     $x_{k+1} = x_k + \\Delta x$ and
     $R_{k+1} = R_k\\tau(\\sigma_k)$, $\\sigma_k = h\\xi_k$ (DESIGN §2).
 
+    **Reconstruction.** For a *reduced* system (nothing depends on R, paper §7) the equations of
+    $(x, \\xi)$ do not involve R, and R is only reconstructed from ξ. With `reconstruction="right"`
+    ξ is read as the *space* velocity $\\xi = (\\dot R R^{-1})^\\vee$ (right trivialization):
+    $\\dot R = \\hat\\xi R$, and the steps reconstruct $R_{k+1} = \\tau(\\sigma_k)R_k$. This is how the
+    paper's §7.4 equations use ω (the rolling constraints hold for the space angular velocity,
+    DESIGN.md §2, errata). The equations and steps of $(x, \\xi)$ are unchanged, to the last bit;
+    only R differs. Systems that depend on R need the left-trivialized equations
+    (:class:`~gnipy.System` refuses the right side for them).
+
     Arguments:
         n: dimension of the Euclidean factor (may be 0).
         group: a :class:`~gnipy.lie_groups.MatrixLieGroup`.
         retraction: a :class:`~gnipy.retractions.Retraction` (Cayley or exp).
+        reconstruction: `"left"` (default: $\\dot R = R\\hat\\xi$, ξ the body velocity) or
+            `"right"` ($\\dot R = \\hat\\xi R$, ξ the space velocity; reduced systems only).
     """
 
     n: int = eqx.field(static=True)
     group: object
     retraction: object
+    reconstruction: str = eqx.field(static=True, default="left")
 
     @property
     def dim(self) -> int:
@@ -175,12 +189,18 @@ class GroupSpace(eqx.Module):
         """The retraction $\\tau(\\sigma)$."""
         return self.retraction.tau(self.group, sigma)
 
+    def reconstruct(self, R, g):
+        """The orientation reached from `R` by the group increment `g`: $Rg$, or $gR$ with
+        `reconstruction="right"` (ξ the space velocity, see the class docstring)."""
+        return g @ R if self.reconstruction == "right" else R @ g
+
     def step_points(self, b0, z, h):
         """`(b1, b_mid, velocity)`: $b_1 = (x_0 + \\Delta x, R_0\\tau(\\sigma))$, the midpoint
-        $(x_0 + \\Delta x/2, R_0\\tau(\\sigma/2))$ and the step velocity $(\\Delta x/h, \\sigma/h)$."""
+        $(x_0 + \\Delta x/2, R_0\\tau(\\sigma/2))$ and the step velocity $(\\Delta x/h, \\sigma/h)$
+        ($\\tau(\\sigma)R_0$, $\\tau(\\sigma/2)R_0$ with `reconstruction="right"`)."""
         dx, sigma = self._split(z)
-        b1 = Point(b0.x + dx, b0.R @ self.tau(sigma))
-        bm = Point(b0.x + 0.5 * dx, b0.R @ self.tau(0.5 * sigma))
+        b1 = Point(b0.x + dx, self.reconstruct(b0.R, self.tau(sigma)))
+        bm = Point(b0.x + 0.5 * dx, self.reconstruct(b0.R, self.tau(0.5 * sigma)))
         return b1, bm, z / h
 
     def end_coordinates(self, b0, z):
@@ -189,16 +209,16 @@ class GroupSpace(eqx.Module):
         return jnp.concatenate([b0.x + dx, sigma])
 
     def advance(self, b0, z):
-        """$(x_k + \\Delta x, R_k\\tau(\\sigma_k))$."""
+        """$(x_k + \\Delta x, R_k\\tau(\\sigma_k))$ (or $\\tau(\\sigma_k)R_k$, :meth:`reconstruct`)."""
         dx, sigma = self._split(z)
-        return Point(b0.x + dx, b0.R @ self.tau(sigma))
+        return Point(b0.x + dx, self.reconstruct(b0.R, self.tau(sigma)))
 
     def advance_compensated(self, b0, err, z):
         """:meth:`advance` with the Euclidean part summed with compensation (:func:`compensated_add`):
         `(b_{k+1}, err_{k+1})`, `err` of the shape of x."""
         dx, sigma = self._split(z)
         x1, err1 = compensated_add(b0.x, dx, err)
-        return Point(x1, b0.R @ self.tau(sigma)), err1
+        return Point(x1, self.reconstruct(b0.R, self.tau(sigma))), err1
 
     def initial_guess(self, b0, v, h):
         """$(h\\dot x, h\\xi)$."""
@@ -248,9 +268,9 @@ class GroupSpace(eqx.Module):
         return jnp.concatenate([gx0, jump.T @ gs + gR])
 
     def move(self, b, w):
-        """$(x + w_x, R\\exp(w_\\xi))$."""
+        """$(x + w_x, R\\exp(w_\\xi))$ (or $\\exp(w_\\xi)R$, :meth:`reconstruct`)."""
         wx, wxi = self._split(w)
-        return Point(b.x + wx, b.R @ self.group.exp(wxi))
+        return Point(b.x + wx, self.reconstruct(b.R, self.group.exp(wxi)))
 
     def lie_correction(self, v, p):
         """$(0, \\mathrm{ad}^*_\\xi p_{\\mathfrak g})$: the term of $\\frac{d}{dt}\\partial l/\\partial\\xi - \\mathrm{ad}^*_\\xi\\partial l/\\partial\\xi$."""
@@ -276,6 +296,7 @@ class GroupSpace(eqx.Module):
         return Point(y[: self.n], y[self.n :].reshape(k, k))
 
     def pack_velocity(self, b, v):
-        """$d/dt\\,(x, \\mathrm{vec}\\,R) = (\\dot x, \\mathrm{vec}(R\\hat\\xi))$ (reconstruction $\\dot R = R\\hat\\xi$)."""
+        """$d/dt\\,(x, \\mathrm{vec}\\,R) = (\\dot x, \\mathrm{vec}(R\\hat\\xi))$ (reconstruction
+        $\\dot R = R\\hat\\xi$; $\\dot R = \\hat\\xi R$ with `reconstruction="right"`)."""
         xd, xi = self._split(v)
-        return jnp.concatenate([xd, (b.R @ self.group.hat(xi)).reshape(-1)])
+        return jnp.concatenate([xd, self.reconstruct(b.R, self.group.hat(xi)).reshape(-1)])

@@ -27,6 +27,7 @@ import os
 import shutil
 import uuid
 from collections.abc import Callable, Mapping
+import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -35,7 +36,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .diagnostics import StreamedVerdicts, conserved_quantity, energy_is_invariant, saved_node_diagnostics
 from .integrators.base import Integrator, MethodError
+from .models.registry import registered_invariants
 from .io import OutputError, write_netcdf
 from .io import check_writable
 from .simulate import MAX_STEPS, _init_one, _integrate, default_initial_condition, resolve_steps
@@ -65,6 +68,8 @@ class StreamResult:
         constraint_residual: max |μ(v − Y)| over the saved nodes.
         iterations: total Newton iterations and the maximum per step.
         final_q, final_v: the last saved node.
+        warnings: the run-time warnings (:meth:`gnipy.Solution.warnings`; the verdicts are also
+            file attributes).
     """
 
     path: Path
@@ -80,6 +85,7 @@ class StreamResult:
     iterations: tuple[int, int]
     final_q: np.ndarray
     final_v: np.ndarray
+    warnings: list = dataclasses.field(default_factory=list)
 
 
 def parts_directory(path) -> Path:
@@ -110,7 +116,7 @@ def _part_path(parts: Path, c: int) -> Path:
 
 def simulate_to_file(
     system: System,
-    method: Integrator | str = "gni-trapezoid",
+    method: Integrator | str | None = None,
     q0=None,
     v0=None,
     *,
@@ -164,6 +170,10 @@ def simulate_to_file(
     release_compiled_programs_if_needed()
     if not isinstance(system, System):
         raise SystemError(f"system: expected a gnipy.System, got {type(system).__name__}")
+    if method is None:  # as simulate: the model's measured default
+        from .models.registry import default_method_for
+
+        method = default_method_for(system.name if isinstance(system, System) else "")
     if isinstance(method, str):
         method = get_method(method)
     if isinstance(method, ContinuousReference):
@@ -193,11 +203,18 @@ def simulate_to_file(
     b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
     method.check(system, b0)
     method = method.prepare(system, b0)
+    energy_invariant = energy_is_invariant(system, b0)
+    attrs = dict(attrs or {})
+    gni_family = type(method).hidden_momentum is not Integrator.hidden_momentum
+    attrs["conserved"] = conserved_quantity(system, b0, gni_family=gni_family,
+                                            invariants=registered_invariants(system.name))
 
     path = check_writable(path)
 
     n_chunks = -(-steps // chunk_steps)
     spec = {
+        # the part files' layout: `time` holds the times (parts of an earlier layout are not resumed)
+        "layout": "time-coordinate",
         "system": system.name, "params": dict(system.params), "method": method.name, "h": h, "steps": steps,
         "save_every": save_every, "chunk_steps": chunk_steps, "t0": t0,
         "q0": np.asarray(system.space.coordinates(b0)).tolist(), "v0": np.asarray(v0).tolist(),
@@ -246,7 +263,7 @@ def simulate_to_file(
         k_start = c * chunk_steps
         length = min(chunk_steps, steps - k_start)
         n_blocks, remainder = divmod(length, save_every)
-        b, v, p, energy, residual, fail_k, fail_res, its, state = _integrate(
+        b, v, p, energy, residual, fail_k, fail_res, its, state, diag = _integrate(
             method, core, state, hj, n_blocks, np.int32(save_every), np.int32(remainder), bool(remainder),
         )
         k_local = np.concatenate([np.arange(n_blocks + 1) * save_every, [length] if remainder else []]).astype(np.int64)
@@ -258,7 +275,11 @@ def simulate_to_file(
             keep &= k_local <= fail_k
             failed_step = k_start + fail_k
         q, R = system.space.coordinates(b), system.space.orientation(b)
-        ds = _chunk_dataset(system, q, v, p, energy, residual, R, keep, t0 + h * (k_start + k_local))
+        ds = _chunk_dataset(system, q, v, p, energy, residual, R, keep, t0 + h * (k_start + k_local), k_start + k_local)
+        if diag is not None:  # the GNI family's diagnostics at the nodes (as Solution.to_xarray writes them)
+            diag = saved_node_diagnostics(core, b, v, p, diag, h)
+            for name, a in zip(("hidden_momentum", "hidden_momentum_expected", "energy_plus"), diag):
+                ds[name] = (("time",), np.asarray(a)[keep])
         for i, leaf in enumerate(jax.tree_util.tree_leaves(state)):
             a = np.asarray(leaf)
             ds[f"state_{i}"] = (tuple(f"state_{i}_d{j}" for j in range(a.ndim)), a)
@@ -278,38 +299,49 @@ def simulate_to_file(
             n_chunks = c + 1
             break
 
-    return _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw)
+    return _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant)
 
 
 def _merge(files, nodes, path, system, method, h, steps, result, stats, n_chunks, attrs) -> None:
     import xarray as xr
 
+    from .io import _NODE_ATTRS, _STEP_ATTRS, _time_attrs, cf_attributes
+    from .solution import set_variable_attrs
+    from .system import describe_orientations
+
     ds = xr.open_mfdataset([str(f) for f in files], combine="nested", concat_dim="time", data_vars="minimal",
                            coords="minimal", compat="override", parallel=False)
     try:
         ds = ds.drop_vars([v for v in ds.data_vars if v.startswith("state_")])
-        ds = ds.assign_coords(time=np.arange(nodes), coordinate=list(system.coordinates),
-                              velocity=list(system.velocities), constraint=np.arange(ds.sizes["constraint"]))
-        for name, long in _LONG_NAMES.items():
-            if name in ds:
-                ds[name].attrs["long_name"] = long
+        for var in ds.variables.values():  # the parts' `coordinates` ("step"): xarray lists the merged ones
+            var.encoding.pop("coordinates", None)
+        # the parts hold `time` (the times) and `step`; the node index runs over the whole run
+        ds = ds.assign_coords(node=("time", np.arange(nodes, dtype=np.int64), dict(_NODE_ATTRS)))
+        ds["time"].attrs.update(_time_attrs())
+        ds["step"].attrs.update(_STEP_ATTRS)
+        ds = ds.assign_coords(coordinate=list(system.coordinates), velocity=list(system.velocities),
+                              constraint=np.arange(ds.sizes["constraint"]))
+        set_variable_attrs(ds)
         ds.attrs = {
+            **cf_attributes(system.name, method.name),
             "model": system.name, "method": method.name, "h": float(h), "steps": int(steps), "start": "p+ = G v0",
             "result": int(result), "newton_iterations_total": int(sum(s["it_tot"] for s in stats)),
             "newton_iterations_max": int(max(s["it_max"] for s in stats)), "streamed_chunks": int(n_chunks),
             "params": json.dumps(dict(system.params)),
             **{f"param_{k}": float(v) for k, v in system.params},
         }
+        if system.group is not None:
+            ds.attrs["orientation"] = describe_orientations(system)
         write_netcdf(ds, path, attrs=dict(attrs or {}))
     finally:
         ds.close()
 
 
-def _chunk_dataset(system, q, v, p, energy, residual, R, keep, times):
+def _chunk_dataset(system, q, v, p, energy, residual, R, keep, times, steps):
+    """The part file of one chunk: its nodes along `time` (the times), with their step indices."""
     import xarray as xr
 
     data = {
-        "t": (("time",), times[keep]),
         "q": (("time", "coordinate"), np.asarray(q)[keep]),
         "v": (("time", "velocity"), np.asarray(v)[keep]),
         "p": (("time", "velocity"), np.asarray(p)[keep]),
@@ -318,7 +350,7 @@ def _chunk_dataset(system, q, v, p, energy, residual, R, keep, times):
     }
     if R is not None:
         data["R"] = (("time", "i", "j"), np.asarray(R)[keep])
-    return xr.Dataset(data)
+    return xr.Dataset(data, coords={"time": times[keep], "step": ("time", np.asarray(steps, np.int64)[keep])})
 
 
 def _partial_result(path, parts, c, steps, n_chunks, resumed):
@@ -329,22 +361,19 @@ def _partial_result(path, parts, c, steps, n_chunks, resumed):
     )
 
 
-_LONG_NAMES = {
-    "t": "time", "q": "configuration", "v": "reported velocity", "p": "reported momentum",
-    "energy": "energy ½vᵀGv + V", "constraint_residual": "constraint residual mu(q)(v - Y(q))",
-    "R": "orientation R (group matrix)",
-}
-
-
-def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw):
+def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant=False):
     """Concatenate the parts (streamed through dask: one part in memory at a time) into `path`."""
     import xarray as xr
 
     files = [_part_path(parts, c) for c in range(n_chunks)]
     stats = []
+    verdicts = StreamedVerdicts(h, h * steps, energy_invariant)
     for f in files:
         with xr.open_dataset(f) as d:
             e = d["energy"].values
+            kinetic = 0.5 * np.sum(d["v"].values * d["p"].values, axis=-1)
+            hidden = (d["hidden_momentum"].values, d["hidden_momentum_expected"].values) if "hidden_momentum" in d else (None, None)
+            verdicts.update(d["time"].values, e, kinetic, *hidden)
             stats.append(dict(result=int(d.attrs["result"]), failed=int(d.attrs["failed_step"]),
                               residual=float(d.attrs["residual"]), it_tot=int(d.attrs["iterations_total"]),
                               it_max=int(d.attrs["iterations_max"]), e_min=float(e.min()) if e.size else np.inf,
@@ -361,6 +390,7 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
 
     # dask's synchronous scheduler: one part in memory at a time, and no concurrent HDF5 calls
     # (the netCDF library is not thread-safe; threaded reads of several parts can crash it)
+    attrs = dict(attrs or {}, **verdicts.attrs(method.name, system.name))
     with dask.config.set(scheduler="synchronous"):
         _merge(files, nodes, path, system, method, h, steps, result, stats, n_chunks, attrs)
     shutil.rmtree(parts, ignore_errors=True)
@@ -371,6 +401,7 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
         constraint_residual=max(s["res"] for s in stats),
         iterations=(int(sum(s["it_tot"] for s in stats)), int(max(s["it_max"] for s in stats))),
         final_q=np.asarray(last["q"][-1]), final_v=np.asarray(last["v"][-1]),
+        warnings=verdicts.warnings(method.name, system.name),
     )
     if result and throw:
         s = next(s for s in stats if s["result"])

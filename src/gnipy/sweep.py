@@ -16,14 +16,18 @@ reaches the store). The driver writes each chunk to the zarr store as soon as it
 arrives.
 
 **The store** (a zarr directory, written through xarray) is created up front at full
-size, with zarr chunks aligned to `chunk_size` along `member`. It holds `t(time)`,
-`q(member, time, coordinate)`, `v` and `p(member, time, velocity)`, `energy(member,
-time)`, `constraint_residual(member, time, constraint)`, `R(member, time, i, j)` on Rⁿ ×
-G, `result(member)` (0: ok, 1: a step failed), `failed_step(member)` (or -1),
-`valid(member, time)` (False after a member's failed step), `grid_<NAME>(member)` (each
-member's grid values) and `chunk_done(chunk)`. The attributes hold the sweep's
-specification as JSON (`sweep_spec`: model, method, h, steps, save_every, grid, fixed
-parameters, chunk size, gnipy version) and the same fields one by one for reading.
+size, with zarr chunks aligned to `chunk_size` along `member`. Its coordinate `time` holds
+the saved times (CF attributes, `units = "s"`), with `node(time)` (the saved-node index)
+and `step(time)` (the step index) beside it; it holds `q(member, time, coordinate)`,
+`v` and `p(member, time, velocity)`, `energy(member, time)`, `constraint_residual(member,
+time, constraint)`, `R(member, time, i, j)` on Rⁿ × G, `result(member)` (0: ok, 1: a
+step failed), `failed_step(member)` (or -1), `valid(member, time)` (False after a
+member's failed step), `grid_<NAME>(member)` (each member's grid values) and
+`chunk_done(chunk)`. The attributes hold the sweep's specification as JSON (`sweep_spec`:
+model, method, h, steps, save_every, grid, fixed parameters, chunk size, gnipy version)
+and the same fields one by one for reading, the CF attributes (`Conventions`, `title`,
+`source`, `history`) and, on Rⁿ × G, `orientation` (how R is reconstructed,
+:attr:`gnipy.System.orientation_description`).
 
 **Resuming.** For each chunk, the data are written first and its `chunk_done` flag last,
 so an interrupted sweep (killed, out of time, Ctrl-C) leaves at worst one chunk whose
@@ -246,6 +250,7 @@ class _Plan:
     velocities: tuple[str, ...]
     constraints: int
     matrix_size: int | None  # k of R (k, k), None on R^n
+    orientation: str = ""  # the attribute `orientation` (on R^n x G)
 
     @property
     def shape(self) -> tuple[int, ...]:
@@ -294,6 +299,10 @@ def _plan(
     from . import __version__
     from .methods import method_names
     from .models import get_model
+    from .models.registry import default_method_for
+
+    if method is None:  # the model's measured default
+        method = default_method_for(str(model))
     from .simulate import resolve_steps
 
     if not isinstance(model, str):
@@ -357,7 +366,7 @@ def _plan(
         "gnipy_version": __version__,
     }
     k = system.group.matrix_size if system.group is not None else None
-    m = _preflight(sweep_spec, axes, members)
+    m, orientation = _preflight(sweep_spec, axes, members)
     return _Plan(
         sweep_spec,
         tuple(axes),
@@ -369,13 +378,16 @@ def _plan(
         velocities,
         m,
         k,
+        orientation,
     )
 
 
-def _preflight(sweep_spec, axes, members) -> int:
+def _preflight(sweep_spec, axes, members) -> tuple[int, str]:
     """Check the corner members of the grid on the driver (fast, before any cluster
-    starts) and return the number of constraints."""
+    starts); return the number of constraints and the attribute `orientation` (from the
+    corner members' systems)."""
     from .methods import get_method
+    from .system import describe_orientations
 
     corners = sorted(
         {
@@ -395,7 +407,7 @@ def _preflight(sweep_spec, axes, members) -> int:
         b0 = _check_member(s, sweep_spec, columns, i, int(idx[i]), q0, v0, R0)
         method.check(s, b0)
         m = s.num_constraints(b0)
-    return m
+    return m, describe_orientations(systems if isinstance(systems, list) else [systems])
 
 
 def _describe_member(columns, i) -> str:
@@ -571,7 +583,8 @@ def _template(plan: _Plan):
     import xarray as xr
 
     from . import __version__
-    from .io import _jax_version
+    from .io import _jax_version, cf_attributes, time_coordinates
+    from .solution import set_variable_attrs
 
     T = len(plan.times)
     sizes = {
@@ -604,7 +617,6 @@ def _template(plan: _Plan):
             da.zeros(shape, chunks=chunks, dtype=dtype),
             {"long_name": long_name},
         )
-    variables["t"] = (("time",), plan.times, {"long_name": "time"})
     all_members = np.arange(plan.members)
     for a, col in _grid_columns(plan.axes, all_members).items():
         variables[f"grid_{a}"] = (("member",), col, {"long_name": f"grid value of {a}"})
@@ -617,7 +629,7 @@ def _template(plan: _Plan):
         variables,
         coords={
             "member": all_members,
-            "time": np.arange(T),
+            **time_coordinates(plan.times, plan.spec["h"]),
             "coordinate": np.array(plan.coordinates, dtype=object),
             "velocity": np.array(plan.velocities, dtype=object),
             "constraint": np.arange(plan.constraints),
@@ -627,7 +639,15 @@ def _template(plan: _Plan):
     for name in ("grid_" + a.name for a in plan.axes):
         ds[name].encoding["chunks"] = (plan.chunk,)
     ds["member"].encoding["chunks"] = (plan.chunk,)
+    ds["time"].encoding["_FillValue"] = None  # CF: a coordinate variable has no missing values
+    set_variable_attrs(ds)
     s = plan.spec
+    created = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    grid = " ".join(str(a) for a in plan.axes)
+    ds.attrs.update(cf_attributes(s["model"], s["method"], created=created,
+                                  title=f"sweep of {s['model']} with {s['method']} over {grid}"))
+    if plan.orientation:
+        ds.attrs["orientation"] = plan.orientation
     ds.attrs.update(
         {
             "sweep_spec": json.dumps(s, sort_keys=True),
@@ -648,7 +668,7 @@ def _template(plan: _Plan):
             "start": "p+ = G v0",
             "gnipy_version": __version__,
             "jax_version": _jax_version(),
-            "created": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            "created": created,
         }
     )
     return ds
@@ -947,7 +967,7 @@ def run_sweep(
     h: float,
     steps: int | None = None,
     t_final: float | None = None,
-    method: str = "gni-trapezoid",
+    method: str | None = None,
     save_every: int | None = None,
     set_params: Mapping[str, float] | None = None,
     project_v0: bool = True,
@@ -971,7 +991,8 @@ def run_sweep(
         h: the step size.
         steps / t_final: the number of steps, or the final time (a whole number of
             steps).
-        method: a method name (see :func:`gnipy.method_names`; not `"reference"`).
+        method: a method name (see :func:`gnipy.method_names`; not `"reference"`); default: the
+            model's measured default (`gni models`).
         save_every: the save stride (nodes 0, K, 2K, ... and the last); default `steps`:
             the initial and the last node only.
         set_params: fixed values of other parameters (the rest keep the model's
@@ -1182,11 +1203,13 @@ def open_sweep(path, *, allow_incomplete: bool = False):
     """
     import xarray as xr
 
+    from .io import upgrade_layout
+
     p = Path(path).expanduser()
     spec = _stored_spec(p) if p.is_dir() else None
     if spec is None:
         raise SweepError(f"path: {str(p)!r} is not a gnipy sweep store")
-    ds = xr.open_zarr(str(p), consolidated=False)
+    ds = upgrade_layout(xr.open_zarr(str(p), consolidated=False))  # stores with `t(time)` too
     axes = [GridAxis(**g) for g in spec["grid"]]
     shape = tuple(a.count for a in axes)
     done = np.asarray(ds["chunk_done"].values, dtype=bool)
@@ -1204,7 +1227,7 @@ def open_sweep(path, *, allow_incomplete: bool = False):
         ds["result"] = ds["result"].where(member_done, -1)
     dims = tuple(a.name for a in axes)
     out = {}
-    order = ["t", *_MEMBER_VARS, "chunk_done"]
+    order = [*_MEMBER_VARS, "chunk_done"]
     for name in sorted(
         ds.data_vars, key=lambda k: order.index(k) if k in order else len(order)
     ):

@@ -54,6 +54,16 @@ class System(eqx.Module):
         group: a Lie group from :mod:`gnipy.lie_groups` (e.g. `SO3()`), or None for $\\mathbb{R}^n$.
         retraction: `"cayley"` (default) or `"exp"`, or a retraction object: how steps move on G.
         depends_on_orientation: the functions take R (the Lie groupoid case of paper §9).
+        reconstruction: how a *reduced* system's orientation follows from its group velocity ξ:
+            `"left"` (default) reads ξ as the body velocity, $\\dot R = R\\hat\\xi$ and
+            $R_{k+1} = R_k\\tau(\\sigma_k)$; `"right"` as the space velocity, $\\dot R = \\hat\\xi R$ and
+            $R_{k+1} = \\tau(\\sigma_k)R_k$ (e.g. the rolling ball of paper §7.4, whose constraints hold
+            for the space angular velocity). The equations of $(x, \\xi)$ are the same either way;
+            only R differs (:class:`~gnipy.spaces.GroupSpace`). Systems that depend on R need
+            `"left"`.
+        orientation_note: a sentence on what R means for this system, appended to the file
+            attribute `orientation` (:attr:`orientation_description`), e.g. that it is not a
+            physical attitude for these parameters.
         coordinates: names of the coordinates x (default `q0, q1, ...`).
         velocities: names of the N velocity components (default `d<coordinate>` then the group's).
         name: a short name used in reports and files.
@@ -74,6 +84,7 @@ class System(eqx.Module):
     name: str = eqx.field(static=True)
     params: tuple[tuple[str, float], ...] = eqx.field(static=True)
     defaults: tuple | None = eqx.field(static=True)
+    orientation_note: str = eqx.field(static=True)
 
     def __init__(
         self,
@@ -85,11 +96,13 @@ class System(eqx.Module):
         group=None,
         retraction="cayley",
         depends_on_orientation: bool = False,
+        reconstruction: str = "left",
         coordinates: Sequence[str] | None = None,
         velocities: Sequence[str] | None = None,
         name: str = "system",
         params: dict[str, float] | None = None,
         defaults: tuple | None = None,
+        orientation_note: str | None = None,
     ):
         if not callable(lagrangian):
             raise SystemError(f"lagrangian: expected a callable l(q, v), got {type(lagrangian).__name__}")
@@ -111,9 +124,13 @@ class System(eqx.Module):
         coordinates = tuple(str(c) for c in coordinates)
         if len(coordinates) != n:
             raise SystemError(f"coordinates: expected {n} names, got {len(coordinates)}")
+        if reconstruction not in ("left", "right"):
+            raise SystemError(f"reconstruction: expected 'left' or 'right', got {reconstruction!r}")
         if group is None:
             if depends_on_orientation:
                 raise SystemError("depends_on_orientation: only meaningful with a group")
+            if reconstruction != "left":
+                raise SystemError("reconstruction: only meaningful with a group")
             space = EuclideanSpace(n)
             group_names: tuple[str, ...] = ()
         else:
@@ -129,7 +146,13 @@ class System(eqx.Module):
                     raise SystemError(str(e)) from e
             if not isinstance(retraction, Retraction):
                 raise SystemError(f"retraction: expected 'cayley', 'exp' or a Retraction, got {retraction!r}")
-            space = GroupSpace(n, group, retraction)
+            if reconstruction == "right" and depends_on_orientation:
+                raise SystemError(
+                    "reconstruction: 'right' (R from the space velocity, dR/dt = hat(xi) R) is for reduced "
+                    "systems only; a system that depends on the orientation (depends_on_orientation=True) "
+                    "needs the left-trivialized equations, reconstruction='left'"
+                )
+            space = GroupSpace(n, group, retraction, reconstruction)
             group_names = tuple(getattr(group, "velocity_names", None) or (f"xi{i}" for i in range(group.dim)))
         if velocities is None:
             velocities = tuple(f"d{c}" for c in coordinates) + tuple(group_names)
@@ -148,6 +171,7 @@ class System(eqx.Module):
         if defaults is not None:
             defaults = tuple(None if d is None else tuple(float(x) for x in np.ravel(d)) for d in defaults)
         self.defaults = defaults
+        self.orientation_note = "" if orientation_note is None else str(orientation_note)
 
     # ----------------------------------------------------------------------------------------
     # Evaluating the user's functions at a base point b (q on R^n, Point(x, R) on R^n x G)
@@ -166,6 +190,30 @@ class System(eqx.Module):
     def group(self):
         """The Lie group G, or None on $\\mathbb{R}^n$."""
         return getattr(self.space, "group", None)
+
+    @property
+    def reconstruction(self) -> str | None:
+        """`"left"` or `"right"`: how R follows from the group velocity (see the constructor); None
+        on $\\mathbb{R}^n$."""
+        return getattr(self.space, "reconstruction", None)
+
+    @property
+    def orientation_description(self) -> str:
+        """What the orientations R of a solution are, as one sentence (the file attribute
+        `orientation`): the velocity they are reconstructed from and how, plus the system's
+        `orientation_note`; empty on $\\mathbb{R}^n$."""
+        if self.group is None:
+            return ""
+        names = self.velocities[self.n:]
+        xi = f"xi = ({', '.join(names)})" if names else "xi"
+        if self.reconstruction == "right":
+            text = (f"R reconstructed from the space velocity {xi} = (dR/dt R^-1)^vee: dR/dt = hat(xi) R; "
+                    "steps R_(k+1) = tau(sigma_k) R_k")
+        else:
+            verb = "integrated with" if self.depends_on_orientation else "reconstructed from"
+            text = (f"R {verb} the body velocity {xi} = (R^-1 dR/dt)^vee: dR/dt = R hat(xi); "
+                    "steps R_(k+1) = R_k tau(sigma_k)")
+        return f"{text}; {self.orientation_note}" if self.orientation_note else text
 
     @property
     def parameters(self) -> dict[str, float]:
@@ -233,7 +281,7 @@ class System(eqx.Module):
         return self.affine is not None
 
     def without_metadata(self) -> "System":
-        """A copy without the provenance fields `params` and `defaults`.
+        """A copy without the provenance fields `params`, `defaults` and `orientation_note`.
 
         This is what compiled code receives: systems that differ only in parameter values then
         share one compilation, and can be stacked into a batch (their parameters are array
@@ -246,6 +294,7 @@ class System(eqx.Module):
             object.__setattr__(new, f.name, getattr(self, f.name))
         object.__setattr__(new, "params", ())
         object.__setattr__(new, "defaults", None)
+        object.__setattr__(new, "orientation_note", "")
         return new
 
     # ----------------------------------------------------------------------------------------
@@ -404,6 +453,20 @@ class System(eqx.Module):
         ws = jnp.asarray(0.3 * rng.standard_normal((2, self.dim)))
         dG = np.asarray(_metric_derivatives(self.without_metadata(), b0, ws))
         return not np.any(dG != 0.0)
+
+
+def describe_orientations(systems) -> str:
+    """The file attribute `orientation` of a run of `systems` (one System, or the members of a
+    batch): :attr:`System.orientation_description`, the members' different notes joined (e.g.
+    where R is physical for some parameter values and not for others); empty on $\\mathbb{R}^n$."""
+    if isinstance(systems, System):
+        systems = [systems]
+    texts = list(dict.fromkeys(s.orientation_description for s in systems))
+    if len(texts) <= 1:
+        return texts[0] if texts else ""
+    notes = list(dict.fromkeys(s.orientation_note for s in systems if s.orientation_note))
+    base = systems[0].without_metadata().orientation_description
+    return f"{base}; depending on the member: " + " | ".join(notes)
 
 
 @jit

@@ -156,8 +156,14 @@ def stubs(monkeypatch):
         progress(1.0, "errata: done")
         return list(ERRATA)
 
+    def struggle_figures(out_dir, quick, progress=None):
+        progress(1.0, "struggles: done")
+        return [_figure(Path(out_dir), 4)]
+
+    import gnipy.experiments.struggles as st
     import gnipy.experiments.theorems as th
 
+    monkeypatch.setattr(st, "struggle_figures", struggle_figures)
     monkeypatch.setattr(th, "theorem_table", theorem_table)
     monkeypatch.setattr(th, "errata_rows", errata_rows)
     monkeypatch.setattr(rp, "_figure_functions", lambda: _stub_figures(state["fail_second"]))
@@ -169,7 +175,10 @@ def test_reproduce_writes_the_report(tmp_path, stubs, capsys):
     assert path == tmp_path / "out" / "report.html" and path.exists()
     assert (tmp_path / "out" / "report.md").exists()
     page = path.read_text(encoding="utf-8")
-    assert page.count("data:image/png;base64,") == 3 and "quick" in page
+    # the paper's three figures and the section "Where the GNI struggles" (one stub figure here)
+    assert page.count("data:image/png;base64,") == 4 and "quick" in page
+    assert "<h2>Where the GNI struggles</h2>" in page
+    assert "## Where the GNI struggles" in (tmp_path / "out" / "report.md").read_text(encoding="utf-8")
     out = capsys.readouterr().out
     assert "PASS" in out and "1 of 1 theorem rows pass" in out and "report.html" in out
 
@@ -200,7 +209,7 @@ def test_command_exit_codes(tmp_path, stubs):
     res = runner.invoke(_app(), ["reproduce", "--quick", "--out", str(tmp_path / "c")])
     assert res.exit_code == 1, res.output
     page = (tmp_path / "c" / "report.html").read_text(encoding="utf-8")
-    assert "stub failure" in page and page.count("data:image/png;base64,") == 2
+    assert "stub failure" in page and page.count("data:image/png;base64,") == 3
 
 
 def test_command_help_is_the_docstring():

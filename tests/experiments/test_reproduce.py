@@ -24,3 +24,9 @@ def test_gni_reproduce_quick(tmp_path):
     m = re.search(r"Theorem table: (\d+) of (\d+) claims pass", md)
     assert m and m.group(1) == m.group(2) and int(m.group(2)) >= 10, m
     assert "| FAIL |" not in md
+    # where the GNI struggles: the three measured failures, each reported by its diagnostic
+    assert "## Where the GNI struggles" in md
+    for name in ("struggles_sleigh", "struggles_suslov", "struggles_oscillator"):
+        assert (out / f"{name}.png").stat().st_size > 1000
+    assert re.search(r"The verdict fires at t = [0-9.]+", md)
+    assert "energy verdict" in md and "out of band at t =" in md

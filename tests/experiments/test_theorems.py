@@ -169,11 +169,14 @@ def test_fitted_order_recovers_known_slopes():
 def test_cayley_steps_invert_the_cayley_map():
     rng = np.random.default_rng(0)
     sig = 0.3 * rng.standard_normal((6, 3))
-    R = [np.eye(3)]
+    R, R_right = [np.eye(3)], [np.eye(3)]
     for s in sig:
         S = np.array([[0.0, -s[2], s[1]], [s[2], 0.0, -s[0]], [-s[1], s[0], 0.0]])
-        R.append(R[-1] @ np.linalg.solve(np.eye(3) - S / 2, np.eye(3) + S / 2))  # cay(σ)
+        cay = np.linalg.solve(np.eye(3) - S / 2, np.eye(3) + S / 2)
+        R.append(R[-1] @ cay)
+        R_right.append(cay @ R_right[-1])  # R_{k+1} = cay(σ_k) R_k (e.g. rolling-ball)
     np.testing.assert_allclose(th.cayley_steps(np.array(R)), sig, atol=1e-14)
+    np.testing.assert_allclose(th.cayley_steps(np.array(R_right), right=True), sig, atol=1e-14)
 
 
 def test_run_all_nodes_matches_simulate():

@@ -141,7 +141,8 @@ def test_rat_equals_the_gni_core(name, runs):
 
 @pytest.mark.parametrize("name", CASES)
 def test_rat_variables_match_their_definitions(name, runs):
-    """From the saved (x_k, R_k) alone: ξ_k = cay⁻¹(R_kᵀR_{k+1})/h, then the paper's
+    """From the saved (x_k, R_k) alone: ξ_k = cay⁻¹(R_kᵀR_{k+1})/h (cay⁻¹(R_{k+1}R_kᵀ)/h for the rolling
+    ball, whose R is reconstructed from the space angular velocity, R_{k+1} = cay(hξ_k)R_k), then the paper's
     p̃_k = G_xx(x_{k+1} − x_{k−1})/2h + ½G_xξ(ξ_k + ξ_{k−1}) and, with
     M̃_k = (dcay⁻¹_{hξ_k})ᵀ D₃l_d(x_k, x_{k+1}, hξ_k), D₃l_d = G_ξx Δ_k + G_ξξ ξ_k, the group part
     ½(M̃_k + Ad*_{cay(hξ_{k−1})}M̃_{k−1}) of the reported momentum p̄_k (Ad*_R = Rᵀ)."""
@@ -150,8 +151,12 @@ def test_rat_variables_match_their_definitions(name, runs):
     G = _np(s.metric(Point(jnp.zeros(2), jnp.eye(3))))
     Gxx, Gxs, Gss = G[:2, :2], G[:2, 2:], G[2:, 2:]
     x, R, p = _np(rat.q), _np(rat.R), _np(rat.p)
-    sig = np.array([cay_inv(R[k].T @ R[k + 1]) for k in range(N)])
-    np.testing.assert_allclose([cay(sg) for sg in sig], np.einsum("kji,kjl->kil", R[:-1], R[1:]), atol=1e-14)
+    if s.reconstruction == "right":
+        increments = np.einsum("kij,klj->kil", R[1:], R[:-1])  # R_{k+1}R_kᵀ
+    else:
+        increments = np.einsum("kji,kjl->kil", R[:-1], R[1:])  # R_kᵀR_{k+1}
+    sig = np.array([cay_inv(g) for g in increments])
+    np.testing.assert_allclose([cay(sg) for sg in sig], increments, atol=1e-14)
     xi = sig / H
     D = np.diff(x, axis=0) / H
     pt = (x[2:] - x[:-2]) @ Gxx.T / (2 * H) + 0.5 * (xi[1:] + xi[:-1]) @ Gxs.T

@@ -54,8 +54,9 @@ def cay_inv(Q):
 
 
 def step_angular_velocities(R, h):
-    """ω_k = σ_k/h with σ_k = cay⁻¹(R_kᵀR_{k+1})."""
-    return np.array([cay_inv(R[k].T @ R[k + 1]) for k in range(len(R) - 1)]) / h
+    """ω_k = σ_k/h with σ_k = cay⁻¹(R_{k+1}R_kᵀ) (the model's reconstruction R_{k+1} = cay(σ_k)R_k:
+    ω is the space angular velocity)."""
+    return np.array([cay_inv(R[k + 1] @ R[k].T) for k in range(len(R) - 1)]) / h
 
 
 def five_equations(p, x, y, w, h, *, order2=True, order1=True):
@@ -225,7 +226,8 @@ def test_printed_sign_of_RBb_violates_the_constraint_equations():
     s, q0, v0 = rb.example_2()
     p = rb.EXAMPLE_2["params"]
     flipped = gnipy.System(s.lagrangian, s.constraints, jtu.Partial(_negated_affine, jnp.asarray(p["Omega"])),
-                           n=2, group=SO3(), retraction="cayley", name="rolling-ball-printed-RBb")
+                           n=2, group=SO3(), retraction="cayley", reconstruction="right",
+                           name="rolling-ball-printed-RBb")
     sol = gnipy.simulate(flipped, "gni-euler-a", q0, v0, h=H_EQ, steps=40, project_v0=True)
     res = relative_residuals(p, sol, H_EQ)
     assert np.max(res[:3]) <= 1e-12, res
@@ -308,6 +310,87 @@ def test_example_2_converges_to_the_reference_and_J(ex2_runs):
 
 
 # --------------------------------------------------------------------------------------------
+# The attitude: R from the space angular velocity, as the paper's constraints use ω
+# --------------------------------------------------------------------------------------------
+T_SPHERE, H_SPHERE = 20.0, (0.02, 0.01)  # saved every 0.2: 101 nodes, one compilation per model
+
+
+@pytest.fixture(scope="module")
+def ball_and_sphere():
+    """`rolling-ball` and `chaplygin-sphere` with I1 = I2 = I3 from the same x, y, ω (R0 = I, where
+    the sphere's body angular velocity equals the space one), on a turning and a fixed table:
+    the reference and the GNI (midpoint) at two step sizes of each."""
+    out = {}
+    for Omega in (1.0, 0.0):
+        p = dict(m=1.0, r=1.0, I1=2.0 / 3.0, I2=2.0 / 3.0, I3=2.0 / 3.0, Omega=Omega)
+        q0 = (1.0, 1.0)
+        v0 = rb.velocity_from_constraints(p, q0, (0.3, 2.0, -0.5))
+        runs = {}
+        for name in ("rolling-ball", "chaplygin-sphere"):
+            s = gnipy.make_system(name, **p)
+            runs[name, "ref"] = gnipy.simulate(s, "reference", q0, v0, h=0.2, t_final=T_SPHERE)
+            for h in H_SPHERE:
+                runs[name, h] = gnipy.simulate(s, "gni-midpoint", q0, v0, h=h, t_final=T_SPHERE,
+                                               save_every=round(0.2 / h))
+        out[Omega] = runs
+    return out
+
+
+@pytest.mark.parametrize("Omega", [1.0, 0.0])
+def test_attitude_is_the_physical_ball_for_equal_moments(ball_and_sphere, Omega):
+    """With ω the space angular velocity (Ṙ = ω̂R, R_{k+1} = cay(σ_k)R_k) the model's R is the
+    physical ball's: the continuous solutions agree to 1e-10 at T = 20, and so do the GNI runs
+    (to round-off: the two GNIs are one map here), which converge to it at order 2."""
+    runs = ball_and_sphere[Omega]
+    ball, sphere = runs["rolling-ball", "ref"], runs["chaplygin-sphere", "ref"]
+    assert np.max(np.abs(_np(ball.q) - _np(sphere.q))) <= 1e-10
+    assert np.max(np.abs(_np(ball.R) - _np(sphere.R))) <= 1e-10
+    assert np.max(np.abs(_np(ball.R) - np.eye(3))) > 1.0  # the ball turns
+    errors = []
+    for h in H_SPHERE:
+        gb, gs = runs["rolling-ball", h], runs["chaplygin-sphere", h]
+        assert np.max(np.abs(_np(gb.R) - _np(gs.R))) <= 1e-10
+        errors.append(np.max(np.abs(_np(gb.R) - _np(ball.R))))
+    assert fitted_order(H_SPHERE, errors) == pytest.approx(2.0, abs=0.1), errors
+
+
+def test_left_reconstruction_is_not_the_attitude_and_changes_only_R():
+    """Read as the body angular velocity (Ṙ = Rω̂), ω gives another R (off by O(1) at T = 20 on the
+    turning table); the motion of (x, y, ω) is the same to the last bit."""
+    p = dict(m=1.0, r=1.0, I1=2.0 / 3.0, I2=2.0 / 3.0, I3=2.0 / 3.0, Omega=1.0)
+    q0 = (1.0, 1.0)
+    v0 = rb.velocity_from_constraints(p, q0, (0.3, 2.0, -0.5))
+    kw = dict(h=0.02, t_final=T_SPHERE, save_every=10)
+    right = gnipy.simulate(rb.build_system(p), "gni-midpoint", q0, v0, **kw)
+    left = gnipy.simulate(rb.build_system(p, reconstruction="left"), "gni-midpoint", q0, v0, **kw)
+    for name in ("q", "v", "p", "energy", "constraint_residual"):
+        np.testing.assert_array_equal(_np(getattr(left, name)), _np(getattr(right, name)), err_msg=name)
+    assert np.max(np.abs(_np(left.R) - _np(right.R))) > 1.0
+    assert "body velocity" in left.orientation and "space velocity" in right.orientation
+
+
+def test_orientation_attribute_says_whether_R_is_physical():
+    s, q0, v0 = rb.example_2()  # unequal moments: the paper's simplified model
+    assert s.reconstruction == "right"
+    ds = gnipy.simulate(s, "gni-midpoint", q0, v0, h=0.1, steps=2).to_xarray()
+    assert "dR/dt = hat(xi) R" in ds.attrs["orientation"]
+    assert "R is not a physical attitude" in ds.attrs["orientation"]
+    # a batch over the moments: the attribute names both cases
+    systems = [gnipy.make_system("rolling-ball", I1=I) for I in (2.0 / 3.0, 1.0)]
+    sol = gnipy.simulate(systems, "gni-midpoint", np.stack([(1.0, 1.0)] * 2), np.stack([(1.0, 1.0, 0.0, 2.0, 0.0)] * 2),
+                         h=0.1, steps=2)
+    text = sol.to_xarray().attrs["orientation"]
+    assert "depending on the member" in text and "physical ball" in text and "not a physical attitude" in text
+
+
+def test_other_group_models_keep_the_body_reconstruction():
+    for name in gnipy.model_names():
+        s = gnipy.make_system(name)
+        if s.group is not None:
+            assert s.reconstruction == ("right" if name == "rolling-ball" else "left"), name
+
+
+# --------------------------------------------------------------------------------------------
 # Discrete Lagrange–d'Alembert on R² × SO(3)
 # --------------------------------------------------------------------------------------------
 def test_dla_discrete_constraint_and_convergence():
@@ -320,7 +403,7 @@ def test_dla_discrete_constraint_and_convergence():
     for h in hs:
         sol = gnipy.simulate(s, "dla", q0, v0, h=h, t_final=T_CONV)
         x, R = _np(sol.q), _np(sol.R)
-        sigma = np.array([cay_inv(R[k].T @ R[k + 1]) for k in range(len(R) - 1)])
+        sigma = np.array([cay_inv(R[k + 1] @ R[k].T) for k in range(len(R) - 1)])
         vel = np.concatenate([np.diff(x, axis=0) / h, sigma / h], axis=1)
         xm = 0.5 * (x[1:] + x[:-1])
         mu = np.array([[1.0, 0, 0, -p["r"], 0], [0, 1.0, p["r"], 0, 0]])
@@ -357,6 +440,9 @@ def test_cli_run_writes_orientations(tmp_path):
     assert list(ds["coordinate"].values) == ["x", "y"] and ds.sizes["velocity"] == 5
     np.testing.assert_array_equal(ds.attrs["R0"], np.eye(3).ravel())
     assert ds.attrs["max_error_q_vs_exact"] < 1e-2 and ds.attrs["invariant_drift_spin"] < 1e-13
+    # the file says how R was reconstructed, and that it is the ball's attitude (equal moments)
+    assert "space velocity" in ds.attrs["orientation"] and "dR/dt = hat(xi) R" in ds.attrs["orientation"]
+    assert "R is the attitude of the physical ball" in ds.attrs["orientation"]
 
     # --x0 (2 values), --v0 (5 values) and --R0 (9 values): on the constraints at x0
     out2 = tmp_path / "g.nc"

@@ -214,7 +214,8 @@ def paper_start(system, q0, omega0, h: float, R0=None) -> GNIState:
     $(x_1, y_1)$ solve the two-point (forward-difference) version of the last two equations of §7.4,
     i.e. the constraints (Cona), (Conb) at node 0:
     $(x_1 - x_0)/h + \\Omega y_0 - r\\omega^0_2 = 0$, $(y_1 - y_0)/h - \\Omega x_0 + r\\omega^0_1 = 0$;
-    $\\sigma_0 = h\\omega^0$ and $R_1 = R_0\\,\\mathrm{cay}(\\sigma_0)$; the post-momentum is
+    $\\sigma_0 = h\\omega^0$ and $R_1$ from $\\sigma_0$ by the model's reconstruction
+    ($\\mathrm{cay}(\\sigma_0)R_0$ for `rolling-ball`, :meth:`~gnipy.spaces.GroupSpace.advance`); the post-momentum is
     $p^+_1 = FL^+(b_0, (x_1 - x_0, \\sigma_0))$ with the paper's $l_d = h\\,l(q_k, \\Delta, \\omega_k)$
     (Euler A), computed by the space's `legendre_plus`. The GNI continues from $(b_1, p^+_1)$.
     """

@@ -107,7 +107,34 @@ def _md_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> list[str]
     return lines
 
 
-def _markdown(out_dir: Path, figures, theorems, errata, meta) -> str:
+STRUGGLES_INTRO = ("Measured failures of the GNI family beyond the paper's examples, each with the run-time "
+                   "diagnostic that reports it (gnipy.diagnostics) and a method that works there.")
+
+
+def _md_figure(out_dir: Path, fig) -> list[str]:
+    """One figure (image, other files, caption, table, metrics, notes) as Markdown lines."""
+    lines = [f"### {fig.title}", ""]
+    for f in fig.files:
+        if Path(f).suffix.lower() == ".png":
+            rel = Path(os.path.relpath(Path(f), out_dir)).as_posix()
+            lines += [f"![{fig.name}]({rel})", ""]
+    others = [Path(f).name for f in fig.files if Path(f).suffix.lower() != ".png"]
+    if others:
+        lines += ["Also: " + ", ".join(f"[{n}]({n})" for n in others), ""]
+    lines += [f"*{' '.join(str(fig.caption).split())}*", ""]
+    if fig.table:
+        lines += _md_table(_columns(fig.table), ([row.get(c, "") for c in _columns(fig.table)] for row in fig.table))
+        lines += [""]
+    if fig.metrics:
+        lines += ["Metrics:", ""]
+        lines += _md_table(["metric", "value"], fig.metrics.items())
+        lines += [""]
+    if fig.notes:
+        lines += [f"- {' '.join(str(n).split())}" for n in fig.notes] + [""]
+    return lines
+
+
+def _markdown(out_dir: Path, figures, theorems, errata, meta, struggles=()) -> str:
     n_pass = sum(bool(r.passed) for r in theorems)
     lines = [f"# {REPORT_TITLE}", "", f"Paper: {PAPER}.", "", "## Provenance", ""]
     lines += _md_table(["", ""], _meta_items(meta))
@@ -117,24 +144,11 @@ def _markdown(out_dir: Path, figures, theorems, errata, meta) -> str:
 
     lines += ["## Figures", ""]
     for fig in figures:
-        lines += [f"### {fig.title}", ""]
-        for f in fig.files:
-            if Path(f).suffix.lower() == ".png":
-                rel = Path(os.path.relpath(Path(f), out_dir)).as_posix()
-                lines += [f"![{fig.name}]({rel})", ""]
-        others = [Path(f).name for f in fig.files if Path(f).suffix.lower() != ".png"]
-        if others:
-            lines += ["Also: " + ", ".join(f"[{n}]({n})" for n in others), ""]
-        lines += [f"*{' '.join(str(fig.caption).split())}*", ""]
-        if fig.table:
-            lines += _md_table(_columns(fig.table), ([row.get(c, "") for c in _columns(fig.table)] for row in fig.table))
-            lines += [""]
-        if fig.metrics:
-            lines += ["Metrics:", ""]
-            lines += _md_table(["metric", "value"], fig.metrics.items())
-            lines += [""]
-        if fig.notes:
-            lines += [f"- {' '.join(str(n).split())}" for n in fig.notes] + [""]
+        lines += _md_figure(out_dir, fig)
+    if struggles:
+        lines += ["## Where the GNI struggles", "", STRUGGLES_INTRO, ""]
+        for fig in struggles:
+            lines += _md_figure(out_dir, fig)
 
     lines += ["## Theorems", "", f"{n_pass} of {len(theorems)} pass.", ""]
     lines += _md_table(["#", "claim", "paper", "expected", "measured", "result"],
@@ -205,7 +219,31 @@ def _data_uri(path: Path) -> str | None:
     return "data:image/png;base64," + base64.b64encode(data).decode("ascii")
 
 
-def _html(out_dir: Path, figures, theorems, errata, meta) -> str:
+def _html_figure(fig) -> list[str]:
+    """One figure as HTML, its PNG images embedded."""
+    parts = [f"<h3>{_e(fig.title)}</h3>"]
+    for f in fig.files:
+        if Path(f).suffix.lower() == ".png":
+            uri = _data_uri(Path(f))
+            if uri is None:
+                parts.append(f'<p class="fail">Image missing: {_e(Path(f).name)}</p>')
+            else:
+                parts.append(f'<figure><img alt="{_e(fig.name)}" src="{uri}"></figure>')
+    others = [Path(f).name for f in fig.files if Path(f).suffix.lower() != ".png"]
+    if others:
+        parts.append(f'<p class="small">Also written next to this report: {_e(", ".join(others))}.</p>')
+    parts.append(f'<p class="caption">{_e(fig.caption)}</p>')
+    if fig.table:
+        cols = _columns(fig.table)
+        parts += _html_table(cols, ([row.get(c, "") for c in cols] for row in fig.table))
+    if fig.metrics:
+        parts += _html_table(["metric", "value"], fig.metrics.items())
+    if fig.notes:
+        parts.append("<ul>" + "".join(f"<li>{_e(n)}</li>" for n in fig.notes) + "</ul>")
+    return parts
+
+
+def _html(out_dir: Path, figures, theorems, errata, meta, struggles=()) -> str:
     n_pass = sum(bool(r.passed) for r in theorems)
     parts = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
              f"<title>{_e(REPORT_TITLE)}</title>", f"<style>{_CSS}</style>", "</head>", "<body>",
@@ -217,25 +255,11 @@ def _html(out_dir: Path, figures, theorems, errata, meta) -> str:
 
     parts.append("<h2>Figures</h2>")
     for fig in figures:
-        parts.append(f"<h3>{_e(fig.title)}</h3>")
-        for f in fig.files:
-            if Path(f).suffix.lower() == ".png":
-                uri = _data_uri(Path(f))
-                if uri is None:
-                    parts.append(f'<p class="fail">Image missing: {_e(Path(f).name)}</p>')
-                else:
-                    parts.append(f'<figure><img alt="{_e(fig.name)}" src="{uri}"></figure>')
-        others = [Path(f).name for f in fig.files if Path(f).suffix.lower() != ".png"]
-        if others:
-            parts.append(f'<p class="small">Also written next to this report: {_e(", ".join(others))}.</p>')
-        parts.append(f'<p class="caption">{_e(fig.caption)}</p>')
-        if fig.table:
-            cols = _columns(fig.table)
-            parts += _html_table(cols, ([row.get(c, "") for c in cols] for row in fig.table))
-        if fig.metrics:
-            parts += _html_table(["metric", "value"], fig.metrics.items())
-        if fig.notes:
-            parts.append("<ul>" + "".join(f"<li>{_e(n)}</li>" for n in fig.notes) + "</ul>")
+        parts += _html_figure(fig)
+    if struggles:
+        parts += ["<h2>Where the GNI struggles</h2>", f"<p>{_e(STRUGGLES_INTRO)}</p>"]
+        for fig in struggles:
+            parts += _html_figure(fig)
 
     parts += ["<h2>Theorems</h2>", f"<p>{n_pass} of {len(theorems)} pass.</p>"]
     parts += _html_table(
@@ -278,7 +302,7 @@ def _write_atomic(path: Path, text: str) -> None:
 
 
 def write_report(out_dir, figures: Sequence, theorems: Sequence, errata: Sequence,
-                 meta: Mapping[str, Any]) -> tuple[Path, Path]:
+                 meta: Mapping[str, Any], struggles: Sequence = ()) -> tuple[Path, Path]:
     """Write `report.md` and the self-contained `report.html` into `out_dir`.
 
     Arguments:
@@ -290,6 +314,8 @@ def write_report(out_dir, figures: Sequence, theorems: Sequence, errata: Sequenc
         errata: :class:`~gnipy.experiments.theorems.Erratum` objects.
         meta: provenance, e.g. `gnipy_version`, `date`, `machine`, `mode`, `runtime_s` (shown first,
             in that order), then any other keys.
+        struggles: the figures of the section "Where the GNI struggles"
+            (:mod:`gnipy.experiments.struggles`), after the paper's figures.
 
     Returns:
         `(md_path, html_path)`.
@@ -297,6 +323,6 @@ def write_report(out_dir, figures: Sequence, theorems: Sequence, errata: Sequenc
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     md_path, html_path = out_dir / "report.md", out_dir / "report.html"
-    _write_atomic(md_path, _markdown(out_dir, figures, theorems, errata, meta))
-    _write_atomic(html_path, _html(out_dir, figures, theorems, errata, meta))
+    _write_atomic(md_path, _markdown(out_dir, figures, theorems, errata, meta, struggles))
+    _write_atomic(html_path, _html(out_dir, figures, theorems, errata, meta, struggles))
     return md_path, html_path

@@ -1,4 +1,5 @@
-"""Reproduce the paper in one call: figures 1–3, the theorem table, the errata, and the report.
+"""Reproduce the paper in one call: figures 1–3, the theorem table, the errata, where the GNI
+struggles (measured failures beyond the paper, :mod:`.struggles`), and the report.
 
 :func:`reproduce` runs every stage with a rich progress display (one bar per stage, fed by the
 stages' `progress(advance, description)` callbacks), writes `report.md` and the self-contained
@@ -38,6 +39,7 @@ class ReproductionResult:
         theorems: the theorem table rows.
         errata: the errata.
         failures: the stages that raised, as "stage: error" strings.
+        struggles: the figures of "Where the GNI struggles" (:mod:`gnipy.experiments.struggles`).
         runtime_s: total run time.
     """
 
@@ -48,6 +50,7 @@ class ReproductionResult:
     errata: list
     failures: list[str]
     runtime_s: float
+    struggles: list = dataclasses.field(default_factory=list)
 
     @property
     def ok(self) -> bool:
@@ -140,8 +143,8 @@ def run_reproduction(out_dir: Path, quick: bool, *, console=None) -> Reproductio
     console = console or _console()
     figure_fns = _figure_functions()
     stages: list[tuple[str, str]] = [(name, f"Figure {name[-1]}") for name in FIGURE_NAMES]
-    stages += [("theorems", "Theorem table"), ("errata", "Errata")]
-    figures, theorems, errata, failures, stage_times = [], [], [], [], {}
+    stages += [("theorems", "Theorem table"), ("errata", "Errata"), ("struggles", "Where the GNI struggles")]
+    figures, theorems, errata, struggles, failures, stage_times = [], [], [], [], [], {}
 
     err_console = _console(stderr=True)
     columns = (SpinnerColumn(), TextColumn("{task.description:<44.44}", markup=False), BarColumn(bar_width=20),
@@ -165,6 +168,10 @@ def run_reproduction(out_dir: Path, quick: bool, *, console=None) -> Reproductio
                     figures.append(fn(out_dir, quick, advance))
                 elif key == "theorems":
                     theorems = theorem_table(quick, advance)
+                elif key == "struggles":
+                    from .struggles import struggle_figures
+
+                    struggles = struggle_figures(out_dir, quick, advance)
                 else:
                     errata = errata_rows(quick, advance)
                 progress.update(task, completed=1.0, description=f"{label}: done")
@@ -190,9 +197,9 @@ def run_reproduction(out_dir: Path, quick: bool, *, console=None) -> Reproductio
     }
     if failures:
         meta["failed_stages"] = "; ".join(failures)
-    md_path, html_path = write_report(out_dir, figures, theorems, errata, meta)
+    md_path, html_path = write_report(out_dir, figures, theorems, errata, meta, struggles)
     result = ReproductionResult(html_path, md_path, figures, theorems, errata, failures,
-                                time.perf_counter() - t_start)
+                                time.perf_counter() - t_start, struggles)
     _print_summary(console, result, quick)
     return result
 

@@ -328,7 +328,8 @@ def _bare(system: System) -> System:
     return System(
         system.lagrangian, system.constraints, system.affine, n=system.n, group=group,
         retraction=system.space.retraction if group is not None else "cayley",
-        depends_on_orientation=system.depends_on_orientation, name="theorem-table",
+        depends_on_orientation=system.depends_on_orientation, reconstruction=system.reconstruction or "left",
+        name="theorem-table",
     )
 
 
@@ -774,11 +775,12 @@ def _hat(w):
     return np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
 
 
-def cayley_steps(R) -> np.ndarray:
-    """σ_k = cay⁻¹(R_kᵀR_{k+1}) from consecutive attitudes (numpy; Appendix:
+def cayley_steps(R, *, right: bool = False) -> np.ndarray:
+    """σ_k = cay⁻¹(R_kᵀR_{k+1}) from consecutive attitudes, or cay⁻¹(R_{k+1}R_kᵀ) with `right` (R
+    reconstructed as R_{k+1} = cay(σ_k)R_k, e.g. `rolling-ball`) (numpy; Appendix:
     cay⁻¹(Q) = 2 vee((Q − I)(Q + I)⁻¹)), shape (K − 1, 3)."""
     R = np.asarray(R, dtype=np.float64)
-    Q = np.einsum("kji,kjl->kil", R[:-1], R[1:])
+    Q = np.einsum("kij,klj->kil", R[1:], R[:-1]) if right else np.einsum("kji,kjl->kil", R[:-1], R[1:])
     eye = np.eye(3)
     S = 2.0 * (Q - eye) @ np.linalg.inv(Q + eye)
     return 0.5 * np.stack([S[:, 2, 1] - S[:, 1, 2], S[:, 0, 2] - S[:, 2, 0], S[:, 1, 0] - S[:, 0, 1]], axis=1)
@@ -850,7 +852,7 @@ def _erratum_sign(quick: bool) -> Erratum:
         # Q*((FL⁻ + FL⁺)/2 + Π) = 0, which is (RBb) as printed
         system = rb.build_system(dict(p, Omega=W), defaults=(q0, v0))
         x, R, v = _rolling_ball_nodes(system, q0, v0, h, steps)
-        w = cayley_steps(R) / h
+        w = cayley_steps(R, right=system.reconstruction == "right") / h
         eq = np.max(np.abs(five_equations(p, x[:, 0], x[:, 1], w, h)), axis=0)
         pbar = v * scale_G
         rel = eq / np.array([np.max(np.abs(pbar))] * 3 + [np.max(np.abs(v))] * 2)
@@ -938,7 +940,7 @@ def _erratum_sphere(quick: bool) -> Erratum:
         ball, sphere = _sphere_systems(params)
         xb, vb, _ = continuous_reference(ball, q0, v0, times, R0=np.eye(3))
         xs, vs, Rs = continuous_reference(sphere, q0, v0, times, R0=np.eye(3))
-        # the model's body ω plays the role of the sphere's space angular velocity Rω
+        # the model's ω is the space angular velocity: compare with the sphere's RΩ
         ws = np.einsum("kij,kj->ki", Rs, vs[:, 2:])
         gaps[label] = (float(np.max(np.linalg.norm(xb - xs, axis=1))), float(np.max(np.abs(vb[:, 2:] - ws))))
     return Erratum(

@@ -83,12 +83,19 @@ class TildeState(NamedTuple):
         lambda_tilde: scaled multiplier $\\tilde\\lambda_k = \\lambda_k/h$, shape (m,).
         q_err: the rounding error of $q_k$ carried by compensated summation
             (:func:`gnipy.spaces.compensated_add`), shape (n,); None: plain summation.
+        p_err: the same for $\\tilde p_k$, which the kicks change by O(h) per step.
     """
 
     q: jax.Array
     p_tilde: jax.Array
     lambda_tilde: jax.Array
     q_err: jax.Array | None = None
+    p_err: jax.Array | None = None
+
+
+def _add(x, dx, err):
+    """`x + dx` with compensation when `err` is carried (see :class:`TildeState`)."""
+    return (x + dx, None) if err is None else compensated_add(x, dx, err)
 
 
 class ShakeState(NamedTuple):
@@ -144,14 +151,10 @@ def _kick_drift_kick(system, state: TildeState, h, s: float) -> TildeState:
     Returns:
         $(q_{k+1}, \\tilde p_{k+1}, \\tilde\\lambda_{k+1})$.
     """
-    q, p, lam, q_err = state
+    q, p, lam, q_err, p_err = state
     M = system.metric(q)  # constant metric: the same at q_k and q_{k+1}
-    p_half = p - 0.5 * h * (system.potential_gradient(q) + system.mu(q).T @ lam)  # (EuAHama)
-    dq = h * solve_spd(M, p_half)  # (EuAHamb)
-    if q_err is None:
-        q1 = q + dq
-    else:
-        q1, q_err = compensated_add(q, dq, q_err)
+    p_half, p_err = _add(p, -0.5 * h * (system.potential_gradient(q) + system.mu(q).T @ lam), p_err)  # (EuAHama)
+    q1, q_err = _add(q, h * solve_spd(M, p_half), q_err)  # (EuAHamb)
     mu1 = system.mu(q1)
     Vq1 = system.potential_gradient(q1)
     Pi1 = system.Pi(q1)
@@ -159,8 +162,8 @@ def _kick_drift_kick(system, state: TildeState, h, s: float) -> TildeState:
     # (EuAHamd) substituted into (EuAHame): (h/2) C λ̃ = μ M⁻¹ (p_{k+1/2} + (s − 1)(h/2) V_q − Π)
     rhs = mu1 @ solve_spd(M, p_half + (s - 1.0) * 0.5 * h * Vq1 - Pi1)
     lam1 = (2.0 / h) * solve_spd(C1, rhs)
-    p1 = p_half - 0.5 * h * (Vq1 + mu1.T @ lam1)  # (EuAHamd)
-    return TildeState(q1, p1, lam1, q_err)
+    p1, p_err = _add(p_half, -0.5 * h * (Vq1 + mu1.T @ lam1), p_err)  # (EuAHamd)
+    return TildeState(q1, p1, lam1, q_err, p_err)
 
 
 def euler_a_map(system, state: TildeState, h) -> TildeState:
@@ -279,7 +282,7 @@ def tilde_state_from_gni(system, q, p_plus, h, s: float) -> TildeState:
     p_bar = p_plus - mu.T @ w  # P*p⁺ + Q*Π
     lam = (2.0 / h) * w
     p_tilde = p_bar - s * 0.5 * h * system.potential_gradient(q)
-    return TildeState(q, p_tilde, lam, jnp.zeros_like(q))
+    return TildeState(q, p_tilde, lam, jnp.zeros_like(q), jnp.zeros_like(p_tilde))
 
 
 class _TildeScheme(Integrator):
@@ -422,11 +425,13 @@ class EulerABComposition(_TildeScheme):
             `(TildeState, StepInfo)`, no iterations.
         """
         half = 0.5 * h
-        q, p_tilde, lam, q_err = state
+        q, p_tilde, lam, q_err, p_err = state
         # Euler A reads p̄ = p̃ + (h/4)V_q; Euler B reads p̄ = p̃_B − (h/4)V_q: p̃_B = p̃ + (h/2)V_q
-        mid = euler_b_map(system, TildeState(q, p_tilde + half * system.potential_gradient(q), lam, q_err), half)
+        p_b, p_err = _add(p_tilde, half * system.potential_gradient(q), p_err)
+        mid = euler_b_map(system, TildeState(q, p_b, lam, q_err, p_err), half)
         # and back at the middle node: p̃_A = p̃_B − (h/2)V_q
-        mid = mid._replace(p_tilde=mid.p_tilde - half * system.potential_gradient(mid.q))
+        p_a, p_err = _add(mid.p_tilde, -half * system.potential_gradient(mid.q), mid.p_err)
+        mid = mid._replace(p_tilde=p_a, p_err=p_err)
         new = euler_a_map(system, mid, half)
         return new, _explicit_info(*new)
 

@@ -17,7 +17,8 @@ the same at $k + 1$ by
 
 - (RATa) $p_{k+1/2} = \\tilde p_k - \\tfrac h2\\big(V_x(x_k) + \\tilde\\lambda_{a,k}\\mu^a(x_k)\\big)$;
 - (RATc) $x_{k+1} = x_k + h\\,G_{xx}^{-1}\\big(p_{k+1/2} - G_{x\\xi}\\xi_k\\big)$;
-- $R_{k+1} = R_k\\tau(h\\xi_k)$ (the discrete reconstruction of the Remark after (RAT));
+- $R_{k+1} = R_k\\tau(h\\xi_k)$ (the discrete reconstruction of the Remark after (RAT); $\\tau(h\\xi_k)R_k$
+  for a system built with `reconstruction="right"`, :class:`~gnipy.spaces.GroupSpace`);
 - (RATb), (RATd), (RATe), (RATf), which are *linear* in $\\tilde\\lambda_{k+1}$:
   $M_{k+1/2} = \\mathrm{Ad}^*_{\\tau(h\\xi_k)}\\tilde M_k - \\tfrac12\\lambda_{a,k+1}\\eta^a(x_{k+1})$,
   $\\tilde p_{k+1} = p_{k+1/2} - \\tfrac h2\\big(V_x(x_{k+1}) + \\tilde\\lambda_{a,k+1}\\mu^a(x_{k+1})\\big)$,
@@ -186,7 +187,7 @@ class ReducedRattle(Integrator):
             return space.retraction.dtau_inv(space.group, sigma).T @ d3 - M1
 
         return solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
-                          floor_scale=jnp.max(jnp.abs(M1)) + jnp.max(jnp.abs(pt1)))
+                          floor_scale=jnp.max(jnp.abs(jnp.concatenate([M1, pt1]))))
 
     def _multipliers(self, system, b, p_hat, h):
         """$\\tilde\\lambda$ with $\\mu\\mathbb{G}^{-1}(\\hat p - \\tfrac h2\\mu^T\\tilde\\lambda - \\Pi) = 0$ ((RATd))."""
@@ -223,7 +224,7 @@ class ReducedRattle(Integrator):
         p_half = pt - 0.5 * h * (self._Vx(system, x, R) + mu.T @ lam)  # (RATa)
         x1, x_err = compensated_add(x, h * self._solve_xx(Gxx, p_half - Gxs @ xi), x_err)  # (RATc)
         g = space.tau(h * xi)
-        R1 = R @ g  # reconstruction R_{k+1} = R_k τ(hξ_k)
+        R1 = space.reconstruct(R, g)  # reconstruction R_{k+1} = R_k τ(hξ_k) (τ(hξ_k) R_k for a right one)
         AdM = space.group.Ad(g).T @ M  # Ad*_{τ(hξ_k)} M̃_k
         b1 = Point(x1, R1)
         Vx1 = self._Vx(system, x1, R1)

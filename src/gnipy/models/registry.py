@@ -9,7 +9,8 @@ from typing import Any
 
 from ..system import System, SystemError
 
-__all__ = ["ModelSpec", "register", "get_model", "model_names", "make_system", "registered_invariants"]
+__all__ = ["ModelSpec", "register", "get_model", "model_names", "make_system", "registered_invariants",
+           "default_method_for"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,6 +73,21 @@ class ModelSpec:
             return tuple(float(x) for x in q0), tuple(float(x) for x in v0)
         return self.q0, self.v0
 
+    @property
+    def default_method(self) -> str:
+        """The method that runs when none is named, chosen from measurements
+        (:mod:`gnipy.models.default_methods`)."""
+        from .default_methods import DEFAULT_METHODS, FALLBACK_METHOD
+
+        return DEFAULT_METHODS.get(self.name, (FALLBACK_METHOD, ""))[0]
+
+    @property
+    def default_reason(self) -> str:
+        """Why :attr:`default_method` (the measurements that chose it)."""
+        from .default_methods import DEFAULT_METHODS
+
+        return DEFAULT_METHODS.get(self.name, ("", "not measured: the library-wide default"))[1]
+
     def system(self, **overrides) -> System:
         """Build the System for the defaults updated with `overrides`."""
         params = self.resolve_params(overrides)
@@ -110,3 +126,11 @@ def registered_invariants(name: str) -> tuple[str, ...]:
     """The names of the invariants registered for the model called `name` (none for other systems)."""
     spec = _REGISTRY.get(name)
     return tuple(spec.invariants) if spec is not None else ()
+
+
+def default_method_for(system_name: str) -> str:
+    """The default method of the zoo model `system_name`, or the library-wide default for other systems."""
+    from .default_methods import FALLBACK_METHOD
+
+    spec = _REGISTRY.get(system_name)
+    return spec.default_method if spec is not None else FALLBACK_METHOD

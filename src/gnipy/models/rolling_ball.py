@@ -2,8 +2,9 @@
 
 A ball of radius r and mass m rolls without slipping on a table turning at constant rate $\\Omega$
 about the vertical axis. A point is $b = (x, y; R)$, a velocity
-$v = (\\dot x, \\dot y, \\omega_1, \\omega_2, \\omega_3)$ with $\\hat\\omega = R^{-1}\\dot R$ (left
-trivialization: $\\omega$ is the *body* angular velocity, DESIGN.md §2). The paper's reduced
+$v = (\\dot x, \\dot y, \\omega_1, \\omega_2, \\omega_3)$ with $\\omega$ the angular velocity as the paper's
+equations use it: the *space* angular velocity, $\\hat\\omega = \\dot R R^{-1}$ (the rolling constraints
+below are those of a ball for the space angular velocity, DESIGN.md §2, errata). The paper's reduced
 Lagrangian (LagCont) and constraints (Cona), (Conb):
 
 $$l = \\tfrac12 m(\\dot x^2 + \\dot y^2) + \\tfrac12(I_1\\omega_1^2 + I_2\\omega_2^2 + I_3\\omega_3^2),$$
@@ -11,16 +12,27 @@ $$\\dot x - r\\omega_2 + \\Omega y = 0, \\qquad \\dot y + r\\omega_1 - \\Omega x
 
 i.e. $\\mu(v - Y) = 0$ with $\\mu = [[1, 0, 0, -r, 0], [0, 1, r, 0, 0]]$ (rows $(\\mu^a, \\eta^a)$:
 x-part, group part), $Y = (-\\Omega y, \\Omega x, 0, 0, 0)$ and $\\Pi = \\mathbb{G}Y = (-m\\Omega y, m\\Omega x, 0, 0, 0)$.
-Nothing depends on R: the system is *reduced* (paper §7), and R is only reconstructed,
-$R_{k+1} = R_k\\,\\mathrm{cay}(\\sigma_k)$.
+Nothing depends on R: the system is *reduced* (paper §7), and R is only reconstructed.
 
-**Which ball this is.** With unequal moments this is the paper's *simplified* model: the body angular
-velocity enters the rolling constraints and the inertia tensor is constant in the body frame while
-the constraints are written as if the body axes were the table axes. It is what the paper's Fig. 3
-integrates, and the model is kept exactly as printed. It is **not** the physical Chaplygin sphere
-(whose rolling constraint involves the space angular velocity $R\\omega$, so that the constraints
-depend on R): that is the separate model `chaplygin-sphere`. For $I_1 = I_2 = I_3$ the two agree
-(the dynamics of $(x, y, \\omega)$ are then those of `rotating-table-ball`).
+**Reconstruction.** R follows from the space angular velocity, $\\dot R = \\hat\\omega R$, and the steps
+reconstruct $R_{k+1} = \\mathrm{cay}(\\sigma_k)\\,R_k$ (right trivialization: the System is built with
+`reconstruction="right"`, :class:`~gnipy.spaces.GroupSpace`). The equations of $(x, y, \\omega)$ are
+the paper's, unchanged (they do not involve R); only R depends on this reading. Reconstructed as
+if $\\omega$ were the body angular velocity ($\\dot R = R\\hat\\omega$), R would not be the ball's attitude:
+measured for $I_1 = I_2 = I_3$, $\\Omega = 1$, $\\omega_0 = (0.3, 2, -0.5)$, the continuous solutions' R is
+then off from the physical ball's (model `chaplygin-sphere`) by up to 1.6 over t ≤ 20, while with
+$\\dot R = \\hat\\omega R$ it agrees to 6e-11 (and $(x, y)$ to 2e-11). Result files say which
+reconstruction was used (attribute `orientation`), and whether R is a physical attitude for the
+parameters of the run.
+
+**Which ball this is.** With unequal moments this is the paper's *simplified* model: the inertia
+tensor $\\mathrm{diag}(I_1, I_2, I_3)$ is constant in the frame in which $\\omega$ enters the rolling
+constraints, the table's, whereas a body's inertia tensor is constant in its body frame. It is what
+the paper's Fig. 3 integrates, and the model is kept exactly as printed. It is **not** the physical
+Chaplygin sphere (whose Lagrangian holds the body angular velocity $R^T\\omega$ and whose constraints
+therefore depend on R): that is the separate model `chaplygin-sphere`, and with unequal moments R is
+not a physical attitude. For $I_1 = I_2 = I_3$ the two agree, attitude included (the dynamics of
+$(x, y, \\omega)$ are then those of `rotating-table-ball`).
 
 **Retraction.** The System uses the Cayley map (the paper's choice for §7.4, whose explicit equations
 are written for it). The registry holds float parameters only, so the retraction is not a model
@@ -44,7 +56,7 @@ $\\kappa = I\\Omega/(I + mr^2)$: the contact point runs round a circle at angula
 (radius $|\\dot z_0|/\\kappa$, $z = x + iy$); $\\omega_1 = (\\Omega x - \\dot y)/r$,
 $\\omega_2 = (\\dot x + \\Omega y)/r$, $\\omega_3$ is constant. These are the dynamics of $(x, y, \\omega)$
 of the $\\mathbb{R}^5$ model `rotating-table-ball`, whose closed forms are reused. The attitude R has
-no closed form here (it is reconstructed from $\\dot R = R\\hat\\omega$).
+no closed form here (it is reconstructed from $\\dot R = \\hat\\omega R$).
 
 **Invariants.** The table does work on the ball: $dE/dt = \\lambda\\cdot\\mu Y = m\\Omega\\,
 \\frac{d}{dt}(x\\dot y - y\\dot x)$ for *any* moments (the gyroscopic term $\\omega\\cdot(I\\omega\\times\\omega)$
@@ -64,7 +76,8 @@ from ..system import System
 from . import rotating_table_ball
 from .registry import ModelSpec, register
 
-__all__ = ["EXAMPLE_2", "MODEL", "build_system", "exact", "example_2", "jacobi_integral", "velocity_from_constraints"]
+__all__ = ["EXAMPLE_2", "MODEL", "build_system", "exact", "example_2", "jacobi_integral", "orientation_note",
+           "velocity_from_constraints"]
 
 COORDINATES = ("x", "y")
 VELOCITIES = ("dx", "dy", "omega1", "omega2", "omega3")
@@ -116,13 +129,25 @@ def _default_ic(p):
     return (x0, y0), (dx0, dy0, (W * x0 - dy0) / r, (dx0 + W * y0) / r, 0.0)
 
 
-def build_system(p, *, retraction="cayley", defaults=None) -> System:
+def orientation_note(p) -> str:
+    """Whether R is a physical attitude for parameters `p` (the file attribute `orientation` ends
+    with it): only for $I_1 = I_2 = I_3$ is the model the physical ball (see the module docstring)."""
+    if p["I1"] == p["I2"] == p["I3"]:
+        return "I1 = I2 = I3: R is the attitude of the physical ball (as in model chaplygin-sphere)"
+    return ("R is not a physical attitude: with unequal moments the paper's simplified model is not the "
+            "physical Chaplygin sphere (model chaplygin-sphere)")
+
+
+def build_system(p, *, retraction="cayley", defaults=None, reconstruction="right") -> System:
     """The System for parameters `p` (a dict with m, r, I1, I2, I3, Omega), on $\\mathbb{R}^2\\times SO(3)$.
 
     Arguments:
         p: the parameters.
         retraction: `"cayley"` (the model's choice) or `"exp"`.
         defaults: the default initial condition `(q0, v0)` (default: example 1's for these parameters).
+        reconstruction: `"right"` (the model's: ω the space angular velocity, $\\dot R = \\hat\\omega R$) or
+            `"left"` (ω read as the body angular velocity, $\\dot R = R\\hat\\omega$: not the ball's attitude;
+            for comparisons). The motion of $(x, y, \\omega)$ is the same.
     """
     p = {k: float(v) for k, v in p.items()}
     return System(
@@ -132,11 +157,14 @@ def build_system(p, *, retraction="cayley", defaults=None) -> System:
         n=2,
         group=SO3(),
         retraction=retraction,
+        reconstruction=reconstruction,
         coordinates=COORDINATES,
         velocities=VELOCITIES,
         name="rolling-ball",
         params=p,
         defaults=_default_ic(p) if defaults is None else defaults,
+        orientation_note=orientation_note(p) if reconstruction == "right" else
+        "R is not the ball's attitude: omega read as the body angular velocity (reconstruction='left')",
     )
 
 

@@ -1,0 +1,140 @@
+"""Run-time diagnostics (gnipy.diagnostics): the GNI's hidden momentum and its verdict, the energy
+verdict, the energy of p⁺, and what summary() and the files say.
+
+What must fire: the Chaplygin sleigh and Suslov (the GNI's hidden momentum grows to O(1): the
+energy of the reported motion is drained, measured against the reference in
+gnipy.experiments.method_choice), and the Euler GNIs on the contact oscillator (energy pumped until
+overflow). What must stay silent: the rolling balls, the vertical disk, the Chaplygin sphere, whose
+GNI runs follow the reference (their exact solutions or invariants, tests/models).
+"""
+
+import numpy as np
+import pytest
+
+import gnipy
+from gnipy.diagnostics import hidden_momentum_verdict
+
+
+def _run(model, method, h, t_final, every=10):
+    return gnipy.simulate(gnipy.make_system(model), method, h=h, t_final=t_final, save_every=every, throw=False)
+
+
+FIRING = [
+    ("chaplygin-sleigh", "gni-trapezoid", 0.05, 20.0, "hidden"),
+    ("chaplygin-sleigh", "gni-midpoint", 0.001, 20.0, "hidden"),  # a smaller h only delays it
+    ("chaplygin-sleigh-se2", "gni-midpoint", 0.05, 20.0, "hidden"),
+    ("suslov", "gni-midpoint", 0.01, 200.0, "hidden"),
+    ("contact-oscillator", "gni-euler-a", 0.05, 100.0, "hidden"),
+    ("contact-oscillator", "gni-euler-a", 0.05, 100.0, "energy"),
+    ("contact-oscillator", "gni-euler-b", 0.05, 60.0, "energy"),
+]
+
+
+@pytest.mark.parametrize(("model", "method", "h", "t_final", "kind"), FIRING)
+def test_verdict_fires_where_the_gni_fails(model, method, h, t_final, kind):
+    sol = _run(model, method, h, t_final)
+    verdict = sol.hidden_verdict if kind == "hidden" else sol.energy_verdict
+    assert not verdict.in_band
+    assert 0.0 < verdict.first_time <= t_final
+    summary = sol.summary()
+    assert "WARNING" in summary and f"t = {verdict.first_time:.6g}" in summary
+    assert any(("hidden momentum" if kind == "hidden" else "drifted") in w for w in sol.warnings())
+    prefix = "hidden_momentum" if kind == "hidden" else "energy_drift"
+    ds = sol.to_xarray()
+    assert ds.attrs[f"{prefix}_verdict"] == "out of band"
+    assert ds.attrs[f"{prefix}_first_time"] == pytest.approx(verdict.first_time)
+    assert "WARNING" in ds.attrs[f"{prefix}_warning"]
+
+
+def test_the_failure_is_real_energy_against_the_invariant():
+    """The sleigh's energy is a constant of the motion; the GNI's reported energy is drained to
+    nearly nothing after the verdict fires, while the energy of p⁺ is conserved to round-off
+    (energy theorem: V = 0, constant metric): the hidden momentum holds what p̄ lost."""
+    sol = _run("chaplygin-sleigh", "gni-trapezoid", 0.05, 60.0, every=1)
+    e, ep = np.asarray(sol.energy), np.asarray(sol.energy_plus)
+    t_fire = sol.hidden_verdict.first_time
+    assert np.min(e) < 0.01 * e[0]
+    assert np.max(np.abs(e[np.asarray(sol.t) <= t_fire] - e[0])) < 1e-2 * e[0]  # an early warning
+    assert np.max(np.abs(ep - ep[0])) <= 1e-13 * ep[0]
+
+
+SILENT = [(m, meth) for m in ("rolling-ball", "rotating-table-ball", "vertical-disk", "chaplygin-sphere")
+          for meth in ("gni-trapezoid", "gni-midpoint")] + [("rolling-ball", "rat"), ("rotating-table-ball", "rattle")]
+
+
+@pytest.mark.parametrize(("model", "method"), SILENT)
+def test_verdict_silent_where_the_gni_works(model, method):
+    sol = _run(model, method, 0.05, 200.0)
+    assert sol.hidden_verdict.in_band and sol.hidden_verdict.max_band_ratio < 0.6
+    assert sol.energy_verdict is None or sol.energy_verdict.in_band
+    assert sol.warnings() == [] and "WARNING" not in sol.summary()
+    assert "in its O(h) band" in sol.summary()
+    assert sol.to_xarray().attrs["hidden_momentum_verdict"] == "in band"
+
+
+def test_hidden_momentum_is_the_gnis_normal_impulse():
+    """p⁺ − p̄ = −(h/2)μᵀλ plus the neutral oscillation the start p⁺₀ = Gv₀ excites (it alternates
+    between 0 and twice that size from step to step): at every node it stays within twice the size
+    (h/2)|μᵀλ|/|p̄| computed from the continuous multiplier, and its largest value halves with h."""
+    largest = []
+    for h in (0.02, 0.01):
+        sol = _run("vertical-disk", "gni-midpoint", h, 10.0, every=1)
+        r, e = np.asarray(sol.hidden_momentum), np.asarray(sol.hidden_expected)
+        assert np.all(r <= 2.0 * e * (1 + 1e-3) + 1e-12)  # up to O(h²)
+        largest.append(np.max(r))
+    assert largest[1] == pytest.approx(0.5 * largest[0], rel=0.05)
+
+
+def test_energy_of_p_plus_is_conserved_under_the_energy_theorem():
+    """V = 0 and a constant metric on R^n (vertical disk): |p⁺| is conserved exactly, while the
+    reported energy has an O(h²) error that oscillates."""
+    sol = _run("vertical-disk", "gni-midpoint", 0.05, 50.0, every=1)
+    e, ep = np.asarray(sol.energy), np.asarray(sol.energy_plus)
+    assert np.max(np.abs(ep - ep[0])) <= 1e-13 * ep[0]
+    assert np.max(np.abs(e - e[0])) > 1e-5
+    assert "energy of p+ (energy_plus) is conserved exactly" in sol.conserved
+
+
+@pytest.mark.parametrize(("model", "expected"), [
+    ("rolling-ball", "affine constraints: neither energy is conserved; the Jacobi integral"),
+    ("knife-edge", "the energy is conserved by the motion"),
+    ("vertical-disk", "energy of p+"),
+])
+def test_summary_says_what_is_conserved(model, expected):
+    sol = _run(model, "gni-midpoint", 0.05, 1.0)
+    assert expected in sol.summary()
+
+
+def test_an_affine_part_that_vanishes_is_linear():
+    """The Chaplygin sphere's turning table at Ω = 0: the energy is a constant of the motion."""
+    sol = _run("chaplygin-sphere", "gni-midpoint", 0.05, 1.0)
+    assert sol.energy_invariant and sol.energy_verdict.in_band
+
+
+def test_non_gni_methods_carry_no_hidden_momentum():
+    sol = _run("vertical-disk", "mp", 0.05, 1.0)
+    assert sol.hidden_momentum is None and sol.hidden_verdict is None and sol.energy_plus is None
+    assert sol.energy_verdict.in_band
+
+
+def test_batch_members_have_their_own_verdicts():
+    """One member in band (a short run), the verdict per member through member(i)."""
+    systems = gnipy.model_systems("chaplygin-sleigh", a=np.array([0.5, 0.5]))
+    sol = gnipy.simulate(systems, "gni-trapezoid", h=0.05, t_final=20.0, save_every=10)
+    assert all(not sol.member(i).hidden_verdict.in_band for i in range(2))
+    assert sol.warnings()[0].startswith("2 of 2 members")
+    assert sol.to_xarray().attrs["hidden_momentum_members_out_of_band"] == 2
+
+
+def test_verdict_rule_on_synthetic_ratios():
+    """The band is 4·max(running max of e, (h/2)ρ₀) + 1e-8 with ρ₀ = 2e₀/h + 1/T: a ratio that keeps
+    the size e had earlier stays in band after e drops to zero; one that grows past it does not."""
+    t = np.linspace(0.0, 10.0, 101)
+    h = 0.01
+    e = np.where(t < 5.0, 1e-3, 0.0)
+    band = 4.0 * (h / 2) * (2 * 1e-3 / h + 1 / 10.0) + 1e-8  # 6e-3: here (h/2)ρ₀ > e
+    inside = hidden_momentum_verdict(t, np.full_like(t, 0.99 * band), e, h)
+    assert inside.in_band
+    r = 1e-3 * np.exp(t / 2)
+    out = hidden_momentum_verdict(t, r, e, h)
+    assert not out.in_band and out.first_time == pytest.approx(t[np.argmax(r > band)])
