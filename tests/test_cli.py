@@ -115,6 +115,10 @@ def test_listings_version_and_help():
     for name in gnipy.model_names():
         assert name in res.output
     assert "Omega=1" in res.output and "I_flip=1" in res.output
+    # each model's measured default and why (gnipy.models.default_methods)
+    for name in gnipy.model_names():
+        spec = gnipy.get_model(name)
+        assert f"default method: {spec.default_method} (best error against the reference" in " ".join(res.output.split()), name
     res = invoke("methods")
     assert res.exit_code == 0
     for name in gnipy.method_names():
