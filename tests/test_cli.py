@@ -17,7 +17,7 @@ from gnipy.cli import app
 runner = CliRunner()
 
 MODEL = "vertical-disk"
-BASE = ["run", MODEL, "--h", "0.1", "--steps", "10"]
+BASE = ["run", MODEL, "--method", "gni-trapezoid", "--h", "0.1", "--steps", "10"]
 
 
 def invoke(*args):
@@ -291,7 +291,7 @@ def test_config_file_gives_the_same_run_as_options(tmp_path):
     assert b.attrs["config_file"] == str(tmp_path / "run.toml")
     # keys with underscores and `set` as a list of strings work the same
     (tmp_path / "run2.toml").write_text(
-        'model = "vertical-disk"\nh = 0.1\nt_final = 1.0\nset = ["r=1"]\nx0 = [0.5, -1, 0, 0]\n'
+        'model = "vertical-disk"\nmethod = "gni-trapezoid"\nh = 0.1\nt_final = 1.0\nset = ["r=1"]\nx0 = [0.5, -1, 0, 0]\n'
         'v0 = [1, 0, 0, 1]\nsave_every = 2\nproject_v0 = false\nout = "config2.nc"\n'
     )
     res = invoke("run", "--config", tmp_path / "run2.toml")
@@ -491,3 +491,10 @@ def test_convergence_out_is_a_file(tmp_path):
     (tmp_path / "f").write_text("")
     res = invoke("convergence", MODEL, "--out", tmp_path / "f")
     assert res.exit_code == 2 and "--out" in _error_lines(res.output)[0]
+
+
+def test_run_without_method_uses_the_models_measured_default(tmp_path):
+    out = tmp_path / "default.nc"
+    res = invoke("run", MODEL, "--h", "0.1", "--steps", "10", "--out", out)
+    assert res.exit_code == 0, res.output
+    assert xr.load_dataset(out).attrs["method"] == gnipy.get_model(MODEL).default_method

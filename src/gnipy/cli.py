@@ -352,6 +352,9 @@ def _invariant_drifts(spec, params, q, v, R=None) -> dict[str, float]:
     import numpy as np
 
     out = {}
+    # host arrays: iterating a device array costs a dispatch per row
+    q, v = np.asarray(q), np.asarray(v)
+    R = None if R is None else np.asarray(R)
     for name, f in spec.invariants.items():
         # on R^n × G an invariant may also take the orientation: f(params, q, v, R)
         with_R = R is not None and len(inspect.signature(f).parameters) >= 4

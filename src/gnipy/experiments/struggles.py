@@ -59,6 +59,25 @@ def _hidden_panel(ax, sol, label: str, color: str) -> None:
     ax.legend(fontsize=7)
 
 
+def _energy_and_diagnostic(fig, axes, runs, gni, label: str, out_dir: Path, name: str, title: str) -> list[Path]:
+    """The shared panels of the sleigh and Suslov figures (energy of each run, the GNI's hidden
+    momentum with its band), the title, and the files."""
+    for sol, run_label, color, ls in runs:
+        axes[1].plot(np.asarray(sol.t), np.asarray(sol.energy), color=color, ls=ls, label=f"{run_label}: energy")
+    axes[1].set_xlabel("t")
+    axes[1].set_title("energy (a constant of the motion)")
+    axes[1].legend(fontsize=7)
+    _hidden_panel(axes[2], gni, label, "tab:red")
+    axes[2].set_title("the diagnostic")
+    fig.suptitle(title)
+    fig.tight_layout()
+    files = _save(fig, Path(out_dir), name)
+    import matplotlib.pyplot as plt
+
+    plt.close(fig)
+    return files
+
+
 def _save(fig, out_dir: Path, name: str) -> list[Path]:
     paths = [out_dir / f"{name}.png", out_dir / f"{name}.pdf"]
     fig.savefig(paths[0], dpi=110)
@@ -86,26 +105,17 @@ def sleigh_figure(out_dir: Path, quick: bool, progress: Progress = None):
         progress(0.8, "struggles: sleigh run")
     t = np.asarray(gni.t)
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
-    for sol, label, color in ((ref, "reference", "k"), (gni, "gni-trapezoid", "tab:red"), (dla, "dla", "tab:blue")):
+    runs = ((ref, "reference", "k", "-"), (gni, "gni-trapezoid", "tab:red", "-"), (dla, "dla", "tab:blue", "--"))
+    for sol, label, color, ls in runs:
         q = np.asarray(sol.q)
-        axes[0].plot(q[:, 0], q[:, 1], color=color, lw=1.0 if sol is not ref else 2.0, label=label,
-                     ls="-" if sol is not dla else "--")
-        axes[1].plot(np.asarray(sol.t), np.asarray(sol.energy), color=color, label=f"{label}: energy",
-                     ls="-" if sol is not dla else "--")
-    axes[1].plot(t, np.asarray(gni.energy_plus), color="tab:orange", ls=":", label="gni-trapezoid: energy of p⁺")
+        axes[0].plot(q[:, 0], q[:, 1], color=color, lw=1.0 if sol is not ref else 2.0, label=label, ls=ls)
     axes[0].set_xlabel("x")
     axes[0].set_ylabel("y")
     axes[0].set_title("path of the sleigh")
     axes[0].legend(fontsize=7)
-    axes[1].set_xlabel("t")
-    axes[1].set_title("energy (a constant of the motion)")
-    axes[1].legend(fontsize=7)
-    _hidden_panel(axes[2], gni, "gni-trapezoid", "tab:red")
-    axes[2].set_title("the diagnostic")
-    fig.suptitle(f"Chaplygin sleigh, h = {h:g}: the GNI's hidden momentum takes over")
-    fig.tight_layout()
-    files = _save(fig, Path(out_dir), "struggles_sleigh")
-    plt.close(fig)
+    axes[1].plot(t, np.asarray(gni.energy_plus), color="tab:orange", ls=":", label="gni-trapezoid: energy of p⁺")
+    files = _energy_and_diagnostic(fig, axes, runs, gni, "gni-trapezoid", out_dir, "struggles_sleigh",
+                                   f"Chaplygin sleigh, h = {h:g}: the GNI's hidden momentum takes over")
     v = gni.hidden_verdict
     err = lambda s: float(np.max(np.abs(np.asarray(s.q) - np.asarray(ref.q))))  # noqa: E731
     e = np.asarray(gni.energy)
@@ -148,23 +158,14 @@ def suslov_figure(out_dir: Path, quick: bool, progress: Progress = None):
     if progress:
         progress(0.8, "struggles: suslov run")
     fig, axes = plt.subplots(1, 3, figsize=(14, 4.2))
-    for sol, label, color, ls in ((ref, "reference", "k", "-"), (gni, "gni-midpoint", "tab:red", "-"),
-                                  (dla, "dla", "tab:blue", "--")):
-        v = np.asarray(sol.v)
-        axes[0].plot(np.asarray(sol.t), v[:, 0], color=color, ls=ls, lw=1.0, label=f"{label}: ω₁")
-        axes[1].plot(np.asarray(sol.t), np.asarray(sol.energy), color=color, ls=ls, label=f"{label}: energy")
+    runs = ((ref, "reference", "k", "-"), (gni, "gni-midpoint", "tab:red", "-"), (dla, "dla", "tab:blue", "--"))
+    for sol, label, color, ls in runs:
+        axes[0].plot(np.asarray(sol.t), np.asarray(sol.v)[:, 0], color=color, ls=ls, lw=1.0, label=f"{label}: ω₁")
     axes[0].set_xlabel("t")
     axes[0].set_title("body angular velocity ω₁")
     axes[0].legend(fontsize=7)
-    axes[1].set_xlabel("t")
-    axes[1].set_title("energy (a constant of the motion)")
-    axes[1].legend(fontsize=7)
-    _hidden_panel(axes[2], gni, "gni-midpoint", "tab:red")
-    axes[2].set_title("the diagnostic")
-    fig.suptitle(f"Suslov problem, h = {h:g}: the same mechanism on SO(3)")
-    fig.tight_layout()
-    files = _save(fig, Path(out_dir), "struggles_suslov")
-    plt.close(fig)
+    files = _energy_and_diagnostic(fig, axes, runs, gni, "gni-midpoint", out_dir, "struggles_suslov",
+                                   f"Suslov problem, h = {h:g}: the same mechanism on SO(3)")
     v = gni.hidden_verdict
     e, er = np.asarray(gni.energy), np.asarray(ref.energy)
     metrics = {
