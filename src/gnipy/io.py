@@ -24,11 +24,18 @@ Ratios carry `units = "1"`. Coordinates mix lengths and angles (radians), so `q`
 and the constraint residual carry no single `units` attribute, and no model states an energy
 unit, so `energy` carries none (none is invented).
 
-**Atomic writes.**
+**Atomic writes, and what gets replaced** (:mod:`gnipy.files`).
 A file either appears complete or not at all: the data go to a temporary file in the destination
 directory, which then replaces the destination with `os.replace` (atomic on POSIX when both lie
 on one file system, hence the same directory rather than `/tmp`). An existing file is kept
-untouched until the new one is complete, and the temporary file is removed on any failure.
+untouched until the new one is complete, and the temporary file is removed on any failure
+(a full disk included: the netCDF library's `HDF error` becomes an :class:`OutputError`). An
+existing file is replaced only with `overwrite=True`; a symbolic link, a directory or a special
+file never is.
+
+**Checksum.** Every result file carries the global attribute `gnipy_checksum`, the
+:class:`gnipy.files.DataChecksum` of its variables (names, dtypes, shapes and bytes):
+:func:`verify_netcdf` (and `gni verify`) recompute it.
 """
 
 from __future__ import annotations
@@ -36,18 +43,18 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import os
-import uuid
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-__all__ = ["OutputError", "check_writable", "write_netcdf", "read_netcdf", "provenance", "VARIABLE_UNITS",
-           "UNITS_CONVENTION", "TIME_UNITS", "CONVENTIONS", "VARIABLE_ATTRS", "time_coordinates", "cf_attributes",
-           "result_times", "upgrade_layout"]
+from .files import OutputError, atomic_write, check_destination
 
+__all__ = ["OutputError", "check_writable", "write_netcdf", "read_netcdf", "verify_netcdf", "provenance",
+           "VARIABLE_UNITS", "UNITS_CONVENTION", "TIME_UNITS", "CONVENTIONS", "VARIABLE_ATTRS", "time_coordinates",
+           "cf_attributes", "result_times", "upgrade_layout", "netcdf_checksum", "stamp_checksum", "CHECKSUM_ATTR"]
 
-class OutputError(OSError):
-    """A file could not be written or read (the message names the path and why)."""
+#: The global attribute that holds a result file's data checksum.
+CHECKSUM_ATTR = "gnipy_checksum"
 
 
 def _attr_value(v):
@@ -209,40 +216,78 @@ def _as_dataset(obj):
     raise TypeError(f"write_netcdf: expected a gnipy.Solution or an xarray.Dataset, got {type(obj).__name__}")
 
 
-def check_writable(path) -> Path:
-    """`path` as a Path, if a file can be created there (its directory exists and is writable, and
-    it is not a directory); else :class:`OutputError` naming the path and why."""
-    path = Path(os.fspath(path))
-    directory = path.parent if str(path.parent) else Path(".")
-    if not directory.is_dir():
-        raise OutputError(f"cannot write {path}: directory {directory} does not exist")
-    if path.is_dir():
-        raise OutputError(f"cannot write {path}: it is a directory")
-    if not os.access(directory, os.W_OK | os.X_OK):
-        raise OutputError(f"cannot write {path}: directory {directory} is not writable")
-    return path
+def check_writable(path, *, overwrite: bool = False, argument: str = "path") -> Path:
+    """`path` as a Path, if a result file may be written there
+    (:func:`gnipy.files.check_destination`): its directory exists and is writable, and nothing is
+    there, or a regular file and `overwrite`; never a directory, link or special file. Else
+    :class:`OutputError` naming the path and why."""
+    return check_destination(path, overwrite=overwrite, argument=argument)
 
 
-def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = None) -> Path:
+def netcdf_checksum(path) -> str:
+    """The :class:`gnipy.files.DataChecksum` of a netCDF file's variables as stored (raw values,
+    no masking or scaling; by name; attributes not included), read in slices along the first
+    axis so memory stays bounded whatever the file's size."""
+    import netCDF4
+    import numpy as np
+
+    from .files import DataChecksum
+
+    c = DataChecksum()
+    with netCDF4.Dataset(os.fspath(path), "r") as nc:
+        nc.set_auto_maskandscale(False)
+        nc.set_always_mask(False)
+        for name in sorted(nc.variables):
+            var = nc.variables[name]
+            if var.ndim == 0:
+                c.update(name, np.asarray(var[...]))
+                continue
+            row = max(1, int(np.prod(var.shape[1:], dtype=np.int64)) * var.dtype.itemsize
+                      if isinstance(var.dtype, np.dtype) else 64)
+            step = max(1, (64 * 2**20) // row)
+            if var.shape[0] == 0:
+                c.update(name, np.zeros((0, *var.shape[1:])))
+            for i in range(0, var.shape[0], step):
+                c.update(name, np.asarray(var[i:i + step]))
+    return c.hexdigest()
+
+
+def stamp_checksum(path) -> str:
+    """Compute :func:`netcdf_checksum` of the netCDF file `path` and store it in its global
+    attribute `gnipy_checksum` (in place); returns it."""
+    import netCDF4
+
+    digest = netcdf_checksum(path)
+    with netCDF4.Dataset(os.fspath(path), "a") as nc:
+        nc.setncattr(CHECKSUM_ATTR, digest)
+    return digest
+
+
+def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = None, *,
+                 overwrite: bool = False) -> Path:
     """Write a :class:`~gnipy.Solution` (via `Solution.to_xarray`) or an `xarray.Dataset` to netCDF.
 
     The write is atomic (see the module docstring). Provenance attributes are added when missing:
-    `gnipy_version`, `jax_version`, `created`, `units_convention`, `Conventions`, `history`
+    `gnipy_version`, `jax_version`, `created`, `units_convention`, `Conventions`, `history`,
+    `gnipy_checksum` (the data checksum, :func:`verify_netcdf`)
     (Solution.to_xarray also gives model, method, h, steps, start, the parameters and the other
     CF attributes), and `units` on the variables of :data:`VARIABLE_UNITS` (on `time` when it
     holds times, i.e. floats).
 
     Arguments:
         solution_or_dataset: what to write.
-        path: the destination file (overwritten if it exists).
+        path: the destination file.
         attrs: extra global attributes (values that netCDF cannot hold are stored as strings/JSON).
+        overwrite: replace an existing regular file at `path` (without it, an existing file is an
+            error; a directory, symbolic link or special file is always refused).
 
     Returns:
         The destination as a `Path`.
 
     Raises:
-        OutputError: (an `OSError`) the directory does not exist, is not writable, the path is a
-            directory, or writing failed; the message names the path.
+        OutputError: (an `OSError`) the directory does not exist, is not writable, the path is
+            taken (see `overwrite`), or writing failed (a full disk included); the message names
+            the path.
         TypeError: `solution_or_dataset` is neither a Solution nor a Dataset.
     """
     path = Path(os.fspath(path))
@@ -261,22 +306,13 @@ def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = No
         ds.attrs[str(k)] = v
     ds.attrs = {k: _attr_value(v) for k, v in ds.attrs.items()}
 
-    directory = check_writable(path).parent
+    ds.attrs.pop(CHECKSUM_ATTR, None)
 
-    # Rejected: tempfile.mkstemp, which creates the file with mode 0600 (the result would not get
-    # the usual umask permissions); the netCDF library creates the file itself here.
-    tmp = directory / f".{path.name}.{uuid.uuid4().hex[:12]}.tmp"
-    try:
+    def write(tmp):
         ds.to_netcdf(tmp)
-        os.replace(tmp, path)
-    except BaseException as e:
-        try:
-            tmp.unlink()
-        except FileNotFoundError:
-            pass
-        if isinstance(e, OSError) and not isinstance(e, OutputError):
-            raise OutputError(f"cannot write {path}: {e.strerror or e}") from e
-        raise
+        stamp_checksum(tmp)
+
+    atomic_write(path, write, overwrite=overwrite, argument="path")
     return path
 
 
@@ -300,3 +336,35 @@ def read_netcdf(path):
         raise OutputError(f"cannot read {path}: {e.strerror or e}") from e
     except ValueError as e:  # xarray: no backend recognises the file
         raise OutputError(f"cannot read {path}: not a netCDF file that xarray can open") from e
+
+
+def verify_netcdf(path) -> tuple[bool, str]:
+    """Check a result file: readable, and its data match the checksum it carries.
+
+    Returns:
+        `(ok, message)`: `ok` is True when the recomputed :func:`netcdf_checksum` equals the
+        file's `gnipy_checksum`; the message says what was checked or what differs. A file without
+        a checksum (written by another tool, or before gnipy kept one) gives `(False, ...)` saying so.
+
+    Raises:
+        OutputError: the file does not exist or cannot be read as netCDF.
+    """
+    import netCDF4
+
+    path = Path(os.fspath(path))
+    if not path.is_file():
+        raise OutputError(f"cannot read {path}: no such file")
+    try:
+        with netCDF4.Dataset(os.fspath(path), "r") as nc:
+            stored = nc.__dict__.get(CHECKSUM_ATTR)
+            n = len(nc.variables)
+        actual = netcdf_checksum(path)
+    except OSError as e:
+        raise OutputError(f"cannot read {path}: {e.strerror or e}") from e
+    except (ValueError, RuntimeError, KeyError, IndexError, TypeError) as e:
+        raise OutputError(f"cannot read {path}: not a readable netCDF file ({type(e).__name__}: {e})") from e
+    if stored is None:
+        return False, f"{path}: no {CHECKSUM_ATTR} attribute (not written by this gnipy); nothing to verify against"
+    if actual != stored:
+        return False, f"{path}: DAMAGED: the data do not match the stored checksum ({stored}; computed {actual})"
+    return True, f"{path}: ok ({n} variables match {stored})"
