@@ -5,6 +5,7 @@ single runs of the same member, and the batch's error handling (sizes, the membe
 messages, failures of single members).
 """
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -153,8 +154,22 @@ def test_failed_member_is_reported_and_truncated():
     m0, m1 = sol.member(0), sol.member(1)
     assert m0.result == 1 and m0.failed_step == k
     assert float(m0.t[-1]) <= 0.1 * k + 1e-12 and len(m1.t) == 11
-    assert np.all(np.asarray(m0.q)[:, 0] < 1.0) and np.all(np.isfinite(np.asarray(sol.q)))
+    assert np.all(np.asarray(m0.q)[:, 0] < 1.0) and np.all(np.isfinite(np.asarray(m0.q)))
     np.testing.assert_array_equal(sol.valid[0], np.arange(11) * 2 <= k)
+    # past its failure a member is NaN (never its last good state repeated), everywhere
+    valid = sol.valid
+    for name in ("q", "v", "p", "energy", "constraint_residual", "hidden_momentum", "energy_plus"):
+        a = np.asarray(getattr(sol, name))
+        assert np.all(np.isnan(a[~valid])), name
+        assert np.all(np.isfinite(a[valid])), name
+    # the failure's step, time and residual are kept per member, and in the file
+    (f,) = sol.failures()
+    assert f["member"] == 0 and f["step"] == k and f["time"] == pytest.approx(0.1 * k)
+    assert np.isfinite(f["residual"]) and f["residual"] > 0
+    assert np.isnan(float(sol.failed_residuals[1]))
+    assert m0.failed_residual == f["residual"] and "member 0: step" in sol.summary()
+    ds = sol.to_xarray()
+    assert float(ds["failed_residual"][0]) == f["residual"] and np.isnan(float(ds["failed_residual"][1]))
     with pytest.raises(gnipy.SolverFailure, match=r"member 0 of 2: step \d+ .*residual"):
         gnipy.simulate(s, GNI(Midpoint()), q0, v0, h=0.1, steps=20, save_every=2)
 
@@ -185,7 +200,7 @@ def test_batch_rotations_checked_per_member():
 def test_systems_must_share_structure():
     a = gnipy.make_system("nonholonomic-particle")
     b = gnipy.make_system("contact-oscillator")
-    with pytest.raises(gnipy.SystemError, match=r"system\[1\]: a batch of systems must differ only in parameter"):
+    with pytest.raises(gnipy.SystemError, match=r"system\[1\]: a batch of systems must differ only in the values"):
         stack_systems([a, b])
     with pytest.raises(gnipy.SystemError, match=r"system\[1\]: expected a gnipy.System"):
         gnipy.simulate([a, "x"], "gni-trapezoid", h=0.1, steps=2)
@@ -193,6 +208,44 @@ def test_systems_must_share_structure():
         model_systems("rolling-ball", m=[1.0, 2.0], r=[1.0, 2.0, 3.0])
     with pytest.raises(gnipy.SystemError, match=r"unknown parameter 'mass'"):
         model_systems("rolling-ball", mass=[1.0, 2.0])
+
+
+def test_a_batch_of_different_functions_is_refused_not_run_as_the_first():
+    """A batch of systems with other Lagrangians or constraints (plain functions, whose values a
+    pytree's structure does not compare) ran every member as system[0] (issue 12, defect 1)."""
+    def mu(q):
+        return jnp.array([[jnp.sin(q[2]), -jnp.cos(q[2]), 0.0]])
+
+    def mu2(q):
+        return jnp.array([[jnp.cos(q[2]), jnp.sin(q[2]), 0.0]])
+
+    def l1(q, v):
+        return 0.5 * v @ v
+
+    def l2(q, v):
+        return v @ v - q[0]
+
+    q0, v0 = np.zeros(3), np.array([0.0, 0.0, 1.0])
+    base = System(l1, mu, n=3)
+    for other, what in ((System(l2, mu, n=3), "l2"), (System(l1, mu2, n=3), "mu2")):
+        with pytest.raises(gnipy.SystemError, match=rf"system\[1\]: a batch of systems .* another function \({what} here"):
+            gnipy.simulate([base, other], "gni-midpoint", q0, v0, h=0.1, steps=5)
+    # a parameter held as a Python float (not an array leaf) would be silently batched as system[0]'s
+    def l_m(m, q, v):
+        return 0.5 * m * v @ v
+
+    def scaled(m):
+        return System(jax.tree_util.Partial(l_m, m), mu, n=3)
+
+    with pytest.raises(gnipy.SystemError, match=r"system\[1\].*Python-number parameter"):
+        gnipy.simulate([scaled(1.0), scaled(2.0)], "gni-midpoint", q0, v0, h=0.1, steps=5)
+    # the same function with array parameters is a batch, and each member is its own trajectory
+    sols = gnipy.simulate([scaled(jnp.asarray(1.0)), scaled(jnp.asarray(2.0))], "gni-midpoint",
+                          np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.0, 1.0]), h=0.1, steps=5)
+    for i, m in enumerate((1.0, 2.0)):
+        one = gnipy.simulate(scaled(jnp.asarray(m)), "gni-midpoint", np.zeros(3), np.array([1.0, 0.0, 1.0]),
+                             h=0.1, steps=5)
+        np.testing.assert_allclose(np.asarray(sols.q[i]), np.asarray(one.q), rtol=0, atol=1e-14)
 
 
 def test_reference_is_not_batched():

@@ -76,6 +76,28 @@ def test_too_many_constraints_and_wrong_shape():
         wrong.check(jnp.zeros(3), jnp.zeros(3))
 
 
+def test_no_constraints_is_a_clear_error():
+    """mu(q) of shape (0, N) gave an IndexError (issue 12, defect 13)."""
+    none = System(lambda q, v: 0.5 * v @ v, lambda q: jnp.zeros((0, 3)), n=3)
+    with pytest.raises(SystemError, match=r"constraints: mu\(q0\) has no rows \(shape \(0, 3\)\)"):
+        gnipy.simulate(none, "gni-midpoint", np.zeros(3), np.ones(3), h=0.1, steps=3)
+
+
+def test_float32_mode_is_named_not_blamed_on_the_lagrangian():
+    """With jax_enable_x64 turned off after import, the Lagrangian was refused as 'not of
+    mechanical type' (issue 12, defect 13); the message now names the setting."""
+    import jax
+
+    jax.config.update("jax_enable_x64", False)
+    try:
+        with pytest.raises(SystemError, match=r"jax_enable_x64: gnipy computes in float64"):
+            gnipy.simulate(_particle(), "gni-trapezoid", [0.0, 1.0, 0.0], [1.0, 0.0, 1.0], h=0.1, steps=2)
+    finally:
+        jax.config.update("jax_enable_x64", True)
+    sol = gnipy.simulate(_particle(), "gni-trapezoid", [0.0, 1.0, 0.0], [1.0, 0.0, 1.0], h=0.1, steps=2)
+    assert sol.q.dtype == np.float64
+
+
 def test_initial_velocity_off_constraints_reports_residual():
     s = _particle()
     with pytest.raises(SystemError, match=r"v0: .*residual 5\.000e-01"):
@@ -118,6 +140,17 @@ def test_project_v0_is_the_metric_orthogonal_projection():
         (dict(steps=None, t_final=0.105), r"t_final: .* not a whole number of steps"),
         (dict(steps=None), r"give exactly one of steps and t_final"),
         (dict(save_every=0), r"save_every: must be a positive integer"),
+        # issue 12: these gave an OverflowError, or dropped an imaginary part with only a warning
+        (dict(h=1e-320, steps=None, t_final=10.0), r"h: 1e-320 is below 2.22507e-308"),
+        (dict(h=1e-300, steps=None, t_final=10.0), r"t_final: 10.0 / h = 1e\+301 steps, more than any run"),
+        (dict(h=1e-320), r"h: 1e-320 is below"),
+        (dict(h=10**400), r"h: expected a positive number"),
+        (dict(h=0.1 + 0j), r"h: expected a positive real number"),
+        (dict(steps=10**20), r"steps: 100000000000000000000 steps is more than any run can take"),
+        (dict(steps=None, t_final=1e300), r"t_final: 1e\+300 / h = .* more than any run"),
+        (dict(q0=np.array([0.0, 1.0, 0.0]) + 0j), r"q0: expected 3 real numbers, got complex values"),
+        (dict(v0=np.array([1.0, 0.0, 1.0]) + 1e-3j), r"v0: expected 3 real numbers, got complex values"),
+        (dict(q0=np.zeros((2, 3)) + 1j), r"q0: expected real numbers, got complex values"),
     ],
 )
 def test_simulate_rejects_bad_arguments(kwargs, pattern):

@@ -23,7 +23,7 @@ import numpy as np
 
 from .compilation import jit
 from .spaces import Point
-from .system import System, SystemError
+from .system import System, SystemError, real_array
 
 __all__ = ["stack_systems", "model_systems", "broadcast_initial_conditions", "check_batch", "member_initial_conditions",
            "member_params"]
@@ -50,23 +50,54 @@ def stack_systems(systems: Sequence[System]) -> System:
     arrays0, static0 = eqx.partition(cores[0], eqx.is_array)
     tdef0 = jax.tree_util.tree_structure(arrays0)
     shapes0 = [np.shape(x) for x in jax.tree_util.tree_leaves(arrays0)]
+    static_leaves0 = jax.tree_util.tree_leaves(static0)
     leaves = []
     for i, c in enumerate(cores):
         arrays, static = eqx.partition(c, eqx.is_array)
-        ok = jax.tree_util.tree_structure(arrays) == tdef0 and jax.tree_util.tree_structure(
-            static
-        ) == jax.tree_util.tree_structure(static0)
-        if ok:
-            lv = jax.tree_util.tree_leaves(arrays)
-            ok = [np.shape(x) for x in lv] == shapes0
-        if not ok:
+        why = None
+        if jax.tree_util.tree_structure(arrays) != tdef0 or jax.tree_util.tree_structure(static) != \
+                jax.tree_util.tree_structure(static0):
+            why = "its structure (functions, group, retraction or parameter leaves) differs"
+        elif [np.shape(x) for x in jax.tree_util.tree_leaves(arrays)] != shapes0:
+            why = "its parameter arrays have other shapes"
+        else:
+            # The non-array leaves (the functions, Python numbers) must be the same: a treedef does
+            # not compare them, and stacking keeps system[0]'s, so another Lagrangian, constraint or
+            # Python-float parameter would silently run as system[0]'s.
+            for j, (a, b) in enumerate(zip(jax.tree_util.tree_leaves(static), static_leaves0)):
+                if not _same_static(a, b):
+                    why = f"it has another {_describe_static(a, b)}"
+                    break
+        if why is not None:
             raise SystemError(
-                f"system[{i}]: a batch of systems must differ only in parameter values "
-                f"(same model, functions and dimensions as system[0])"
+                f"system[{i}]: a batch of systems must differ only in the values of array parameters "
+                f"(the same model, functions and dimensions as system[0]), but {why}. Build the members "
+                "from one function with the parameters as JAX arrays (jax.tree_util.Partial(l, m), as the "
+                "zoo models and gnipy.model_systems do), or simulate the systems one at a time"
             )
         leaves.append(jax.tree_util.tree_leaves(arrays))
     stacked = [jnp.stack([np.asarray(lv[j]) for lv in leaves]) for j in range(len(shapes0))]
     return eqx.combine(jax.tree_util.tree_unflatten(tdef0, stacked), static0)
+
+
+def _same_static(a, b) -> bool:
+    if a is b:
+        return True
+    try:
+        same = a == b
+        return bool(same) if isinstance(same, (bool, np.bool_)) else False
+    except Exception:  # noqa: BLE001 - an object that cannot be compared: not the same
+        return False
+
+
+def _describe_static(a, b) -> str:
+    if callable(a):
+        def name(f):
+            return getattr(f, "__name__", type(f).__name__)
+        return f"function ({name(a)} here, {name(b)} in system[0])"
+    if isinstance(a, (int, float, complex, np.number)):
+        return f"Python-number parameter ({a!r} here, {b!r} in system[0]; not a JAX array, so it cannot be batched)"
+    return f"non-array leaf of type {type(a).__name__}"
 
 
 def model_systems(name: str, **params) -> list[System]:
@@ -131,10 +162,7 @@ def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
     n, N = system.n, system.dim
 
     def as_array(name, x):
-        try:
-            return np.asarray(x, dtype=np.float64)
-        except (TypeError, ValueError) as e:
-            raise SystemError(f"{name}: expected numbers, got {x!r}") from e
+        return real_array(name, x)
 
     q0 = as_array("q0", q0)
     v0 = as_array("v0", v0)

@@ -13,10 +13,16 @@ from .integrators.base import Integrator, MethodError
 from .solution import RESULT_SOLVER_FAILED, Solution, SolverFailure
 from .system import System, SystemError, describe_orientations
 
-__all__ = ["simulate", "resolve_steps", "MAX_STEPS"]
+__all__ = ["simulate", "resolve_steps", "MAX_STEPS", "MAX_TOTAL_STEPS", "MIN_STEP_SIZE"]
 
 #: Most steps in one `simulate` call (the compiled loop counts steps in int32).
 MAX_STEPS = 2**31 - 1
+
+#: The most steps of any run, streamed ones included (t = t0 + k h needs k exact in float64).
+MAX_TOTAL_STEPS = 2**53
+
+#: The smallest step size accepted: the smallest normal float64 (below it, precision is lost).
+MIN_STEP_SIZE = float(np.finfo(np.float64).tiny)
 
 
 def resolve_steps(h, steps=None, t_final=None) -> tuple[float, int]:
@@ -25,26 +31,52 @@ def resolve_steps(h, steps=None, t_final=None) -> tuple[float, int]:
     With `t_final`, the number of steps is `round(t_final / h)`; `t_final` must be a multiple of `h`
     to within 1e-9 relative.
     """
+    if isinstance(h, (complex, np.complexfloating)):
+        raise SystemError(f"h: expected a positive real number, got {h!r}")
     try:
         h = float(h)
-    except (TypeError, ValueError) as e:
+    except (TypeError, ValueError, OverflowError) as e:
         raise SystemError(f"h: expected a positive number, got {h!r}") from e
     if not math.isfinite(h) or h <= 0:
         raise SystemError(f"h: the step size must be a positive finite number, got {h!r}")
+    if h < MIN_STEP_SIZE:
+        raise SystemError(
+            f"h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision (subnormal numbers; "
+            "the time t0 + k h and the momenta divided by h would be meaningless)"
+        )
     if (steps is None) == (t_final is None):
         raise SystemError("steps/t_final: give exactly one of steps and t_final")
     if t_final is not None:
+        if isinstance(t_final, (complex, np.complexfloating)):
+            raise SystemError(f"t_final: expected a positive real number, got {t_final!r}")
         try:
             t_final = float(t_final)
-        except (TypeError, ValueError) as e:
+        except (TypeError, ValueError, OverflowError) as e:
             raise SystemError(f"t_final: expected a positive number, got {t_final!r}") from e
         if not math.isfinite(t_final) or t_final <= 0:
             raise SystemError(f"t_final: must be a positive finite number, got {t_final!r}")
-        steps = round(t_final / h)
+        ratio = t_final / h
+        if not math.isfinite(ratio) or ratio > MAX_TOTAL_STEPS:
+            raise SystemError(
+                f"t_final: {t_final!r} / h = {ratio:.3g} steps, more than any run can take "
+                f"(at most {MAX_TOTAL_STEPS:.3g}); choose a larger h or a shorter t_final"
+            )
+        steps = round(ratio)
         if steps < 1 or abs(steps * h - t_final) > 1e-9 * t_final:
             raise SystemError(f"t_final: {t_final!r} is not a whole number of steps of h = {h!r}")
-    if isinstance(steps, bool) or int(steps) != steps or steps < 1:
+    if isinstance(steps, bool) or isinstance(steps, (complex, np.complexfloating)):
         raise SystemError(f"steps: must be a positive integer, got {steps!r}")
+    try:
+        whole = int(steps) == steps
+    except (TypeError, ValueError, OverflowError):
+        raise SystemError(f"steps: must be a positive integer, got {steps!r}") from None
+    if not whole or steps < 1:
+        raise SystemError(f"steps: must be a positive integer, got {steps!r}")
+    if steps > MAX_TOTAL_STEPS:
+        raise SystemError(
+            f"steps: {int(steps)} steps is more than any run can take (at most {MAX_TOTAL_STEPS:.3g}: the "
+            "step index must stay exact in float64)"
+        )
     return h, int(steps)
 
 
@@ -181,7 +213,9 @@ def simulate(
         t0: initial time.
         project_v0: project `v0` onto the constraints instead of raising when it violates them.
         throw: raise :class:`~gnipy.SolverFailure` if a step fails; with `False`, return the
-            solution up to the last good saved node with `result = 1`.
+            solution up to the last good saved node with `result = 1` (in a batch: a failed
+            member's nodes after its failure are NaN; :meth:`Solution.failures` gives each
+            failure's member, step, time and residual).
 
     Returns:
         A :class:`~gnipy.Solution`. For a batch (B members: the batch size of the systems and
@@ -276,7 +310,8 @@ def simulate(
     meta |= {k: meta[k][:good] for k in _DIAGNOSTIC_ARRAYS if meta.get(k) is not None}
     partial = Solution(
         jnp.asarray(times[:good]), q[:good], v[:good], p[:good], energy[:good], residual[:good], its,
-        R=None if R is None else R[:good], result=RESULT_SOLVER_FAILED, failed_step=fail_k, **meta,
+        R=None if R is None else R[:good], result=RESULT_SOLVER_FAILED, failed_step=fail_k,
+        failed_residual=float(fail_res), **meta,
     )
     msg = (
         f"{method.name}: step {fail_k} (t = {t0 + h * fail_k:.6g} -> {t0 + h * (fail_k + 1):.6g}) failed: "
@@ -310,8 +345,8 @@ def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False
 def _is_batch(system: System, q0, v0, R0) -> bool:
     """Whether the initial conditions carry a leading batch axis."""
     try:
-        q = np.asarray(q0, dtype=np.float64)
-        v = np.asarray(v0, dtype=np.float64)
+        q = np.asarray(q0)
+        v = np.asarray(v0)
     except (TypeError, ValueError):
         return False  # let System.check name the bad argument
     if q.ndim == 2 or v.ndim == 2:
@@ -353,7 +388,20 @@ def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks,
     q, R = space.coordinates(b), space.orientation(b)
     fail_k = np.asarray(fail_k)
     failed = fail_k >= 0
+    fail_res = np.where(failed, np.asarray(fail_res, dtype=np.float64), np.nan)
     results = np.where(failed, RESULT_SOLVER_FAILED, 0).astype(np.int32)
+    if failed.any():  # a failed member is NaN after its failed step, never its last state repeated
+        valid = ~failed[:, None] | (k_saved[None, :] <= fail_k[:, None])
+
+        def blank(a):
+            if a is None:
+                return None
+            a = np.array(a, dtype=np.float64)
+            a[~valid] = np.nan
+            return jnp.asarray(a)
+
+        q, v, p, energy, residual, R = (blank(a) for a in (q, v, p, energy, residual, R))
+        batch_diag |= {k: blank(batch_diag[k]) for k in _DIAGNOSTIC_ARRAYS if batch_diag.get(k) is not None}
     its = np.asarray(its)
     batch_meta = dict(meta)
     if sys_batched:
@@ -361,7 +409,7 @@ def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks,
     sol = Solution(
         jnp.asarray(times), q, v, p, energy, residual, jnp.asarray([its[:, 0].sum(), its[:, 1].max()]), R=R,
         result=RESULT_SOLVER_FAILED if failed.any() else 0, failed_step=int(fail_k[failed].min()) if failed.any() else -1,
-        results=jnp.asarray(results), failed_steps=jnp.asarray(fail_k),
+        results=jnp.asarray(results), failed_steps=jnp.asarray(fail_k), failed_residuals=jnp.asarray(fail_res),
         member_params=member_params(systems) if sys_batched else None,
         **batch_meta, **batch_diag,
     )
@@ -370,8 +418,8 @@ def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks,
         k = int(fail_k[i])
         msg = (
             f"{method.name}: member {i} of {B}: step {k} (t = {t0 + h * k:.6g} -> {t0 + h * (k + 1):.6g}) failed: "
-            f"the solve did not converge or gave a non-finite value (residual {float(np.asarray(fail_res)[i]):.3e}); "
+            f"the solve did not converge or gave a non-finite value (residual {float(fail_res[i]):.3e}); "
             f"{int(failed.sum())} member(s) failed"
         )
-        raise SolverFailure(msg, step=k, time=t0 + h * k, residual=float(np.asarray(fail_res)[i]), solution=sol)
+        raise SolverFailure(msg, step=k, time=t0 + h * k, residual=float(fail_res[i]), solution=sol)
     return sol

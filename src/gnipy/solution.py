@@ -62,8 +62,10 @@ class Solution(eqx.Module):
         result: 0 on success, 1 if a step failed (then the arrays stop at the last good node;
             in a batch: 1 if any member failed).
         failed_step: index of the first failed step, or -1 (in a batch: the earliest).
-        results, failed_steps: in a batch, each member's result code and failed step, (B,);
-            None for a single trajectory.
+        failed_residual: the residual of the failed step's solve (NaN when no step failed).
+        results, failed_steps, failed_residuals: in a batch, each member's result code, failed
+            step (-1 if none) and the residual of its failed solve (NaN if none), (B,); None for
+            a single trajectory.
         member_params: in a parameter batch, each member's parameter values, name -> (B,).
         hidden_momentum: the GNI family's hidden momentum $\\|p^+ - \\bar p\\|/\\|\\bar p\\|$ (norms in
             $\\mathbb{G}^{-1}$) at each saved node, (T,); None for other methods
@@ -81,8 +83,8 @@ class Solution(eqx.Module):
     **Batches.** A solution of B trajectories (from :func:`gnipy.simulate` with batched
     initial conditions or systems) has a leading member axis on `q, v, p, energy,
     constraint_residual, R` (`t` is shared). A failed member's saved nodes after its failed
-    step hold its last good state: read members through :meth:`member` (truncated at the
-    failure) or mask with :attr:`valid`.
+    step are NaN (never a repeated last state): read members through :meth:`member` (truncated
+    at the failure) or mask with :attr:`valid`; :meth:`failures` lists them.
     """
 
     t: jax.Array
@@ -95,6 +97,7 @@ class Solution(eqx.Module):
     R: jax.Array | None = None
     result: int = eqx.field(static=True, default=RESULT_SUCCESS)
     failed_step: int = eqx.field(static=True, default=-1)
+    failed_residual: float = eqx.field(static=True, default=float("nan"))
     system: str = eqx.field(static=True, default="system")
     method: str = eqx.field(static=True, default="method")
     h: float = eqx.field(static=True, default=float("nan"))
@@ -104,6 +107,7 @@ class Solution(eqx.Module):
     start: str = eqx.field(static=True, default="p+ = G v0")
     results: jax.Array | None = None
     failed_steps: jax.Array | None = None
+    failed_residuals: jax.Array | None = None
     member_params: dict | None = None
     hidden_momentum: jax.Array | None = None
     hidden_expected: jax.Array | None = None
@@ -160,6 +164,7 @@ class Solution(eqx.Module):
         if self.member_params is not None:
             params = tuple((k, float(np.asarray(v)[i])) for k, v in self.member_params.items())
         fs = int(np.asarray(self.failed_steps)[i])
+        fr = float("nan") if self.failed_residuals is None else float(np.asarray(self.failed_residuals)[i])
 
         def row(a):
             return None if a is None else a[i, :good]
@@ -168,12 +173,28 @@ class Solution(eqx.Module):
             self.t[:good], self.q[i, :good], self.v[i, :good], self.p[i, :good], self.energy[i, :good],
             self.constraint_residual[i, :good], self.iterations,
             R=row(self.R),
-            result=int(np.asarray(self.results)[i]), failed_step=fs, system=self.system, method=self.method,
+            result=int(np.asarray(self.results)[i]), failed_step=fs, failed_residual=fr, system=self.system,
+            method=self.method,
             h=self.h, coordinates=self.coordinates, velocities=self.velocities, params=params, start=self.start,
             hidden_momentum=row(self.hidden_momentum), hidden_expected=row(self.hidden_expected),
             energy_plus=row(self.energy_plus), conserved=self.conserved,
             orientation=self.orientation, energy_invariant=self.energy_invariant,
         )
+
+    def failures(self) -> list[dict[str, Any]]:
+        """The failed steps: one dict per failed member (a single trajectory: at most one) with
+        `member` (None for a single trajectory), `step`, `time` (the failed step's start) and
+        `residual` (of its solve)."""
+        t0 = float(self.t[0]) if len(self.t) else 0.0
+        if self.batch_size is None:
+            if self.failed_step < 0:
+                return []
+            return [dict(member=None, step=self.failed_step, time=t0 + self.h * self.failed_step,
+                         residual=self.failed_residual)]
+        fs = np.asarray(self.failed_steps)
+        fr = np.full(fs.shape, np.nan) if self.failed_residuals is None else np.asarray(self.failed_residuals)
+        return [dict(member=int(i), step=int(fs[i]), time=t0 + self.h * int(fs[i]), residual=float(fr[i]))
+                for i in np.flatnonzero(fs >= 0)]
 
     @property
     def steps(self) -> int:
@@ -243,6 +264,8 @@ class Solution(eqx.Module):
                 "constraint_residual": ((*mt, "constraint"), np.asarray(self.constraint_residual)),
                 "result": (("member",), np.asarray(self.results)),
                 "failed_step": (("member",), np.asarray(self.failed_steps)),
+                "failed_residual": (("member",), np.full(self.batch_size, np.nan) if self.failed_residuals is None
+                                    else np.asarray(self.failed_residuals, dtype=np.float64)),
                 "valid": (mt, self.valid),
             },
             coords={"member": np.arange(self.batch_size), **self._time_coords(), "coordinate": coords,
@@ -273,6 +296,9 @@ class Solution(eqx.Module):
                 "created": created,
             }
         )
+        if self.batch_size is None and self.failed_step >= 0:
+            ds.attrs.update(failed_step=int(self.failed_step), failed_residual=float(self.failed_residual),
+                            failed_time=float(self.t[0]) + self.h * self.failed_step if len(self.t) else float("nan"))
         for k, v in self.params:
             ds.attrs[f"param_{k}"] = float(v)
         if self.conserved:
@@ -347,13 +373,23 @@ class Solution(eqx.Module):
             e = np.asarray(self.energy)
             valid = self.valid
             dev = np.where(valid, np.abs(e - e[:, :1]), 0.0)
-            r = np.asarray(self.constraint_residual)
-            return "\n".join([
+            r = np.abs(np.asarray(self.constraint_residual))
+            r = np.where(valid[..., None], r, 0.0) if r.size else r
+            failures = self.failures()
+            lines = [
                 f"{self.system} with {self.method}: {self.batch_size} members, h = {self.h:g}, {self.steps} steps, "
                 f"t = {float(self.t[0]):g} .. {float(self.t[-1]):g}",
-                f"  failed members: {int(np.sum(np.asarray(self.results) != 0))}",
+                f"  failed members: {len(failures)}",
+            ]
+            for f in failures[:5]:
+                lines.append(f"    member {f['member']}: step {f['step']} (t = {f['time']:.6g}) failed, "
+                             f"residual {f['residual']:.3e}; NaN after it")
+            if len(failures) > 5:
+                lines.append(f"    ... and {len(failures) - 5} more")
+            return "\n".join([
+                *lines,
                 f"  max |E - E0| over members = {np.max(dev):.3e}",
-                f"  max constraint residual = {np.max(np.abs(r)) if r.size else 0.0:.3e}",
+                f"  max constraint residual = {np.max(r) if r.size else 0.0:.3e}",
                 f"  Newton iterations: total {int(np.asarray(self.iterations)[0])}, max per step {int(np.asarray(self.iterations)[1])}",
                 *self._diagnostic_lines(),
             ])

@@ -316,10 +316,7 @@ class System(eqx.Module):
         if R0 is None:
             R = np.eye(k)  # the identity of every matrix group (NumPy: no device dispatch)
         else:
-            try:
-                R = np.asarray(R0, dtype=np.float64)
-            except (TypeError, ValueError) as e:
-                raise SystemError(f"R0: expected a {k}x{k} group matrix, got {R0!r}") from e
+            R = real_array("R0", R0, f"a {k}x{k} group matrix")
             if R.size == k * k:
                 R = R.reshape(k, k)
             if R.shape != (k, k):
@@ -353,6 +350,7 @@ class System(eqx.Module):
         Raises:
             SystemError: naming the argument and the problem.
         """
+        require_float64()
         b0 = self.initial_point(q0, R0)
         if v0 is not None:
             v0 = _as_vector("v0", v0, self.dim)
@@ -376,6 +374,11 @@ class System(eqx.Module):
         if not np.all(np.isfinite(mu)):
             raise SystemError("constraints: mu(q0) is not finite")
         m = mu.shape[0]
+        if m == 0:
+            raise SystemError(
+                f"constraints: mu(q0) has no rows (shape {mu.shape}); gnipy integrates constrained systems, give "
+                "at least one constraint"
+            )
         if m >= N:
             raise SystemError(f"constraints: {m} constraints on a {N}-dimensional velocity space leave no motion")
         sv = np.linalg.svd(mu, compute_uv=False)
@@ -499,11 +502,33 @@ def _metric_derivatives(system, b0, ws):
     return jax.vmap(one)(ws)
 
 
-def _as_vector(name: str, x, n: int) -> np.ndarray:
+def real_array(name: str, x, what: str = "real numbers") -> np.ndarray:
+    """`x` as a float64 array; :class:`SystemError` naming `name` if it is not numbers, or is
+    complex (an imaginary part would otherwise be dropped with only a NumPy warning)."""
     try:
-        a = np.asarray(x, dtype=np.float64)
+        a = np.asarray(x)
     except (TypeError, ValueError) as e:
-        raise SystemError(f"{name}: expected {n} numbers, got {x!r}") from e
+        raise SystemError(f"{name}: expected {what}, got {x!r}") from e
+    if a.dtype.kind == "c":
+        raise SystemError(f"{name}: expected {what}, got complex values (gnipy integrates real systems)")
+    try:
+        return np.asarray(a, dtype=np.float64)
+    except (TypeError, ValueError, OverflowError) as e:
+        raise SystemError(f"{name}: expected {what}, got {x!r}") from e
+
+
+def require_float64() -> None:
+    """:class:`SystemError` unless JAX computes in float64 (`jax_enable_x64`, which importing
+    gnipy turns on): in float32 nothing gnipy computes reaches its stated accuracy."""
+    if not jax.config.jax_enable_x64:
+        raise SystemError(
+            "jax_enable_x64: gnipy computes in float64, but JAX's jax_enable_x64 is off (something turned it "
+            "off after importing gnipy); turn it back on with jax.config.update('jax_enable_x64', True)"
+        )
+
+
+def _as_vector(name: str, x, n: int) -> np.ndarray:
+    a = real_array(name, x, f"{n} real numbers")
     if a.ndim != 1 or a.shape[0] != n:
         raise SystemError(f"{name}: expected a vector of length {n}, got shape {a.shape}")
     if not np.all(np.isfinite(a)):
