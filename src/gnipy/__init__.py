@@ -42,6 +42,7 @@ from .ensembles import model_systems, stack_systems  # noqa: E402
 from .simulate import simulate  # noqa: E402
 from .streaming import simulate_to_file  # noqa: E402
 from .sweep import open_sweep, run_sweep  # noqa: E402
+from .io import OutputError, read_netcdf, verify_netcdf, write_netcdf  # noqa: E402
 from .solution import Solution, SolverFailure  # noqa: E402
 from .spaces import EuclideanSpace, GroupSpace, Point  # noqa: E402
 from .system import System, SystemError  # noqa: E402
@@ -75,6 +76,10 @@ __all__ = [
     "simulate_to_file",
     "run_sweep",
     "open_sweep",
+    "OutputError",
+    "write_netcdf",
+    "read_netcdf",
+    "verify_netcdf",
     "stack_systems",
     "Solution",
     "SolverFailure",
