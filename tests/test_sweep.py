@@ -197,7 +197,13 @@ def test_failed_members_are_recorded_not_raised(osc_reference):
     np.testing.assert_array_equal(
         ds["valid"].values, (fs[..., None] < 0) | (k <= fs[..., None])
     )
-    assert np.isfinite(ds["q"].values).all()  # held at the last good state, not NaN
+    valid = ds["valid"].values
+    q = ds["q"].values
+    assert np.isnan(q[~valid]).all()  # NaN after the failure, not held at the last good state
+    assert np.isfinite(q[~failed]).all()
+    np.testing.assert_array_equal(ds["failed_time"].values[failed], 0.5 * fs[failed])
+    assert np.isnan(ds["failed_time"].values[~failed]).all()
+    assert np.isnan(ds["failed_residual"].values[~failed]).all()
 
 
 # --------------------------------------------------------------------------------------
@@ -248,7 +254,8 @@ def test_interrupted_cli_sweep_resumes_without_recomputing(
         open_sweep(out)
 
     res = invoke(*args[:-4], "--scheduler", client.scheduler.address, "--out", out)
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == 1, res.output  # members failed (written, and listed)
+    assert "members failed" in _error_lines(res.output)[0], res.output
     n = int(done.sum())
     assert f"chunks: {24 - n} computed, {n} skipped" in res.output, res.output
     _assert_same_data(open_sweep(out), open_sweep(osc_reference[0]))
@@ -314,7 +321,8 @@ def test_a_different_sweep_on_the_store_is_refused(osc_reference, client, tmp_pa
     address = client.scheduler.address
     res = invoke(*OSC_ARGS, "--scheduler", address, "--overwrite", "--max-chunks", "2",
                  "--out", copy)
-    assert res.exit_code == 0, res.output
+    assert res.exit_code == 1, res.output  # members 1 to 3 failed
+    assert "3 of 48 members failed" in _error_lines(res.output)[0], res.output
     assert "chunks: 2 computed, 0 skipped" in res.output
     assert "22 remaining" in res.output
     attrs = xr.open_zarr(copy, consolidated=False).attrs
@@ -429,6 +437,6 @@ def test_help_lists_every_option():
     assert res.exit_code == 0
     options = "--grid --method --h --steps --t-final --save-every --set --project-v0 "
     options += "--no-project-v0 --chunk-size --scheduler --workers --overwrite "
-    options += "--max-chunks"
+    options += "--max-chunks --yes --connect-timeout"
     for option in [*options.split(), "--out"]:
         assert option in res.output, option

@@ -6,6 +6,13 @@ model parameter (`m`, `Omega`, ...) or a component of the initial condition:
 `q0.<coordinate>` (e.g. `q0.x`) or `v0.<velocity>` (e.g. `v0.omega3`). The members (grid
 points) are numbered in C order: the last axis varies fastest.
 
+**Size.** Before anything is allocated or created, :func:`run_sweep` estimates the store's size
+(members × saved nodes × bytes per node, uncompressed) and the memory of one chunk. A store
+over `max_bytes` (default :data:`DEFAULT_MAX_BYTES`, 100 GiB; `None` lifts the bound, `gni
+sweep --yes`) is refused, as are, whatever `max_bytes`, a store larger than the free space of
+its file system, a chunk over a quarter of this machine's memory and a grid whose per-member
+indices alone would take a quarter of it. Each axis has at most :data:`MAX_COUNT` values.
+
 **How it runs.** The members are cut into chunks of `chunk_size`; each chunk is one task
 on the cluster, :func:`run_chunk`, which runs the whole chunk as one vmapped program
 (:func:`gnipy.simulate` with a batch of systems and initial conditions, `throw=False`).
@@ -13,31 +20,57 @@ Every chunk has the same size, so each worker compiles once and reuses the progr
 all its other chunks: the last, shorter chunk is *padded on input* by repeating its last
 member, and the extra members are dropped before anything is written (no padding ever
 reaches the store). The driver writes each chunk to the zarr store as soon as it
-arrives.
+arrives. With `scheduler`, the address is checked (`tcp://HOST:PORT`, `tls://HOST:PORT`,
+`inproc://...`, `HOST:PORT`, or a scheduler file) and the client connects, within
+`connect_timeout` seconds (default :data:`DEFAULT_CONNECT_TIMEOUT`, 10), before the store is
+created. A local cluster serves no dashboard (its scheduler's HTTP server listens on a random
+port of 127.0.0.1, with no pages).
 
-**The store** (a zarr directory, written through xarray) is created up front at full
-size, with zarr chunks aligned to `chunk_size` along `member`. Its coordinate `time` holds
-the saved times (CF attributes, `units = "s"`), with `node(time)` (the saved-node index)
-and `step(time)` (the step index) beside it; it holds `q(member, time, coordinate)`,
-`v` and `p(member, time, velocity)`, `energy(member, time)`, `constraint_residual(member,
-time, constraint)`, `R(member, time, i, j)` on Rⁿ × G, `result(member)` (0: ok, 1: a
-step failed), `failed_step(member)` (or -1), `valid(member, time)` (False after a
-member's failed step), `grid_<NAME>(member)` (each member's grid values) and
+**Failed members.** A member whose step fails does not stop the sweep: its `result` is 1, its
+`failed_step`, `failed_time` and `failed_residual` (the residual of the failed solve) are
+recorded, and every variable of it is NaN after its last good node (`valid` False there).
+:class:`SweepReport` counts the failed members and lists the first few; `gni sweep` exits with
+code 1 when there are any.
+
+**The store** (a zarr directory) is created up front at full size, with zarr chunks aligned to
+`chunk_size` along `member`. Its coordinate `time` holds the saved times (CF attributes,
+`units = "s"`), with `node(time)` (the saved-node index) and `step(time)` (the step index)
+beside it; it holds `q(member, time, coordinate)`, `v` and `p(member, time, velocity)`,
+`energy(member, time)`, `constraint_residual(member, time, constraint)`, `R(member, time, i,
+j)` on Rⁿ × G, `result(member)` (0: ok, 1: a step failed), `failed_step(member)` (or -1),
+`failed_time(member)` and `failed_residual(member)` (NaN when none), `valid(member, time)`
+(False after a member's failed step), `grid_<NAME>(member)` (each member's grid values),
+`chunk_checksum(chunk, digest)` (the SHA-256 digest, 32 bytes, of each chunk's data:
+:func:`gnipy.files.array_checksum` of the chunk's member variables and grid values) and
 `chunk_done(chunk)`. The attributes hold the sweep's specification as JSON (`sweep_spec`:
 model, method, h, steps, save_every, grid, fixed parameters, chunk size, gnipy version)
-and the same fields one by one for reading, the CF attributes (`Conventions`, `title`,
-`source`, `history`) and, on Rⁿ × G, `orientation` (how R is reconstructed,
-:attr:`gnipy.System.orientation_description`).
+and the same fields one by one for reading, the names of the store's arrays
+(`store_arrays`), the CF attributes (`Conventions`, `title`, `source`, `history`) and, on
+Rⁿ × G, `orientation` (how R is reconstructed, :attr:`gnipy.System.orientation_description`).
 
-**Resuming.** For each chunk, the data are written first and its `chunk_done` flag last,
-so an interrupted sweep (killed, out of time, Ctrl-C) leaves at worst one chunk whose
-data were written and whose flag was not. Running the same sweep again on the same store
-checks that the specification is the same (else :class:`SweepError` names the field that
-differs), skips the chunks whose flag is set and computes the others. The store is
-created in a temporary directory beside its destination and renamed into place, so a
-store either exists with all its arrays or not at all; chunks not yet done read as NaN
-(floats) and `valid = False`, and :func:`open_sweep` refuses a store whose chunks are
-not all done unless asked.
+**Ownership.** The store is built in a temporary directory beside its destination
+(`.NAME.gnipy-PID-HEX.partial`), holding gnipy's marker file (:data:`gnipy.files.MARKER`),
+and renamed into place, so a store either exists with all its arrays or not at all. gnipy
+writes a store only where nothing is, or into an empty directory, or over a store it created
+(with the marker; a store written by an earlier gnipy, without the marker but with a valid
+`sweep_spec`, counts as one); `overwrite=True` replaces such a store only when everything at
+its top level is gnipy's (its arrays, metadata and marker). It refuses a symbolic link, a file,
+and a non-empty directory it did not create. Each run first removes the temporaries
+(`.partial`, `.old`) that runs killed while creating or replacing a store at the same path
+left behind (:func:`gnipy.files.clean_stale_temporaries`; those of a live process are kept).
+
+**Resuming and integrity.** For each chunk, the data are written first, then its checksum,
+and its `chunk_done` flag last, so an interrupted sweep leaves at worst one chunk whose data
+were written and whose flag was not. Running the same sweep again on the same store checks
+that the specification is the same (else :class:`SweepError` names the field that differs),
+that the store's metadata and arrays are intact (else :class:`SweepError` says what is
+damaged and to start afresh with `overwrite=True`), then reads every chunk flagged done back
+and recomputes its checksum: a chunk that cannot be read or whose data differ is recomputed,
+with a :class:`SweepWarning` naming the chunk and its members; the others are skipped. (This
+reads the whole store once.) :func:`open_sweep` does the same check (and refuses a damaged
+store), and :func:`verify_sweep` reports on a store without changing it. Chunks not yet done
+read as NaN (floats) and `valid = False`, and :func:`open_sweep` refuses a store whose chunks
+are not all done unless asked.
 
 Two runs must not write to the same store at the same time.
 """
@@ -51,29 +84,54 @@ import math
 import os
 import re
 import shutil
+import stat
 import time
 import uuid
+import warnings
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from . import files
 from .system import SystemError
 
 __all__ = [
     "GridAxis",
     "SweepError",
     "SweepFailure",
+    "SweepWarning",
     "SweepReport",
+    "DEFAULT_MAX_BYTES",
+    "DEFAULT_CONNECT_TIMEOUT",
+    "MAX_COUNT",
     "parse_grid",
     "run_sweep",
     "open_sweep",
+    "verify_sweep",
     "run_chunk",
 ]
 
-#: The format tag stored in the `sweep_spec` attribute (and compared on resume).
-FORMAT = "gnipy-sweep/1"
+#: The format tag stored in the `sweep_spec` attribute (and compared on resume). Stores of
+#: format `gnipy-sweep/1` (before checksums) can be read and replaced, not resumed.
+FORMAT = "gnipy-sweep/2"
+_OLD_FORMATS = ("gnipy-sweep/1",)
+
+#: The default bound on a store's estimated size, in bytes (`run_sweep(max_bytes=...)`; `gni
+#: sweep --yes` lifts it): 100 GiB.
+DEFAULT_MAX_BYTES = 100 * 2**30
+
+#: Seconds to wait for the connection to an existing scheduler (`run_sweep(connect_timeout=...)`).
+DEFAULT_CONNECT_TIMEOUT = 10.0
+
+#: The most values one grid axis may have.
+MAX_COUNT = 10**9
+
+# the `purpose` in the marker file of a sweep store
+_PURPOSE = "gnipy sweep store"
+# failed members listed in a SweepReport
+_FAILURES_LISTED = 5
 
 _MAX_ZARR_CHUNK_BYTES = 64 * 2**20
 _MAX_PREFLIGHT = 64
@@ -93,6 +151,11 @@ class SweepFailure(RuntimeError):
     sweep again to resume."""
 
 
+class SweepWarning(UserWarning):
+    """A chunk of a store that was flagged done is damaged (unreadable, or its data differ from
+    their checksum) and is computed again; the message names the chunk and its members."""
+
+
 # --------------------------------------------------------------------------------------
 # The grid
 # --------------------------------------------------------------------------------------
@@ -106,7 +169,8 @@ class GridAxis:
     Attributes:
         name: a model parameter, `q0.<coordinate>` or `v0.<velocity name>`.
         start, stop: the first and last values (finite).
-        count: the number of values (a positive integer; 1 gives `start` only).
+        count: the number of values (a positive integer, at most :data:`MAX_COUNT`; 1
+            gives `start` only).
     """
 
     name: str
@@ -138,6 +202,10 @@ class GridAxis:
         if isinstance(c, bool) or not isinstance(c, (int, np.integer)) or c < 1:
             raise SweepError(
                 f"grid: {name}: COUNT must be a positive integer, got {c!r}"
+            )
+        if c > MAX_COUNT:
+            raise SweepError(
+                f"grid: {name}: COUNT must be at most {MAX_COUNT:,}, got {c!r}"
             )
         object.__setattr__(self, "count", int(c))
 
@@ -201,6 +269,11 @@ def parse_grid(text: str) -> GridAxis:
             f"grid: {name}: COUNT must be a positive integer, got {parts[2]!r} in "
             f"{text!r}"
         )
+    if count > MAX_COUNT:
+        raise SweepError(
+            f"grid: {name}: COUNT must be at most {MAX_COUNT:,}, got {parts[2]!r} in "
+            f"{text!r}"
+        )
     return GridAxis(name, values[0], values[1], count)
 
 
@@ -251,10 +324,21 @@ class _Plan:
     constraints: int
     matrix_size: int | None  # k of R (k, k), None on R^n
     orientation: str = ""  # the attribute `orientation` (on R^n x G)
+    store_bytes: int = 0  # the store's estimated size (uncompressed)
 
     @property
     def shape(self) -> tuple[int, ...]:
         return tuple(a.count for a in self.axes)
+
+    @property
+    def member_vars(self) -> tuple[str, ...]:
+        """The per-member variables of the store (R on R^n x G only)."""
+        return tuple(k for k in _MEMBER_VARS if k != "R" or self.matrix_size is not None)
+
+    @property
+    def array_names(self) -> tuple[str, ...]:
+        """Every array of the store."""
+        return _array_names(self.member_vars, [a.name for a in self.axes])
 
     def member_range(self, index: int) -> tuple[int, int]:
         a = index * self.chunk
@@ -281,6 +365,80 @@ def _positive_int(argument: str, value) -> int:
     return int(value)
 
 
+def _saved_steps(steps: int, save_every: int) -> np.ndarray:
+    """The step index of each saved node: 0, K, 2K, ... and the last."""
+    n_blocks, remainder = divmod(steps, save_every)
+    return np.concatenate(
+        [np.arange(n_blocks + 1) * save_every, [steps] if remainder else []]
+    ).astype(np.int64)
+
+
+def _fmt_bytes(n: float) -> str:
+    n = float(n)
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.0f} bytes" if unit == "bytes" else f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"  # pragma: no cover
+
+
+def _memory_total() -> int | None:
+    """This machine's physical memory in bytes (None if unknown)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE")) * int(os.sysconf("SC_PHYS_PAGES"))
+    except (AttributeError, ValueError, OSError):
+        return None
+
+
+def _check_size(axes, *, members, chunk, saved, node_bytes, member_bytes, max_bytes,
+                disk) -> int:
+    """Refuse a sweep too large for the bound `max_bytes` (None: no bound), for the free
+    space of `disk` (a directory; None: not checked) or for this machine's memory; return the
+    store's estimated size. Pure arithmetic: nothing is allocated."""
+    grid = " ".join(str(a) for a in axes)
+    chunks = -(-members // chunk)
+    store = members * (saved * node_bytes + member_bytes) + chunks * 33
+    what = (f"grid: {grid} gives {members:,} member(s) x {saved:,} saved node(s): the store "
+            f"would hold about {_fmt_bytes(store)} ({node_bytes} bytes per member and node, "
+            "uncompressed)")
+    if max_bytes is not None and store > max_bytes:
+        raise SweepError(
+            f"{what}, more than the bound max_bytes = {_fmt_bytes(max_bytes)}; sweep a "
+            "coarser grid or save fewer nodes (a larger save_every), or pass "
+            "max_bytes=None to go ahead"
+        )
+    memory = _memory_total()
+    if memory:
+        # the member coordinate, the grid values and their indices, on the driver
+        driver = members * 8 * (2 * len(axes) + 2)
+        if 4 * driver > memory:
+            raise SweepError(
+                f"grid: {grid} gives {members:,} members: their indices and grid values "
+                f"alone take about {_fmt_bytes(driver)} of memory, more than a quarter of "
+                f"this machine's {_fmt_bytes(memory)}; sweep a coarser grid"
+            )
+        per_chunk = chunk * saved * node_bytes
+        if 4 * per_chunk > memory:
+            raise SweepError(
+                f"chunk_size: a chunk of {chunk:,} member(s) x {saved:,} saved node(s) "
+                f"holds about {_fmt_bytes(per_chunk)} in memory (a worker, and this "
+                "process while writing it, hold whole chunks), more than a quarter of this "
+                f"machine's {_fmt_bytes(memory)}; choose a smaller chunk_size or save "
+                "fewer nodes (a larger save_every)"
+            )
+    if disk is not None:
+        try:
+            free = shutil.disk_usage(disk).free
+        except OSError:
+            free = None
+        if free is not None and store > free:
+            raise SweepError(
+                f"out: {what.partition(': ')[2]}, and only {_fmt_bytes(free)} are free "
+                f"in {str(disk)!r}; free some space or write the store elsewhere"
+            )
+    return store
+
+
 def _plan(
     model,
     grid,
@@ -293,9 +451,12 @@ def _plan(
     set_params,
     project_v0,
     chunk_size,
+    max_bytes=None,
+    disk=None,
 ) -> _Plan:
     """Validate a sweep's input and work out its specification (or raise SweepError,
-    SystemError or MethodError)."""
+    SystemError or MethodError). The sizes are checked (:func:`_check_size`, with
+    `max_bytes` and `disk`) before anything of the sweep's size is allocated."""
     from . import __version__
     from .methods import method_names
     from .models import get_model
@@ -346,11 +507,19 @@ def _plan(
     swept = {a.name for a in axes}
     members = math.prod(a.count for a in axes)
     chunk = min(chunk_size, members)
+    k = system.group.matrix_size if system.group is not None else None
+    n, N = len(coordinates), len(velocities)
     n_blocks, remainder = divmod(steps, save_every)
-    k_saved = np.concatenate(
-        [np.arange(n_blocks + 1) * save_every, [steps] if remainder else []]
-    )
-    times = h * k_saved.astype(np.float64)
+    saved = n_blocks + 1 + (1 if remainder else 0)
+    # bytes per member and saved node: q, v, p, energy, constraint_residual (at most N
+    # constraints), R, valid; per member: result, failed_step, failed_time,
+    # failed_residual, the grid values and the member index
+    node_bytes = 8 * (n + 2 * N + 1 + N + (k or 0) ** 2) + 1
+    member_bytes = 4 + 4 + 8 + 8 + 8 * len(axes) + 8
+    store_bytes = _check_size(axes, members=members, chunk=chunk, saved=saved,
+                              node_bytes=node_bytes, member_bytes=member_bytes,
+                              max_bytes=max_bytes, disk=disk)
+    times = h * _saved_steps(steps, save_every).astype(np.float64)
     sweep_spec = {
         "format": FORMAT,
         "model": spec.name,
@@ -365,7 +534,6 @@ def _plan(
         "chunk_size": chunk,
         "gnipy_version": __version__,
     }
-    k = system.group.matrix_size if system.group is not None else None
     m, orientation = _preflight(sweep_spec, axes, members)
     return _Plan(
         sweep_spec,
@@ -379,6 +547,7 @@ def _plan(
         m,
         k,
         orientation,
+        store_bytes,
     )
 
 
@@ -504,7 +673,12 @@ def run_chunk(
 
     Returns:
         numpy arrays with a leading member axis of length `size`: `q, v, p, energy,
-        constraint_residual, valid, result, failed_step`, and `R` on Rⁿ × G.
+        constraint_residual, valid, result, failed_step, failed_time, failed_residual`,
+        and `R` on Rⁿ × G. A failed member's `q, v, p, energy, constraint_residual, R` are
+        NaN after its last good node (where `valid` is False); `failed_time` is the time
+        at the start of its failed step and `failed_residual` the residual of the failed
+        solve (both NaN for a member that did not fail, and the residual NaN when the
+        simulation does not report it).
 
     Raises:
         SweepError: a member whose parameters or initial condition are not acceptable
@@ -536,18 +710,36 @@ def run_chunk(
             s = systems[i] if isinstance(systems, list) else systems
             _check_member(s, job, columns, i, first + min(i, size - 1), q0, v0, R0)
         raise
+    valid = np.asarray(sol.valid, dtype=bool)
+    failed_steps = np.asarray(sol.failed_steps, dtype=np.int64)
+    failed = failed_steps >= 0
+
+    def blank(a):
+        """NaN where the member's node is not valid (after its failed step)."""
+        a = np.array(a, dtype=np.float64)
+        return np.where(valid.reshape(valid.shape + (1,) * (a.ndim - 2)), a, np.nan)
+
+    # the residual of each member's failed solve, where the simulation reports it
+    residuals = getattr(sol, "failed_residuals", None)
+    residuals = (
+        np.full(B, np.nan)
+        if residuals is None
+        else np.asarray(residuals, dtype=np.float64).reshape(B)
+    )
     out = {
-        "q": sol.q,
-        "v": sol.v,
-        "p": sol.p,
-        "energy": sol.energy,
-        "constraint_residual": sol.constraint_residual,
-        "valid": sol.valid,
-        "result": sol.results,
-        "failed_step": sol.failed_steps,
+        "q": blank(sol.q),
+        "v": blank(sol.v),
+        "p": blank(sol.p),
+        "energy": blank(sol.energy),
+        "constraint_residual": blank(sol.constraint_residual),
+        "valid": valid,
+        "result": np.asarray(sol.results),
+        "failed_step": failed_steps.astype(np.int32),
+        "failed_time": np.where(failed, float(job["h"]) * failed_steps, np.nan),
+        "failed_residual": np.where(failed, residuals, np.nan),
     }
     if sol.R is not None:
-        out["R"] = sol.R
+        out["R"] = blank(sol.R)
     return {k: np.asarray(v)[:size] for k, v in out.items()}
 
 
@@ -573,7 +765,20 @@ _MEMBER_VARS = {
     ),
     "result": ((), np.int32, "0: success, 1: a step failed"),
     "failed_step": ((), np.int32, "first failed step or -1"),
+    "failed_time": ((), np.float64, "time at the start of the failed step, or NaN"),
+    "failed_residual": ((), np.float64, "residual of the failed step's solve, or NaN"),
 }
+# the coordinates of the store (arrays too)
+_COORDS = ("member", "time", "node", "step", "coordinate", "velocity", "constraint", "chunk")
+# per chunk
+_CHUNK_VARS = ("chunk_done", "chunk_checksum")
+# the metadata files at the top of a zarr store (v3 and v2)
+_META_FILES = ("zarr.json", ".zgroup", ".zattrs", ".zmetadata")
+
+
+def _array_names(member_vars, grid_names) -> tuple[str, ...]:
+    return tuple(sorted({*member_vars, *(f"grid_{g}" for g in grid_names), *_CHUNK_VARS,
+                         *_COORDS}))
 
 
 def _template(plan: _Plan):
@@ -623,7 +828,13 @@ def _template(plan: _Plan):
     variables["chunk_done"] = (
         ("chunk",),
         da.zeros((plan.chunks,), chunks=(1,), dtype=bool),
-        {"long_name": "True once the chunk's data are written (written last)"},
+        {"long_name": "True once the chunk's data and checksum are written (written last)"},
+    )
+    variables["chunk_checksum"] = (
+        ("chunk", "digest"),
+        da.zeros((plan.chunks, 32), chunks=(1, 32), dtype=np.uint8),
+        {"long_name": "SHA-256 digest of the chunk's data (gnipy.files.array_checksum of its "
+                      "member variables and grid values); zero until written"},
     )
     ds = xr.Dataset(
         variables,
@@ -669,6 +880,7 @@ def _template(plan: _Plan):
             "gnipy_version": __version__,
             "jax_version": _jax_version(),
             "created": created,
+            "store_arrays": json.dumps(sorted(ds.variables)),
         }
     )
     return ds
@@ -686,35 +898,256 @@ def _read_attrs(path: Path) -> dict[str, Any] | None:
         return None
 
 
+def _parse_spec(text) -> dict[str, Any] | None:
+    try:
+        spec = json.loads(text)
+    except (TypeError, ValueError):
+        return None
+    ok = isinstance(spec, dict) and spec.get("format") in (FORMAT, *_OLD_FORMATS)
+    return spec if ok else None
+
+
 def _stored_spec(path: Path) -> dict[str, Any] | None:
+    """The `sweep_spec` of the store at `path` (this format or an older one), or None."""
     attrs = _read_attrs(path)
     if attrs is None or "sweep_spec" not in attrs:
         return None
+    return _parse_spec(attrs["sweep_spec"])
+
+
+def _marker_purpose(path: Path) -> str | None:
+    """The purpose recorded in the marker of the gnipy directory `path` (None if unreadable)."""
     try:
-        spec = json.loads(attrs["sweep_spec"])
-    except (TypeError, ValueError):
+        purpose = json.loads((path / files.MARKER).read_text()).get("purpose")
+    except (OSError, ValueError, AttributeError):
         return None
-    return spec if isinstance(spec, dict) and spec.get("format") == FORMAT else None
+    return purpose if isinstance(purpose, str) else None
 
 
-def _read_done(path: Path, chunks: int) -> np.ndarray:
+def _is_store(path: Path) -> bool:
+    """Whether `path` is a sweep store: a directory gnipy created as one (it may be damaged),
+    or one with a readable `sweep_spec` (stores of earlier versions have no marker)."""
+    if files.is_owned_dir(path):
+        return _marker_purpose(path) in (None, _PURPOSE)
+    try:
+        is_dir = stat.S_ISDIR(os.lstat(path).st_mode)
+    except OSError:
+        return False
+    return is_dir and _stored_spec(path) is not None
+
+
+def _why(e: BaseException) -> str:
+    text = " ".join(str(e).split())
+    if len(text) > 160:
+        text = text[:157] + "..."
+    return f"{type(e).__name__}: {text}" if text else type(e).__name__
+
+
+def _damaged(argument: str, path: Path, what: str) -> SweepError:
+    return SweepError(
+        f"{argument}: the sweep store {str(path)!r} is damaged: {what}; start afresh with "
+        "overwrite=True (its data cannot be trusted)"
+    )
+
+
+def _open_group(path: Path, argument: str, mode: str = "r"):
+    """`(group, spec)` of the store at `path`, or a SweepError saying what is damaged."""
     import zarr
 
+    if not (path / "zarr.json").is_file() and not (path / ".zgroup").is_file():
+        raise _damaged(argument, path, "its metadata file zarr.json is missing")
     try:
-        done = np.asarray(
-            zarr.open_group(str(path), mode="r")["chunk_done"][:], dtype=bool
+        group = zarr.open_group(str(path), mode=mode)
+        attrs = dict(group.attrs)
+    except Exception as e:  # noqa: BLE001 - any failure to parse the metadata
+        raise _damaged(
+            argument, path, f"its metadata (zarr.json) cannot be read ({_why(e)})"
+        ) from None
+    spec = _parse_spec(attrs.get("sweep_spec"))
+    if spec is None:
+        raise _damaged(
+            argument, path, "its attribute sweep_spec (the sweep's specification) is "
+            "missing or unreadable"
         )
+    return group, spec
+
+
+def _stored_array_names(group, spec) -> tuple[str, ...] | None:
+    """The arrays the store was created with (None for a store of an older format)."""
+    try:
+        names = json.loads(group.attrs["store_arrays"])
+    except (KeyError, TypeError, ValueError):
+        return None
+    return tuple(names) if isinstance(names, list) else None
+
+
+def _check_arrays(argument: str, path: Path, group, names, spec) -> dict[str, Any]:
+    """Open every array `names` of the store, check its length along `member`, `chunk` or
+    `time`; return them (SweepError naming the first one damaged)."""
+    import zarr
+
+    members = math.prod(int(g["count"]) for g in spec["grid"])
+    chunks = -(-members // int(spec["chunk_size"]))
+    saved = len(_saved_steps(int(spec["steps"]), int(spec["save_every"])))
+    arrays = {}
+    for name in names:
+        try:
+            arr = group[name]
+        except KeyError:
+            raise _damaged(
+                argument, path, f"its array {name!r} is missing (the directory {name}/ or "
+                f"its metadata {name}/zarr.json was deleted)"
+            ) from None
+        except Exception as e:  # noqa: BLE001
+            raise _damaged(
+                argument, path, f"the metadata of its array {name!r} ({name}/zarr.json) "
+                f"cannot be read ({_why(e)})"
+            ) from None
+        if not isinstance(arr, zarr.Array):
+            raise _damaged(argument, path, f"{name!r} is not an array")
+        if name in _MEMBER_VARS or name.startswith("grid_") or name == "member":
+            length = members
+        elif name in _CHUNK_VARS or name == "chunk":
+            length = chunks
+        elif name in ("time", "node", "step"):
+            length = saved
+        else:
+            length = None
+        if length is not None and (arr.ndim == 0 or arr.shape[0] != length):
+            raise _damaged(
+                argument, path, f"its array {name!r} has shape {arr.shape}, expected "
+                f"{length} along its first axis"
+            )
+        arrays[name] = arr
+    return arrays
+
+
+def _check_coordinates(argument: str, path: Path, arrays, spec) -> None:
+    """The coordinates the sweep's specification determines hold their values."""
+    steps = _saved_steps(int(spec["steps"]), int(spec["save_every"]))
+    h = float(spec["h"])
+    expected = {
+        "member": np.arange(arrays["member"].shape[0]),
+        "chunk": np.arange(arrays["chunk"].shape[0]),
+        "time": h * steps.astype(np.float64),
+        "node": np.arange(len(steps)),
+        "step": steps,
+    }
+    for name in _COORDS:
+        if name not in arrays:
+            continue
+        try:
+            values = np.asarray(arrays[name][...])
+        except Exception as e:  # noqa: BLE001
+            raise _damaged(
+                argument, path, f"its coordinate {name!r} cannot be read ({_why(e)})"
+            ) from None
+        if name in expected and not np.array_equal(values, expected[name]):
+            raise _damaged(
+                argument, path, f"its coordinate {name!r} does not hold the sweep's values"
+            )
+
+
+def _read_done(argument: str, path: Path, arrays, chunks: int) -> np.ndarray:
+    try:
+        done = np.asarray(arrays["chunk_done"][...], dtype=bool)
     except Exception as e:  # noqa: BLE001
-        raise SweepError(
-            f"out: cannot read the chunk flags of {str(path)!r} ({e}); start afresh "
-            "with overwrite=True"
+        raise _damaged(
+            argument, path, f"its chunk flags (chunk_done) cannot be read ({_why(e)})"
         ) from None
     if done.shape != (chunks,):
-        raise SweepError(
-            f"out: the store {str(path)!r} is damaged (chunk_done has shape "
-            f"{done.shape}, expected ({chunks},)); start afresh with overwrite=True"
+        raise _damaged(
+            argument, path, f"chunk_done has shape {done.shape}, expected ({chunks},)"
         )
     return done
+
+
+def _digest(data: Mapping[str, np.ndarray]) -> bytes:
+    """The SHA-256 digest (32 bytes) of a chunk's data, each array in its stored dtype."""
+    typed = {
+        name: np.asarray(a, dtype=_MEMBER_VARS[name][1] if name in _MEMBER_VARS else np.float64)
+        for name, a in data.items()
+    }
+    return bytes.fromhex(files.array_checksum(typed).partition(":")[2])
+
+
+def _data_names(names) -> list[str]:
+    """The arrays a chunk's checksum covers: its member variables and grid values."""
+    return sorted(n for n in names if n in _MEMBER_VARS or n.startswith("grid_"))
+
+
+def _verify_chunks(arrays, names, chunk: int, members: int, done: np.ndarray,
+                   block_bytes: int = _MAX_ZARR_CHUNK_BYTES) -> dict[int, str]:
+    """Read every chunk flagged done back and compare its checksum: `{chunk: what is wrong}`
+    for those unreadable or different. Consecutive chunks are read together, up to about
+    `block_bytes` at a time (a block that cannot be read is read again chunk by chunk, to
+    find the chunks at fault)."""
+    bad = {}
+    data_names = _data_names(names)
+    try:
+        sums = np.asarray(arrays["chunk_checksum"][...], dtype=np.uint8)
+    except Exception:  # noqa: BLE001 - read them one by one below
+        sums = None
+    per_member = sum(
+        math.prod(arrays[n].shape[1:]) * arrays[n].dtype.itemsize for n in data_names
+    )
+    per_block = max(1, block_bytes // max(1, chunk * per_member))
+
+    def read(a, b):
+        out = {}
+        for name in data_names:
+            try:
+                out[name] = np.asarray(arrays[name][a:b])
+            except Exception as e:  # noqa: BLE001 - a truncated or corrupted chunk file
+                return f"its {name!r} data cannot be read ({_why(e)})"
+        return out
+
+    def check(i, data):
+        if sums is not None:
+            stored = sums[i]
+        else:
+            try:
+                stored = np.asarray(arrays["chunk_checksum"][i], dtype=np.uint8)
+            except Exception as e:  # noqa: BLE001
+                return f"its checksum cannot be read ({_why(e)})"
+        if stored.shape != (32,) or not stored.any():
+            return "it has no checksum"
+        if isinstance(data, str):
+            return data
+        if _digest(data) != stored.tobytes():
+            return "its data differ from their checksum"
+        return None
+
+    todo = [int(i) for i in np.flatnonzero(done)]
+    # runs of consecutive chunks, cut into blocks of at most `per_block` chunks
+    blocks, start = [], 0
+    for k in range(1, len(todo) + 1):
+        if k == len(todo) or todo[k] != todo[k - 1] + 1 or k - start == per_block:
+            blocks.append(todo[start:k])
+            start = k
+    for block in blocks:
+        a0, b0 = block[0] * chunk, min((block[-1] + 1) * chunk, members)
+        data = read(a0, b0) if len(block) > 1 else None
+        for i in block:
+            a, b = i * chunk, min((i + 1) * chunk, members)
+            if isinstance(data, dict):
+                part = {name: x[a - a0: b - a0] for name, x in data.items()}
+            else:
+                part = read(a, b)
+            why = check(i, part)
+            if why is not None:
+                bad[i] = why
+    return bad
+
+
+def _describe_members(axes, a: int, b: int) -> str:
+    """`member 6 (m=1.5, q0.x=-1)` or `members 6..7 (m=1.5, q0.x=-1 .. m=1.5, q0.x=1)`."""
+    idx = np.array([a, b - 1])
+    cols = _grid_columns(axes, idx)
+    first, last = _describe_member(cols, 0), _describe_member(cols, 1)
+    if b - a == 1:
+        return f"member {a} ({first})"
+    return f"members {a}..{b - 1} ({first} .. {last})"
 
 
 def _fmt_value(key, value) -> str:
@@ -733,6 +1166,12 @@ def _fmt_value(key, value) -> str:
 def _compare_specs(
     path: Path, stored: dict[str, Any], requested: dict[str, Any]
 ) -> None:
+    if stored.get("format") != requested["format"]:
+        raise SweepError(
+            f"out: the store {str(path)!r} was written by an earlier gnipy (format "
+            f"{stored.get('format')}, without chunk checksums) and cannot be resumed; "
+            "start afresh with overwrite=True, or choose another output path"
+        )
     for key in requested:
         if stored.get(key) != requested[key]:
             raise SweepError(
@@ -750,77 +1189,162 @@ def _compare_specs(
         )
 
 
-def _check_out(out) -> Path:
-    if not isinstance(out, (str, os.PathLike)) or not str(out):
+def _foreign_entries(path: Path) -> list[str]:
+    """The entries at the top of the store `path` that gnipy does not write there."""
+    foreign = []
+    try:
+        entries = sorted(os.scandir(path), key=lambda e: e.name)
+    except OSError:
+        return foreign
+    for e in entries:
+        if e.is_symlink():
+            foreign.append(e.name)
+        elif e.is_dir():
+            ours = (
+                e.name in _MEMBER_VARS or e.name in _COORDS or e.name in _CHUNK_VARS
+                or e.name.startswith("grid_")
+                or any(os.path.isfile(os.path.join(e.path, m)) for m in ("zarr.json", ".zarray"))
+            )
+            if not ours:
+                foreign.append(e.name + "/")
+        elif e.name not in (*_META_FILES, files.MARKER):
+            foreign.append(e.name)
+    return foreign
+
+
+def _remove_store(path: Path) -> None:
+    """Delete a store gnipy wrote (what :func:`_foreign_entries` does not list)."""
+    foreign = set(_foreign_entries(path))
+    try:
+        entries = list(os.scandir(path))
+    except OSError:
+        return
+    for e in entries:
+        if e.name in foreign or e.name + "/" in foreign:
+            continue
+        try:
+            if e.is_dir(follow_symlinks=False):
+                shutil.rmtree(e.path)
+            else:
+                os.unlink(e.path)
+        except OSError:
+            pass
+    try:
+        os.rmdir(path)
+    except OSError:
+        pass
+
+
+def _check_out(out, overwrite: bool) -> tuple[Path, str]:
+    """The store's path and what to do there: `"create"` (nothing there, or an empty
+    directory), `"replace"` (a store gnipy wrote, with overwrite) or `"resume"`. Changes
+    nothing; SweepError (`out: ...`) for a destination gnipy must not write."""
+    if not isinstance(out, (str, os.PathLike)) or not os.fspath(out):
         raise SweepError(f"out: expected a path to a directory DIR.zarr, got {out!r}")
-    path = Path(out).expanduser()
-    parent = path.parent if str(path.parent) else Path(".")
-    if path.exists() and not path.is_dir():
+    path = Path(os.fspath(out)).expanduser()
+    try:
+        st = os.lstat(path)
+    except FileNotFoundError:
+        st = None
+    except OSError as e:
+        raise SweepError(f"out: cannot use {str(path)!r}: {e.strerror or e}") from None
+    is_dir = st is not None and stat.S_ISDIR(st.st_mode)
+    owned = is_dir and files.is_owned_dir(path)
+    if owned and _marker_purpose(path) not in (None, _PURPOSE):
         raise SweepError(
-            f"out: {str(path)!r} exists and is not a directory (a sweep store is a "
-            "directory)"
+            f"out: {str(path)!r} is a directory gnipy created for something else "
+            f"({_marker_purpose(path)}), not a sweep store; choose another path"
         )
-    if not parent.is_dir():
+    # a store written by an earlier gnipy has no marker: its sweep_spec tells it is one
+    legacy = is_dir and not owned and _stored_spec(path) is not None
+    try:
+        if legacy:
+            parent = path.parent if str(path.parent) else Path(".")
+            for where in (path, parent):
+                if not os.access(where, os.W_OK | os.X_OK):
+                    raise files.OutputError(f"out: {where} is not writable")
+        else:
+            files.check_directory_destination(path, overwrite=overwrite, reuse=True,
+                                              argument="out")
+    except files.OutputError as e:
+        raise SweepError(str(e)) from None
+    if not (owned or legacy):
+        return path, "create"
+    if not overwrite:
+        return path, "resume"
+    foreign = _foreign_entries(path)
+    if foreign:
+        listed = ", ".join(repr(f) for f in foreign[:5]) + (", ..." if len(foreign) > 5 else "")
         raise SweepError(
-            f"out: cannot create {str(path)!r}: directory {str(parent)!r} does not "
-            "exist"
+            f"out: {str(path)!r} holds {listed}, which gnipy did not write; gnipy replaces "
+            "a sweep store only when everything in it is its own: move them away, or "
+            "choose another path"
         )
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise SweepError(
-            f"out: cannot create {str(path)!r}: directory {str(parent)!r} is not "
-            "writable"
-        )
-    if path.is_dir() and not os.access(path, os.W_OK | os.X_OK):
-        raise SweepError(f"out: {str(path)!r} is not writable")
-    return path
+    return path, "replace"
 
 
-def _create_store(path: Path, plan: _Plan) -> None:
-    """Write the store's metadata and the per-member grid values into a temporary
-    directory beside `path`, then rename it into place (replacing an old store or an
-    empty directory there)."""
-    from .io import OutputError
-
-    tmp = path.parent / f".{path.name}.{uuid.uuid4().hex}.partial"
+def _create_store(path: Path, plan: _Plan, mode: str) -> None:
+    """Write the store's metadata, its marker and the per-member grid values into a
+    temporary directory beside `path`, then rename it into place (replacing, for `mode`
+    "replace", the store there, else nothing or an empty directory)."""
+    tmp = files.temporary_name(path, "partial")
     old = None
     try:
-        _template(plan).to_zarr(str(tmp), mode="w", compute=False, consolidated=False)
-        if path.exists():
-            old = path.parent / f".{path.name}.{uuid.uuid4().hex}.old"
+        _template(plan).to_zarr(str(tmp), mode="w-", compute=False, consolidated=False)
+        marker = {"created_by": "gnipy", "purpose": _PURPOSE}
+        (tmp / files.MARKER).write_text(json.dumps(marker) + "\n")
+        if mode == "replace":
+            old = files.temporary_name(path, "old")
             os.rename(path, old)
-        os.rename(tmp, path)
+            try:
+                os.rename(tmp, path)
+            except OSError:
+                os.rename(old, path)  # put the old store back
+                old = None
+                raise
+        else:
+            # nothing there, or an empty directory (replaced atomically); a file, link or
+            # anything else put there meanwhile makes the rename fail
+            os.rename(tmp, path)
     except OSError as e:
-        raise OutputError(f"cannot create {str(path)!r}: {e.strerror or e}") from None
+        err = files.as_output_error(e, path, "create")
+        raise (err or e) from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+            _remove_store(old)
 
 
 def _write_chunk(
     path: Path, plan: _Plan, index: int, result: Mapping[str, np.ndarray]
 ) -> None:
-    """Write one chunk's data, then (last) its `chunk_done` flag."""
-    import xarray as xr
+    """Write one chunk's data and grid values, then its checksum, then (last) its
+    `chunk_done` flag."""
+    import zarr
 
     a, b = plan.member_range(index)
     data = {}
     for name, arr in result.items():
-        dims, _, _ = _MEMBER_VARS[name]
-        arr = np.asarray(arr)
-        if arr.shape[0] != b - a:
+        if name not in _MEMBER_VARS:
+            raise SweepFailure(f"chunk {index}: the task returned an unknown variable {name!r}")
+        arr = np.asarray(arr, dtype=_MEMBER_VARS[name][1])
+        if arr.shape[:1] != (b - a,):
             raise SweepFailure(
-                f"chunk {index}: the task returned {arr.shape[0]} members for {name}, "
+                f"chunk {index}: the task returned {arr.shape[:1]} members for {name}, "
                 f"expected {b - a}"
             )
-        data[name] = (("member", *dims), arr)
-    xr.Dataset(data).to_zarr(
-        str(path), region={"member": slice(a, b)}, consolidated=False
-    )
-    flag = xr.Dataset({"chunk_done": (("chunk",), np.ones(1, dtype=bool))})
-    flag.to_zarr(
-        str(path), region={"chunk": slice(index, index + 1)}, consolidated=False
-    )
+        data[name] = arr
+    missing = sorted(set(plan.member_vars) - set(data))
+    if missing:
+        raise SweepFailure(f"chunk {index}: the task returned no {missing[0]!r}")
+    for name, col in plan.columns(index).items():
+        data[f"grid_{name}"] = np.asarray(col[: b - a], dtype=np.float64)
+    digest = np.frombuffer(_digest(data), dtype=np.uint8)
+    group = zarr.open_group(str(path), mode="r+")
+    for name, arr in data.items():
+        group[name][a:b] = arr
+    group["chunk_checksum"][index] = digest
+    group["chunk_done"][index] = True
 
 
 # --------------------------------------------------------------------------------------
@@ -835,7 +1359,7 @@ class SweepReport:
         members: the number of members of the sweep (grid points).
         chunks: the number of chunks of the sweep.
         chunks_computed: chunks computed (and written) by this run.
-        chunks_skipped: chunks found done in the store and not recomputed.
+        chunks_skipped: chunks found done (and intact) in the store and not recomputed.
         chunks_remaining: chunks still not done (non-zero only when `max_chunks` stopped
             the run).
         failed_members: members whose run failed (`result = 1`) over all done chunks.
@@ -846,6 +1370,12 @@ class SweepReport:
         chunk_size: the number of members per chunk.
         spec: the sweep's specification (as stored in the store's `sweep_spec`
             attribute).
+        chunks_repaired: chunks flagged done but found damaged (unreadable, or their data
+            differ from their checksum), and so not skipped (a :class:`SweepWarning` named
+            each).
+        failures: the first failed members (at most 5), each a dict: `member` (its index),
+            `grid` (its grid values, name -> value), `step`, `time` (the failed step and its
+            start time) and `residual` (of the failed solve; NaN when not reported).
     """
 
     path: Path
@@ -860,6 +1390,8 @@ class SweepReport:
     steps: int
     chunk_size: int
     spec: dict = dataclasses.field(repr=False, compare=False)
+    chunks_repaired: int = 0
+    failures: tuple = dataclasses.field(default=(), repr=False, compare=False)
 
     @property
     def complete(self) -> bool:
@@ -911,38 +1443,100 @@ def _default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
-class _Cluster:
-    """The client to use: the caller's, one connected to `scheduler`, or a new local
-    cluster."""
+# HOST:PORT (a name, an IPv4 address, or an IPv6 address in brackets)
+_HOST_PORT = re.compile(
+    r"^(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9](?:[A-Za-z0-9._-]*[A-Za-z0-9])?):(\d{1,5})$"
+)
+_NETWORK_PROTOCOLS = ("tcp", "tls", "ws", "wss", "ucx")
 
-    def __init__(self, client, scheduler, workers):
-        self.given, self.scheduler, self.workers = client, scheduler, workers
+
+def _scheduler_address(scheduler, *, _from_file: str | None = None) -> str:
+    """The address to connect to for `scheduler` (an address or a scheduler file), or a
+    SweepError (`scheduler: ...`); nothing is contacted."""
+    where = f" (in the scheduler file {_from_file!r})" if _from_file else ""
+    usage = ("an address tcp://HOST:PORT, tls://HOST:PORT, inproc://..., HOST:PORT, or a "
+             "scheduler file (JSON, from `dask scheduler --scheduler-file`)")
+    if not isinstance(scheduler, str) or not scheduler.strip():
+        raise SweepError(f"scheduler: expected {usage}, got {scheduler!r}{where}")
+    text = scheduler.strip()
+    if "://" in text:
+        protocol, _, location = text.partition("://")
+        if protocol == "inproc":
+            if location and not any(c.isspace() for c in location):
+                return text
+        elif protocol in _NETWORK_PROTOCOLS:
+            m = _HOST_PORT.match(location)
+            if m and 0 < int(m.group(1)) < 65536:
+                return text
+        raise SweepError(f"scheduler: {text!r}{where} is not a valid address; expected {usage}")
+    m = _HOST_PORT.match(text)
+    if m and 0 < int(m.group(1)) < 65536:
+        return "tcp://" + text
+    if _from_file is None and os.path.isfile(os.path.expanduser(text)):
+        try:
+            with open(os.path.expanduser(text), encoding="utf-8") as fh:
+                address = json.load(fh)["address"]
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise SweepError(
+                f"scheduler: {text!r} is not a scheduler file (JSON with the scheduler's "
+                f"address): {_why(e)}"
+            ) from None
+        return _scheduler_address(address, _from_file=text)
+    raise SweepError(
+        f"scheduler: {text!r}{where} is neither a valid address nor a scheduler file that "
+        f"exists; expected {usage}"
+    )
+
+
+def _local_cluster_kwargs(workers: int) -> dict[str, Any]:
+    """The arguments of the local `distributed.LocalCluster`: single-threaded worker
+    processes, and no dashboard (the scheduler's HTTP server, which always starts, listens on
+    a random port of 127.0.0.1 instead of 8787; its pages are switched off with the
+    configuration `distributed.scheduler.http.routes = []` while it starts)."""
+    import logging
+
+    return dict(
+        n_workers=workers,
+        threads_per_worker=1,
+        processes=True,
+        dashboard_address="127.0.0.1:0",
+        scheduler_kwargs={"dashboard": False},
+        worker_dashboard_address=None,
+        silence_logs=logging.ERROR,
+    )
+
+
+class _Cluster:
+    """The client to use: the caller's, one connected to `address` (within
+    `connect_timeout` seconds), or a new local cluster."""
+
+    def __init__(self, client, address, workers, connect_timeout, scheduler=None):
+        self.given, self.address, self.workers = client, address, workers
+        self.connect_timeout, self.scheduler = connect_timeout, scheduler
         self.client = self.cluster = None
 
     def __enter__(self):
-        import logging
-
+        import dask
         from distributed import Client, LocalCluster
 
         if self.given is not None:
             self.client = self.given
             return self.client
-        if self.scheduler is not None:
+        if self.address is not None:
             try:
-                self.client = Client(self.scheduler, timeout=20, set_as_default=False)
-            except (OSError, ValueError, TypeError) as e:
+                self.client = Client(
+                    self.address, timeout=self.connect_timeout, set_as_default=False
+                )
+            except Exception as e:  # noqa: BLE001 - refused, timed out, bad TLS, ...
                 raise SweepError(
-                    f"scheduler: cannot connect to {self.scheduler!r}: {e}"
+                    f"scheduler: cannot connect to {self.scheduler!r} within "
+                    f"{self.connect_timeout:g} s ({_why(e)}); check the address and that "
+                    "the scheduler runs, or raise connect_timeout"
                 ) from None
             return self.client
         try:
-            self.cluster = LocalCluster(
-                n_workers=self.workers,
-                threads_per_worker=1,
-                processes=True,
-                dashboard_address=None,
-                silence_logs=logging.ERROR,
-            )
+            with dask.config.set({"distributed.scheduler.http.routes": []}):
+                self.cluster = LocalCluster(**_local_cluster_kwargs(self.workers))
             self.client = Client(self.cluster, set_as_default=False)
         except Exception as e:  # noqa: BLE001
             self.__exit__()
@@ -978,6 +1572,8 @@ def run_sweep(
     overwrite: bool = False,
     max_chunks: int | None = None,
     progress: bool = True,
+    max_bytes: int | None = DEFAULT_MAX_BYTES,
+    connect_timeout: float = DEFAULT_CONNECT_TIMEOUT,
 ) -> SweepReport:
     """Run a parameter sweep on a dask.distributed cluster and write it to a zarr store.
 
@@ -1003,35 +1599,72 @@ def run_sweep(
         chunk_size: members per task (and per zarr chunk along `member`); the last
             chunk's inputs are padded to this size so that every chunk runs the same
             compiled program.
-        scheduler: the address of an existing cluster's scheduler (e.g.
-            `"tcp://host:8786"`); its workers need gnipy installed.
+        scheduler: an existing cluster's scheduler: its address (`"tcp://host:8786"`,
+            `"tls://..."`, `"inproc://..."`, `"host:8786"`) or a scheduler file (JSON, as
+            written by `dask scheduler --scheduler-file`); its workers need gnipy installed.
+            The address is checked and the connection made before the store is created.
         workers: the size of the local cluster started when neither `scheduler` nor
             `client` is given (one single-threaded worker process each; default: the
             number of cores).
         client: an existing `distributed.Client` to use (it is not closed).
-        overwrite: delete an existing store at `out` (only a gnipy sweep store) and
-            start afresh.
+        overwrite: replace an existing store at `out` and start afresh: only a store gnipy
+            created (with its marker, or an earlier version's store with a valid
+            `sweep_spec`), holding nothing else at its top level.
         max_chunks: compute at most this many chunks and stop (the store stays
             resumable): for runs under a time limit, and to test resumption.
         progress: show a progress bar (chunks done, members/s) on stderr when it is a
             terminal.
+        max_bytes: the largest estimated store size (bytes, uncompressed) accepted when a
+            store is created; default :data:`DEFAULT_MAX_BYTES` (100 GiB); None: no bound.
+            (The free space of the file system, and this machine's memory for one chunk,
+            are checked whatever it is.)
+        connect_timeout: seconds to wait for the connection to `scheduler` (default 10).
 
     Returns:
         A :class:`SweepReport`.
 
-    Running the same sweep again on an existing store resumes it: the chunks already
-    done are skipped. If the store holds a different sweep, :class:`SweepError` names
-    the field that differs.
+    Running the same sweep again on an existing store resumes it: the chunks done are read
+    back and their checksums compared; the intact ones are skipped, the damaged ones
+    recomputed (with a :class:`SweepWarning`). If the store holds a different sweep,
+    :class:`SweepError` names the field that differs.
 
     Raises:
         SweepError: bad input (the message starts with the argument: `grid:`, `out:`,
-            ...), or a member whose parameters or initial condition are not acceptable.
+            `scheduler:`, ...), a sweep over the size bounds, a scheduler that cannot be
+            reached, a store whose metadata or arrays are damaged, or a member whose
+            parameters or initial condition are not acceptable.
         gnipy.SystemError: bad `h`, `steps`, `t_final` or model name.
         gnipy.MethodError: a method that cannot integrate this model.
-        gnipy.io.OutputError: the store cannot be created.
-        SweepFailure: a chunk failed on the cluster (e.g. a worker died).
+        gnipy.files.OutputError: the store cannot be created or written.
+        SweepFailure: a chunk failed on the cluster (e.g. a worker died), or the local
+            cluster did not start.
     """
     t_start = time.perf_counter()
+    address = None
+    if scheduler is not None:
+        if client is not None:
+            raise SweepError("scheduler: give either a scheduler address or a client")
+    if workers is not None:
+        workers = _positive_int("workers", workers)
+        if scheduler is not None or client is not None:
+            raise SweepError(
+                "workers: sets the size of a local cluster; it cannot be used with an "
+                "existing cluster"
+            )
+    if max_chunks is not None:
+        max_chunks = _positive_int("max_chunks", max_chunks)
+    if max_bytes is not None and (
+        isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, float, np.integer, np.floating))
+        or not max_bytes > 0
+    ):
+        raise SweepError(f"max_bytes: must be a positive number of bytes or None, got {max_bytes!r}")
+    if (isinstance(connect_timeout, bool) or not isinstance(connect_timeout, (int, float))
+            or not (math.isfinite(connect_timeout) and connect_timeout > 0)):
+        raise SweepError(f"connect_timeout: must be a positive number of seconds, got {connect_timeout!r}")
+    if scheduler is not None:
+        address = _scheduler_address(scheduler)
+    path, mode = _check_out(out, overwrite)
+    creating = mode != "resume"
     plan = _plan(
         model,
         grid,
@@ -1043,37 +1676,17 @@ def run_sweep(
         set_params=set_params,
         project_v0=project_v0,
         chunk_size=chunk_size,
+        max_bytes=max_bytes if creating else None,
+        disk=(path.parent if str(path.parent) else Path(".")) if creating else None,
     )
-    if scheduler is not None and not isinstance(scheduler, str):
-        raise SweepError(
-            "scheduler: expected an address such as 'tcp://host:8786', got "
-            f"{scheduler!r}"
-        )
-    if scheduler is not None and client is not None:
-        raise SweepError("scheduler: give either a scheduler address or a client")
-    if workers is not None:
-        workers = _positive_int("workers", workers)
-        if scheduler is not None or client is not None:
-            raise SweepError(
-                "workers: sets the size of a local cluster; it cannot be used with an "
-                "existing cluster"
-            )
-    if max_chunks is not None:
-        max_chunks = _positive_int("max_chunks", max_chunks)
-    path = _check_out(out)
+    # temporaries of runs killed while creating or replacing this store
+    files.clean_stale_temporaries(path)
 
-    stored = _stored_spec(path) if path.is_dir() else None
-    if path.is_dir() and stored is None and any(path.iterdir()):
-        raise SweepError(
-            f"out: {str(path)!r} exists and is not a gnipy sweep store; choose another "
-            "output path"
-        )
-    if stored is not None and not overwrite:
-        _compare_specs(path, stored, plan.spec)
-        done = _read_done(path, plan.chunks)
-    else:
-        _create_store(path, plan)
+    repaired = 0
+    if creating:
         done = np.zeros(plan.chunks, dtype=bool)
+    else:
+        done, repaired = _resume(path, plan)
 
     todo = [int(i) for i in np.flatnonzero(~done)]
     skipped = plan.chunks - len(todo)
@@ -1081,11 +1694,19 @@ def run_sweep(
         todo = todo[:max_chunks]
     computed = members = 0
     if todo:
-        computed, members = _compute(
-            path, plan, todo, client, scheduler, workers or _default_workers(), progress
-        )
-    done = _read_done(path, plan.chunks)
-    failed = _count_failed(path, plan, done)
+        name = f"sweep {plan.spec['model']}"
+        with _progress_bar(progress) as bar:
+            task = bar.add_task(f"{name}: starting the cluster", total=len(todo), rate="")
+            with _Cluster(client, address, workers or _default_workers(), connect_timeout,
+                          scheduler) as c:
+                if creating:
+                    _create_store(path, plan, mode)
+                computed, members = _compute(path, plan, todo, c, bar, task, name)
+    group, _ = _open_group(path, "out")
+    arrays = {k: group[k] for k in ("chunk_done", "result", "failed_step", "failed_time",
+                                    "failed_residual")}
+    done = _read_done("out", path, arrays, plan.chunks)
+    failed, failures = _failures(arrays, plan.axes, plan.chunk, plan.members, done)
     return SweepReport(
         path=path,
         members=plan.members,
@@ -1099,91 +1720,203 @@ def run_sweep(
         steps=plan.spec["steps"],
         chunk_size=plan.chunk,
         spec=plan.spec,
+        chunks_repaired=repaired,
+        failures=failures,
     )
 
 
-def _count_failed(path: Path, plan: _Plan, done: np.ndarray) -> int:
-    import zarr
+def _resume(path: Path, plan: _Plan) -> tuple[np.ndarray, int]:
+    """Check the store at `path` holds this sweep, intact; return its chunk flags (the damaged
+    chunks' flags cleared, with a warning each) and the number of damaged chunks."""
+    group, stored = _open_group(path, "out", mode="r+")
+    _compare_specs(path, stored, plan.spec)
+    arrays = _check_arrays("out", path, group, plan.array_names, plan.spec)
+    _check_coordinates("out", path, arrays, plan.spec)
+    done = _read_done("out", path, arrays, plan.chunks)
+    bad = _verify_chunks(arrays, plan.array_names, plan.chunk, plan.members, done)
+    for i, why in bad.items():
+        a, b = plan.member_range(i)
+        warnings.warn(
+            SweepWarning(
+                f"out: chunk {i} of {str(path)!r}, {_describe_members(plan.axes, a, b)}, was "
+                f"done but is damaged ({why}): computing it again"
+            ),
+            stacklevel=3,
+        )
+        try:
+            arrays["chunk_done"][i] = False
+        except Exception as e:  # noqa: BLE001
+            raise _damaged("out", path, f"its chunk flags cannot be written ({_why(e)})") from None
+        done[i] = False
+    return done, len(bad)
 
-    result = np.asarray(zarr.open_group(str(path), mode="r")["result"][:])
-    member_done = np.repeat(done, plan.chunk)[: plan.members]
-    return int(np.sum((result != 0) & member_done))
+
+def _failures(arrays, axes, chunk: int, members: int, done: np.ndarray):
+    """`(count, first)`: the failed members of the done chunks and the first few of them."""
+    result = np.asarray(arrays["result"][...])
+    member_done = np.repeat(done, chunk)[:members]
+    failed = np.flatnonzero((result != 0) & member_done)
+    first = failed[:_FAILURES_LISTED]
+    out = []
+    if len(first):
+        cols = _grid_columns(axes, first)
+        fields = {k: np.asarray(arrays[f"failed_{k}"].get_orthogonal_selection((first,)))
+                  for k in ("step", "time", "residual")}
+        for j, m in enumerate(first):
+            out.append({
+                "member": int(m),
+                "grid": {name: float(v[j]) for name, v in cols.items()},
+                "step": int(fields["step"][j]),
+                "time": float(fields["time"][j]),
+                "residual": float(fields["residual"][j]),
+            })
+    return int(len(failed)), tuple(out)
 
 
-def _compute(path, plan, todo, client, scheduler, workers, progress) -> tuple[int, int]:
-    """Submit the chunks `todo`, write each as it completes; returns `(chunks, members)`
-    computed."""
+def _compute(path, plan, todo, c, bar, task, name) -> tuple[int, int]:
+    """Submit the chunks `todo` to the client `c`, write each as it completes; returns
+    `(chunks, members)` computed."""
     from distributed import as_completed
 
     from .integrators.base import MethodError
-    from .io import OutputError
 
     computed = members_done = 0
-    name = f"sweep {plan.spec['model']}"
-    with _progress_bar(progress) as bar:
-        task = bar.add_task(f"{name}: starting the cluster", total=len(todo), rate="")
-        with _Cluster(client, scheduler, workers) as c:
-            bar.update(task, description=f"{name}: compiling")
-            token = uuid.uuid4().hex[:8]
-            futures = {}
-            for i in todo:
-                a, b = plan.member_range(i)
-                f = c.submit(
-                    run_chunk,
-                    plan.spec,
-                    a,
-                    plan.columns(i),
-                    b - a,
-                    key=f"gnipy-sweep-{token}-chunk-{i}",
-                    pure=False,
-                )
-                futures[f] = i
-            # (time, members) at the first completed chunk: the rate is measured from
-            # there, after the compilation
-            first = None
+    bar.update(task, description=f"{name}: compiling")
+    token = uuid.uuid4().hex[:8]
+    futures = {}
+    for i in todo:
+        a, b = plan.member_range(i)
+        f = c.submit(
+            run_chunk,
+            plan.spec,
+            a,
+            plan.columns(i),
+            b - a,
+            key=f"gnipy-sweep-{token}-chunk-{i}",
+            pure=False,
+        )
+        futures[f] = i
+    # (time, members) at the first completed chunk: the rate is measured from
+    # there, after the compilation
+    first = None
+    try:
+        for f in as_completed(list(futures), loop=c.loop):
+            i = futures[f]
             try:
-                for f in as_completed(list(futures), loop=c.loop):
-                    i = futures[f]
-                    try:
-                        result = f.result()
-                    except (SystemError, MethodError):
-                        raise  # bad input (a member's parameters, the method)
-                    except Exception as e:  # noqa: BLE001 - a worker died, ...
-                        a, b = plan.member_range(i)
-                        raise SweepFailure(
-                            f"chunk {i} (members {a}..{b - 1}) failed on the cluster: "
-                            f"{type(e).__name__}: {e}"
-                        ) from e
-                    try:
-                        _write_chunk(path, plan, i, result)
-                    except OSError as e:
-                        raise OutputError(
-                            f"cannot write chunk {i} to {str(path)!r}: "
-                            f"{e.strerror or e}"
-                        ) from None
-                    del futures[f]
-                    f.release()
-                    computed += 1
-                    a, b = plan.member_range(i)
-                    members_done += b - a
-                    now = time.perf_counter()
-                    if first is None:
-                        first = (now, members_done)
-                        bar.update(task, description=name)
-                    elif now > first[0]:
-                        rate = (members_done - first[1]) / (now - first[0])
-                        bar.update(task, rate=f"{rate:,.0f} members/s")
-                    bar.update(task, advance=1)
-            finally:
-                for f in futures:
-                    f.cancel()
+                result = f.result()
+            except (SystemError, MethodError):
+                raise  # bad input (a member's parameters, the method)
+            except Exception as e:  # noqa: BLE001 - a worker died, ...
+                a, b = plan.member_range(i)
+                raise SweepFailure(
+                    f"chunk {i} (members {a}..{b - 1}) failed on the cluster: "
+                    f"{type(e).__name__}: {e}"
+                ) from e
+            try:
+                _write_chunk(path, plan, i, result)
+            except OSError as e:
+                raise files.OutputError(
+                    f"cannot write chunk {i} to {str(path)!r}: {e.strerror or e}"
+                ) from None
+            del futures[f]
+            f.release()
+            computed += 1
+            a, b = plan.member_range(i)
+            members_done += b - a
+            now = time.perf_counter()
+            if first is None:
+                first = (now, members_done)
+                bar.update(task, description=name)
+            elif now > first[0]:
+                rate = (members_done - first[1]) / (now - first[0])
+                bar.update(task, rate=f"{rate:,.0f} members/s")
+            bar.update(task, advance=1)
+    finally:
+        for f in futures:
+            f.cancel()
     return computed, members_done
 
 
 # --------------------------------------------------------------------------------------
 # Reading
 # --------------------------------------------------------------------------------------
-def open_sweep(path, *, allow_incomplete: bool = False):
+def _inspect(p: Path, argument: str):
+    """`(spec, arrays, done, bad)` of the store at `p`, all its done chunks read back and
+    checked (`bad`: {chunk: what is wrong}; None for a store of an older format, which has no
+    checksums). SweepError for a path that is not a sweep store, or damaged metadata."""
+    if not _is_store(p):
+        raise SweepError(f"{argument}: {str(p)!r} is not a gnipy sweep store")
+    group, spec = _open_group(p, argument)
+    names = _stored_array_names(group, spec)
+    if spec["format"] != FORMAT or names is None:
+        names = ("chunk_done", "result", "valid", "member", "time")
+        arrays = _check_arrays(argument, p, group, names, spec)
+        return spec, arrays, None
+    arrays = _check_arrays(argument, p, group, names, spec)
+    _check_coordinates(argument, p, arrays, spec)
+    return spec, arrays, names
+
+
+def _for_verify(message: str) -> str:
+    """A SweepError's message as a report of :func:`verify_sweep` (no argument prefix)."""
+    return message.partition(": ")[2].replace(
+        "start afresh with overwrite=True",
+        "start afresh: run the sweep with overwrite=True (gni sweep --overwrite)",
+    )
+
+
+def verify_sweep(path) -> tuple[bool, str, list[int]]:
+    """Check a sweep store without changing it: its metadata, arrays and coordinates, and
+    every chunk flagged done (read back, its checksum recomputed).
+
+    Returns:
+        `(ok, message, bad_chunks)`: `ok` is True when everything checked is intact (an
+        incomplete sweep can be intact: the message says how many chunks are done);
+        `message` a sentence naming the store and what is damaged; `bad_chunks` the indices
+        of the done chunks that are unreadable or whose data differ from their checksum
+        (running the same sweep again recomputes them). Damaged metadata or a missing array
+        give `ok = False` and no chunk (start afresh with `overwrite=True`). A store of an
+        earlier gnipy (format `gnipy-sweep/1`) has no checksums: `ok = False`, it cannot be
+        verified.
+
+    Raises:
+        SweepError: `path` is not a gnipy sweep store.
+    """
+    p = Path(os.fspath(path)).expanduser()
+    try:
+        spec, arrays, names = _inspect(p, "path")
+    except SweepError as e:
+        if not _is_store(p):
+            raise
+        return False, _for_verify(str(e)), []
+    if names is None:
+        return (False, f"the sweep store {str(p)!r} was written by an earlier gnipy (format "
+                f"{spec['format']}) without chunk checksums: its data cannot be verified", [])
+    axes = [GridAxis(**g) for g in spec["grid"]]
+    members = math.prod(a.count for a in axes)
+    chunk = int(spec["chunk_size"])
+    try:
+        done = _read_done("path", p, arrays, -(-members // chunk))
+    except SweepError as e:
+        return False, _for_verify(str(e)), []
+    bad = _verify_chunks(arrays, names, chunk, members, done)
+    n_done = int(done.sum())
+    if bad:
+        listed = "; ".join(
+            f"chunk {i}, {_describe_members(axes, i * chunk, min((i + 1) * chunk, members))}: {why}"
+            for i, why in list(bad.items())[:5]
+        )
+        more = f"; and {len(bad) - 5} more" if len(bad) > 5 else ""
+        return (False, f"the sweep store {str(p)!r} is damaged: {len(bad)} of its {n_done} done "
+                f"chunk(s) cannot be trusted ({listed}{more}); run the same sweep again to "
+                "compute them again", sorted(bad))
+    state = ("complete" if n_done == done.size else
+             f"incomplete: {n_done} of {done.size} chunks done (run the same sweep again to resume)")
+    return True, (f"the sweep store {str(p)!r} is intact: {n_done} done chunk(s) read back and "
+                  f"their checksums match; {state}"), []
+
+
+def open_sweep(path, *, allow_incomplete: bool = False, verify: bool = True):
     """Open a sweep store as an `xarray.Dataset` with the grid axes as dimensions.
 
     The flat `member` dimension is reshaped to the grid's dimensions (named after the
@@ -1194,25 +1927,51 @@ def open_sweep(path, *, allow_incomplete: bool = False):
     Arguments:
         path: the store written by :func:`run_sweep` (or `gni sweep`).
         allow_incomplete: open a sweep whose chunks are not all done: the members of the
-            chunks not done get `valid = False` and `result = -1` (their other data are
-            not meaningful).
+            chunks not done (and, with `verify`, of damaged chunks, with a
+            :class:`SweepWarning`) get `valid = False` and `result = -1` (their other data
+            are not meaningful).
+        verify: first read every done chunk back and compare its checksum (see
+            :func:`verify_sweep`; this reads the whole store once). Stores of an earlier
+            gnipy have no checksums and are not verified.
 
     Raises:
-        SweepError: not a sweep store, or (without `allow_incomplete`) an incomplete
-            one.
+        SweepError: not a sweep store, damaged metadata or arrays, (with `verify`) a
+            damaged chunk, or (without `allow_incomplete`) an incomplete sweep.
     """
     import xarray as xr
 
     from .io import upgrade_layout
 
-    p = Path(path).expanduser()
-    spec = _stored_spec(p) if p.is_dir() else None
-    if spec is None:
-        raise SweepError(f"path: {str(p)!r} is not a gnipy sweep store")
-    ds = upgrade_layout(xr.open_zarr(str(p), consolidated=False))  # stores with `t(time)` too
+    p = Path(os.fspath(path)).expanduser()
+    spec, arrays, names = _inspect(p, "path")
     axes = [GridAxis(**g) for g in spec["grid"]]
     shape = tuple(a.count for a in axes)
-    done = np.asarray(ds["chunk_done"].values, dtype=bool)
+    members = math.prod(shape)
+    chunk = int(spec["chunk_size"])
+    done = _read_done("path", p, arrays, -(-members // chunk))
+    if verify and names is not None:
+        bad = _verify_chunks(arrays, names, chunk, members, done)
+        if bad and not allow_incomplete:
+            listed = "; ".join(
+                f"chunk {i}, {_describe_members(axes, i * chunk, min((i + 1) * chunk, members))}: "
+                f"{why}" for i, why in list(bad.items())[:5]
+            )
+            raise SweepError(
+                f"path: the sweep store {str(p)!r} is damaged: {len(bad)} done chunk(s) "
+                f"cannot be trusted ({listed}); run the same sweep again to compute them "
+                "again, or pass allow_incomplete=True to open the rest"
+            )
+        for i, why in bad.items():
+            warnings.warn(SweepWarning(
+                f"path: chunk {i} of {str(p)!r}, "
+                f"{_describe_members(axes, i * chunk, min((i + 1) * chunk, members))}, is "
+                f"damaged ({why}): its members are marked not done"), stacklevel=2)
+            done[i] = False
+    with warnings.catch_warnings():
+        # zarr lists the store's marker file as "not a component of a Zarr hierarchy"
+        warnings.filterwarnings("ignore", message=f".*{re.escape(files.MARKER)}.*")
+        ds = xr.open_zarr(str(p), consolidated=False)
+    ds = upgrade_layout(ds)  # stores with `t(time)` too
     if not done.all():
         if not allow_incomplete:
             raise SweepError(
@@ -1221,13 +1980,13 @@ def open_sweep(path, *, allow_incomplete: bool = False):
                 "allow_incomplete=True"
             )
         member_done = xr.DataArray(
-            np.repeat(done, spec["chunk_size"])[: ds.sizes["member"]], dims=("member",)
+            np.repeat(done, chunk)[: ds.sizes["member"]], dims=("member",)
         )
         ds["valid"] = ds["valid"] & member_done
         ds["result"] = ds["result"].where(member_done, -1)
     dims = tuple(a.name for a in axes)
     out = {}
-    order = [*_MEMBER_VARS, "chunk_done"]
+    order = [*_MEMBER_VARS, *_CHUNK_VARS]
     for name in sorted(
         ds.data_vars, key=lambda k: order.index(k) if k in order else len(order)
     ):
