@@ -60,6 +60,7 @@ with open(out / "convergence.csv", "w", newline="") as f:
     writer.writerow(["method", "h", "error"])
     for name, err in errors.items():
         writer.writerows([name, repr(float(hi)), repr(float(e))] for hi, e in zip(h, err))
-plot_convergence(h, errors, out / "convergence.png", guides=(1, 2), title="knife edge: GNI convergence")
+plot_convergence(h, errors, out / "convergence.png", guides=(1, 2), title="knife edge: GNI convergence",
+                 overwrite=True)
 print(f"written: {out / 'convergence.csv'}")
 print(f"written: {out / 'convergence.png'}")

@@ -51,5 +51,5 @@ residual = np.asarray(sol.constraint_residual)
 print(f"energy drift: {np.max(np.abs(energy - energy[0])):.3e}")
 print(f"max constraint residual: {np.max(np.abs(residual)):.3e}")
 
-path = write_netcdf(sol, out / "skate.nc", attrs={"example": "define_your_own_system.py"})
+path = write_netcdf(sol, out / "skate.nc", attrs={"example": "define_your_own_system.py"}, overwrite=True)
 print(f"written: {path}")

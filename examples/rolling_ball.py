@@ -53,7 +53,7 @@ ax.plot(x_exact[:, 0], x_exact[:, 1], "--", color="0.4", lw=1, label="exact")
 ax.legend(loc="best", fontsize="small")
 ax.set_title("ball on a turning table: contact path\n(GNI, trapezoid, Cayley, h = 0.05)", fontsize="medium")
 ax.figure.savefig(out / "rolling_ball_path.png", dpi=110)
-plots.plot_solution(sol, out / "rolling_ball.png")
-write_netcdf(sol, out / "rolling_ball.nc")
+plots.plot_solution(sol, out / "rolling_ball.png", overwrite=True)  # this example's own output
+write_netcdf(sol, out / "rolling_ball.nc", overwrite=True)
 for name in ["rolling_ball_path.png", "rolling_ball.png", "rolling_ball.nc"]:
     print(f"written: {out / name}")

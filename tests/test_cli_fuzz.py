@@ -15,15 +15,25 @@ after the fuzzed one and before any computation, so that a fuzzed value that hap
 be valid ends in the sentinel's error. The order of the checks, read from
 `gnipy/cli.py`:
 
-- `gni run`: config file, MODEL, --method, --h, --steps/--t-final, --save-every, --set,
-  --x0, --v0, --R0, then --out (is its directory writable), --plot, --checkpoint-every,
-  then the run. Sentinel `--out /<missing dir>/x.nc` for everything parsed before --out;
-  `--checkpoint-every 0` when fuzzing --out and --plot; `--method reference` (not
+- `gni run`: config file, MODEL, --method, --h, --steps/--t-final, --save-every, the step
+  count (gnipy.simulate.resolve_steps: h below the normal floats, t_final / h beyond any run,
+  t_final not a whole number of steps), --set, --x0, --v0, --R0, then --out (its directory
+  writable; nothing there, or a regular file and --overwrite; never a link, FIFO or
+  directory), --plot (the same), --checkpoint-every, the memory and file bounds (unless
+  --yes), then the run. Sentinel `--out /<missing dir>/x.nc` for everything parsed before
+  --out; `--checkpoint-every 0` when fuzzing --out and --plot; `--method reference` (not
   streamed) when fuzzing --checkpoint-every.
 - `gni convergence`: --error, MODEL, --set, --x0, --v0, --methods, --h-max, --h-min,
   --count, --t-final, --R0, then --out, then the initial condition, then the study.
   Sentinel: --out an existing file; when fuzzing --out, a v0 off the constraints.
 - `gni demo`: --out is its only input: fuzzed below a missing directory.
+- `gni verify PATH`, `gni info FILE`: random file contents, random attributes (rich markup,
+  control characters), and paths that are links, FIFOs, directories or unfinished runs:
+  they compute nothing (exit 0, 1 or 2, one clean line).
+
+Path options pointing at existing files, symbolic links, FIFOs and directories (with and
+without --overwrite) are checked for every command that writes: what is there is left as it
+was, and a refusal names the option.
 
 A tripwire (a module fixture) replaces every entry point of a computation with a
 function that raises, so that a sentinel that failed to stop a run shows up as a test
@@ -76,6 +86,8 @@ RUN_OPTIONS = {
     "--config",
     "--checkpoint-every",
     "--resume",
+    "--overwrite",
+    "--yes",
 }
 
 
@@ -250,7 +262,7 @@ _NAMED = [
     re.compile(r"Error: Option '([^']+)'"),
     re.compile(r"Error: No such option: (\S+)"),
     re.compile(r"Error: Missing (?:argument|option) '([^']+)'"),
-    re.compile(r"Error: ((?:--[\w-]+|MODEL|FILE)(?:/--[\w-]+)*)(?: \(from [^)]*\))?:"),
+    re.compile(r"Error: ((?:--[\w-]+|MODEL|FILE|PATH)(?:/--[\w-]+)*)(?: \(from [^)]*\))?:"),
 ]
 # click's errors about words that belong to no option: they name the word instead
 EXTRA_ARGUMENT, NO_SUCH_COMMAND = "<extra argument>", "<no such command>"
@@ -386,10 +398,35 @@ def run_args(model=MODEL, **options):
     return [*args, "--", model]
 
 
+def expectation_for_step_count(base, argument: str):
+    """`base`'s expectation, and a value it accepts that gnipy.simulate.resolve_steps refuses
+    with the other base options (h = 0.1, or 10 steps) is "fuzzed" too: the step count is
+    checked before --out (h below the normal floats, a step count beyond any run, a final time
+    that is not a whole number of steps)."""
+    from gnipy.simulate import resolve_steps
+
+    def expectation(value: str) -> str | None:
+        verdict = base(value)
+        if verdict != "sentinel":
+            return verdict
+        x = int(value) if argument == "steps" else float(value)
+        kwargs = {"h": 0.1, "steps": 10, "t_final": None}
+        kwargs[argument] = x
+        if argument == "t_final":
+            kwargs["steps"] = None
+        try:
+            resolve_steps(**kwargs)
+        except gnipy.SystemError:
+            return "fuzzed"
+        return "sentinel"
+
+    return expectation
+
+
 NUMBER_OPTIONS = {
-    "--h": (expectation_for_positive_number, {}),
-    "--t-final": (expectation_for_positive_number, {"--steps": None}),
-    "--steps": (expectation_for_positive_integer, {}),
+    "--h": (expectation_for_step_count(expectation_for_positive_number, "h"), {}),
+    "--t-final": (expectation_for_step_count(expectation_for_positive_number, "t_final"), {"--steps": None}),
+    "--steps": (expectation_for_step_count(expectation_for_positive_integer, "steps"), {}),
     "--save-every": (expectation_for_positive_integer, {}),
 }
 
@@ -585,6 +622,8 @@ CONFIG_KEYS = [
     "checkpoint-every",
     "resume",
     "config",
+    "overwrite",
+    "yes",
 ]
 
 scalars = st.one_of(
@@ -875,7 +914,7 @@ def test_info_on_random_file_contents(magic, tail):
 
 
 @pytest.mark.parametrize(
-    "command", ["models", "methods", "info", "demo", "reproduce", "convergence"]
+    "command", ["models", "methods", "info", "verify", "demo", "reproduce", "convergence"]
 )
 @fuzz_settings(15)
 @given(args=st.lists(fuzz_text(), min_size=1, max_size=3))
@@ -884,6 +923,7 @@ def test_stray_arguments_of_other_commands(command, existing_file, args):
     early)."""
     sentinel = {
         "info": [],  # FILE is the first word: a missing or unreadable file
+        "verify": [],  # PATH likewise
         "demo": ["--out", MISSING_OUT],
         "reproduce": ["--out", MISSING_OUT],
         "convergence": ["--out", str(existing_file)],
@@ -905,6 +945,7 @@ def test_unknown_commands(args):
         "methods",
         "reproduce",
         "sweep",
+        "verify",
     }
     if args[0] in commands:
         args = ["x" + args[0], *args[1:]]
@@ -968,3 +1009,229 @@ def test_convergence_huge_values(tmp_path, args, option):
         base[k] = v
     flat = [x for kv in base.items() for x in kv]
     assert_one_error_naming(invoke("convergence", "vertical-disk", *flat, "--out", str(tmp_path / "c")), option)
+
+
+# ---------------------------------------------------------------------------------------------
+# gni info and gni verify: random attributes (rich markup, control characters), random paths
+# ---------------------------------------------------------------------------------------------
+CONTROL = "".join(map(chr, [*range(1, 0x20), 0x7F, *range(0x80, 0xA0)]))
+MARKUP = ["[/bold]", "[/]", "[bold]", "[link=http://x]y[/link]", "[red]x", "\\[", "[", "]", ":warning:",
+          "\x1b[31mred", "\x1b]8;;http://x\x1b\\y\x1b]8;;\x1b\\", "\x07", "\x1b[2J", "\u202eevil", "\x9b31m"]
+attribute_text = st.one_of(
+    st.sampled_from(MARKUP),
+    st.text(alphabet=st.sampled_from(list("[]/=:\\ ab") + list(CONTROL)), max_size=20),
+    st.lists(st.sampled_from(MARKUP), min_size=1, max_size=4).map("".join),
+)
+attribute_values = st.one_of(attribute_text, st.floats(allow_nan=True), st.integers(-(2**31), 2**31 - 1))
+attribute_names = st.one_of(
+    st.sampled_from(["model", "method", "h", "steps", "start", "params", "save_every", "created", "command",
+                     "q0", "coordinates", "invariant_drift_H", "max_error_q_vs_exact", "title"]),
+    st.from_regex(r"[A-Za-z][A-Za-z0-9_]{0,10}", fullmatch=True),
+)
+
+RAW_CONTROL = re.compile("[\x00-\x08\x0b-\x1f\x7f-\x9f]")  # what may never reach the terminal raw
+
+
+def assert_no_raw_control(output: str) -> None:
+    m = RAW_CONTROL.search(output)
+    assert m is None, (m.group(), output)
+
+
+@fuzz_settings(40)
+@given(attrs=st.dictionaries(attribute_names, attribute_values, max_size=6),
+       with_checksum=st.booleans())
+def test_info_and_verify_with_random_attributes(attrs, with_checksum):
+    """Attributes holding rich markup and control characters: shown literally and escaped
+    (never a MarkupError, never an escape sequence on the terminal); `gni verify` agrees with
+    the checksum the file carries."""
+    import numpy as np
+    import xarray as xr
+
+    from gnipy.io import write_netcdf
+
+    ds = xr.Dataset({"energy": (("time",), np.array([1.0, 2.0]))}, coords={"time": [0.0, 1.0]})
+    with tempfile.TemporaryDirectory() as d:
+        (Path(d) / "[").mkdir()  # paths holding "[/]" and "[/bold]"
+        path = Path(d) / "[" / ("]x\x1b.nc" if with_checksum else "bold]plain.nc")
+        if with_checksum:
+            write_netcdf(ds, path, attrs=attrs)
+        else:
+            ds.attrs.update(attrs)
+            ds.to_netcdf(path)
+        info = invoke("info", path)
+        verify = invoke("verify", path)
+    named = assert_clean(info)
+    if named is not None:
+        assert "FILE" in named, info.output
+    assert_no_raw_control(info.output)
+    if info.exit_code == 0:
+        for key, value in attrs.items():  # each string listed shown literally (markup not interpreted)
+            listed = key not in gnipy.cli._SHOWN_ATTRS and not key.startswith(
+                ("param_", "invariant_drift_", "max_error_"))
+            if listed and isinstance(value, str) and value.strip() and " " not in value and len(value) < 12:
+                assert gnipy.cli._safe(value) in info.output.replace("\n", ""), (value, info.output)
+    named = assert_clean(verify)
+    assert_no_raw_control(verify.output)
+    if with_checksum:
+        assert verify.exit_code == 0 and "ok" in verify.output, verify.output
+    else:
+        assert verify.exit_code == 1 and named == {"PATH"} and "gnipy_checksum" in verify.output
+
+
+@fuzz_settings(40)
+@given(magic=st.sampled_from(MAGIC), tail=st.binary(max_size=300))
+def test_verify_on_random_file_contents(magic, tail):
+    with tempfile.TemporaryDirectory() as d:
+        path = Path(d) / "f.nc"
+        path.write_bytes(magic + tail)
+        res = invoke("verify", path)
+    named = assert_clean(res)
+    if named is not None:
+        assert "PATH" in named, res.output
+
+
+# ---------------------------------------------------------------------------------------------
+# Path options that point at what is already there
+# ---------------------------------------------------------------------------------------------
+KINDS = ["missing", "file", "link-to-file", "dangling-link", "fifo", "directory", "link-to-directory"]
+
+
+def make_kind(path: Path, kind: str, target_dir: Path) -> None:
+    """Put a `kind` at `path` (targets of links live in `target_dir`)."""
+    if kind == "file":
+        path.write_bytes(b"precious")
+    elif kind == "link-to-file":
+        (target_dir / f"{path.name}.target").write_bytes(b"precious")
+        path.symlink_to(target_dir / f"{path.name}.target")
+    elif kind == "dangling-link":
+        path.symlink_to(target_dir / f"{path.name}.nowhere")
+    elif kind == "fifo":
+        os.mkfifo(path)
+    elif kind == "directory":
+        path.mkdir()
+    elif kind == "link-to-directory":
+        (target_dir / f"{path.name}.dir").mkdir()
+        path.symlink_to(target_dir / f"{path.name}.dir")
+
+
+def snapshot(directory: Path) -> dict:
+    """What is in `directory` (recursively): each entry's kind and a regular file's bytes."""
+    out = {}
+    for p in sorted(directory.rglob("*")):
+        rel = str(p.relative_to(directory))
+        if p.is_symlink():
+            out[rel] = ("link", os.readlink(p))
+        elif p.is_fifo():
+            out[rel] = ("fifo",)
+        elif p.is_dir():
+            out[rel] = ("dir",)
+        else:
+            out[rel] = ("file", p.read_bytes())
+    return out
+
+
+@fuzz_settings(60)
+@given(out_kind=st.sampled_from(KINDS), plot_kind=st.sampled_from(KINDS + ["none"]), overwrite=st.booleans())
+def test_run_out_and_plot_at_existing_paths(out_kind, plot_kind, overwrite):
+    """`gni run --out P [--plot Q] [--overwrite]` with links, FIFOs, directories and files at P, Q:
+    a link, FIFO or directory is refused always, a file without --overwrite; the refusal names
+    the option, and nothing there changes. (Sentinel: --checkpoint-every 0.)"""
+    with tempfile.TemporaryDirectory() as d, tempfile.TemporaryDirectory() as targets:
+        d, targets = Path(d), Path(targets)
+        out, plot = d / "out.nc", d / "plot.png"
+        make_kind(out, out_kind, targets)
+        args = ["--out", out]
+        if plot_kind != "none":
+            make_kind(plot, plot_kind, targets)
+            args += ["--plot", plot]
+        before = snapshot(d), snapshot(targets)
+        res = invoke(*run_args(**{"--out": None, "--checkpoint-every": "0"})[:-2], *args,
+                     *(["--overwrite"] if overwrite else []), "--", MODEL)
+        assert (snapshot(d), snapshot(targets)) == before
+
+    def refused(kind):
+        return kind not in ("missing", "none", "file") or (kind == "file" and not overwrite)
+
+    named = assert_fails_naming(res, {"--out", "--plot", "--checkpoint-every"})
+    expected = "--out" if refused(out_kind) else "--plot" if refused(plot_kind) else "--checkpoint-every"
+    assert expected in named, (expected, res.output)
+
+
+WRITERS = {
+    # command: (args before the path, option, args after, sentinel options, what a directory there is)
+    "demo": (["demo", "--out"], "--out", [], "file"),
+    "convergence": (["convergence", "--v0", OFF_CONSTRAINTS_V0, "--out"], "--out", ["--", MODEL], "directory"),
+    "reproduce": (["reproduce", "--quick", "--out"], "--out", [], "directory"),
+}
+
+
+@pytest.mark.parametrize("overwrite", [False, True])
+@pytest.mark.parametrize("kind", KINDS)
+@pytest.mark.parametrize("command", sorted(WRITERS))
+def test_other_writers_at_existing_paths(command, kind, overwrite, tmp_path):
+    """demo --out FILE, convergence --out DIR, reproduce --out DIR pointed at each kind of thing,
+    with and without --overwrite: one clean line or (for a path they may use) the tripwire; what
+    is there is unchanged."""
+    before_args, option, after, what = WRITERS[command]
+    targets = tmp_path / "targets"
+    targets.mkdir()
+    work = tmp_path / "work"
+    work.mkdir()
+    path = work / ("x.nc" if what == "file" else "x")
+    make_kind(path, kind, targets)
+    before = snapshot(tmp_path)
+    res = invoke(*before_args, path, *(["--overwrite"] if overwrite else []), *after)
+    assert snapshot(tmp_path) == before
+    usable = {"file": kind == "missing" or (kind == "file" and overwrite),
+              "directory": kind in ("missing", "directory", "link-to-directory")}[what]
+    if isinstance(res.exception, ReachedComputation):
+        assert usable and command != "convergence", (command, kind)  # (convergence has its --v0 sentinel)
+        return
+    named = assert_fails_naming(res, {option, "--v0"})
+    assert ("--v0" in named) == (usable and command == "convergence"), res.output
+
+
+@pytest.mark.parametrize("kind", ["file", "link-to-file", "dangling-link", "fifo", "directory"])
+@pytest.mark.parametrize("command", ["convergence", "reproduce"])
+def test_output_directories_holding_files_of_their_names(command, kind, tmp_path):
+    """In a directory gnipy did not create, a file of an output's name needs --overwrite; a link,
+    FIFO or directory there is refused even with it, and nothing is changed."""
+    targets = tmp_path / "targets"
+    targets.mkdir()
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    make_kind(folder / ("convergence.png" if command == "convergence" else "report.html"), kind, targets)
+    before = snapshot(tmp_path)
+    for overwrite in (False, True):
+        flag = ["--overwrite"] if overwrite else []
+        if command == "convergence":
+            res = invoke("convergence", "--v0", OFF_CONSTRAINTS_V0, "--out", folder, *flag, "--", MODEL)
+        else:
+            res = invoke("reproduce", "--quick", "--out", folder, *flag)
+        assert snapshot(tmp_path) == before
+        if kind == "file" and overwrite:  # allowed: the run starts (stopped by --v0, or the tripwire)
+            if command == "reproduce":
+                assert isinstance(res.exception, ReachedComputation), res.output
+            else:
+                assert_fails_naming(res, {"--v0"}, required="--v0")
+            continue
+        assert_fails_naming(res, {"--out"}, required="--out")
+
+
+@pytest.mark.parametrize("kind", KINDS + ["parts"])
+def test_verify_and_info_at_each_kind_of_path(kind, tmp_path):
+    targets = tmp_path / "targets"
+    targets.mkdir()
+    path = tmp_path / "x.nc"
+    if kind == "parts":
+        (tmp_path / "x.nc.parts").mkdir()
+        (tmp_path / "x.nc.parts" / "spec.json").write_text("{}")
+    else:
+        make_kind(path, kind, targets)
+    before = snapshot(tmp_path)
+    for command, option in (("verify", "PATH"), ("info", "FILE")):
+        res = invoke(command, path)
+        assert snapshot(tmp_path) == before
+        assert_fails_naming(res, {option}, required=option)  # none of these is a result file
+        if command == "verify":
+            assert res.exit_code == (1 if kind == "parts" else 2), res.output

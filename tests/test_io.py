@@ -136,8 +136,10 @@ def test_missing_directory_is_a_clear_oserror(tmp_path):
 
 def test_parent_is_a_file(tmp_path):
     (tmp_path / "file").write_text("x")
-    with pytest.raises(OutputError, match="does not exist"):
+    # (the message is the directory check's, or the system's ENOTDIR from looking the path up)
+    with pytest.raises(OutputError, match="does not exist|Not a directory") as info:
         write_netcdf(_solution(), tmp_path / "file" / "out.nc")
+    assert str(tmp_path / "file" / "out.nc") in str(info.value)
 
 
 def test_path_is_a_directory(tmp_path):
@@ -175,7 +177,7 @@ def test_failed_overwrite_keeps_the_old_file_and_leaves_no_temp(tmp_path, monkey
     seen = {}
     _failing_after_temp_written(monkeypatch, RuntimeError("interrupted"), seen)
     with pytest.raises(RuntimeError, match="interrupted"):
-        write_netcdf(_solution(7.0), path)
+        write_netcdf(_solution(7.0), path, overwrite=True)
     # the data went to a temporary file in the same directory, never to the destination
     assert seen["temp_existed"] and os.path.dirname(seen["temp"]) == str(tmp_path)
     assert seen["temp"] != str(path)
@@ -197,7 +199,7 @@ def test_oserror_during_write_is_named_and_cleaned_up(tmp_path, monkeypatch):
 def test_successful_overwrite_replaces_content_with_usual_permissions(tmp_path):
     path = tmp_path / "out.nc"
     write_netcdf(_solution(1.0), path)
-    write_netcdf(_solution(3.0), path)
+    write_netcdf(_solution(3.0), path, overwrite=True)
     np.testing.assert_array_equal(read_netcdf(path)["q"].values, np.asarray(_solution(3.0).q))
     assert _leftovers(tmp_path, ["out.nc"]) == []
     (tmp_path / "plain").write_text("")  # what the umask gives an ordinary new file
@@ -217,3 +219,68 @@ def test_rejects_other_objects(tmp_path):
     with pytest.raises(TypeError):
         write_netcdf({"q": 1}, tmp_path / "x.nc")
     assert os.listdir(tmp_path) == []
+
+
+# ------------------------------------------------------------------------------------------------
+# What may be replaced (gnipy.files.check_destination) and the data checksum (verify_netcdf)
+# ------------------------------------------------------------------------------------------------
+def test_existing_file_is_refused_without_overwrite(tmp_path):
+    path = tmp_path / "out.nc"
+    path.write_bytes(b"someone's data")
+    with pytest.raises(OutputError, match="exists") as info:
+        write_netcdf(_solution(), path)
+    assert str(path) in str(info.value) and "overwrite" in str(info.value)
+    assert path.read_bytes() == b"someone's data"  # untouched
+    assert _leftovers(tmp_path, ["out.nc"]) == []
+    write_netcdf(_solution(), path, overwrite=True)  # replacing is asked for: done
+    assert read_netcdf(path)["q"].shape == (5, 4)
+
+
+@pytest.mark.parametrize("kind", ["symlink", "dangling-symlink", "fifo"])
+def test_links_and_special_files_are_refused_even_with_overwrite(tmp_path, kind):
+    target = tmp_path / "target.txt"
+    target.write_bytes(b"precious")
+    path = tmp_path / "out.nc"
+    if kind == "symlink":
+        path.symlink_to(target)
+    elif kind == "dangling-symlink":
+        path.symlink_to(tmp_path / "nowhere.nc")
+    else:
+        os.mkfifo(path)  # opening it would block: it must not even be opened
+    for overwrite in (False, True):
+        with pytest.raises(OutputError, match="symbolic link|FIFO") as info:
+            write_netcdf(_solution(), path, overwrite=overwrite)
+        assert str(path) in str(info.value)
+    assert target.read_bytes() == b"precious"
+    assert os.path.islink(path) == (kind != "fifo")
+    assert not (tmp_path / "nowhere.nc").exists()
+    assert _leftovers(tmp_path, ["out.nc", "target.txt"]) == []
+
+
+def test_verify_netcdf_detects_an_edited_value(tmp_path):
+    import netCDF4
+
+    from gnipy.io import CHECKSUM_ATTR, verify_netcdf
+
+    path = tmp_path / "out.nc"
+    write_netcdf(_solution(), path)
+    ok, message = verify_netcdf(path)
+    assert ok and "ok" in message and str(path) in message
+    assert read_netcdf(path).attrs[CHECKSUM_ATTR].startswith("sha256:")
+    with netCDF4.Dataset(path, "a") as nc:  # one value changed in place, attributes untouched
+        nc.variables["q"][2, 1] = nc.variables["q"][2, 1] + 1e-12
+    ok, message = verify_netcdf(path)
+    assert not ok and "DAMAGED" in message and str(path) in message
+
+
+def test_verify_netcdf_without_a_checksum_and_on_unreadable_files(tmp_path):
+    from gnipy.io import verify_netcdf
+
+    _solution().to_xarray().to_netcdf(tmp_path / "plain.nc")  # not written by write_netcdf
+    ok, message = verify_netcdf(tmp_path / "plain.nc")
+    assert not ok and "gnipy_checksum" in message
+    (tmp_path / "junk.nc").write_text("not netcdf")
+    with pytest.raises(OutputError, match="junk.nc"):
+        verify_netcdf(tmp_path / "junk.nc")
+    with pytest.raises(OutputError, match="no such file"):
+        verify_netcdf(tmp_path / "missing.nc")

@@ -7,17 +7,32 @@ summaries of result files; the demo; listings.
     gni convergence MODEL --methods M1,M2 --h-max A --h-min B --count N [--t-final T]
             [--set NAME=VALUE ...] [--x0 ...] [--v0 ...] [--R0 ...] [--error state|q|v] --out DIR
     gni info FILE.nc
+    gni verify PATH
     gni demo [--out FILE.nc]
     gni models
     gni methods
 
 Bad input gives a one-line message naming the option and exit code 2; a solver failure or a file
 that cannot be written gives exit code 1. Neither prints a Python traceback.
+
+**Files** (:mod:`gnipy.files`). An existing output file is replaced only with `--overwrite`; a
+symbolic link, a directory, a FIFO or a device is never written to. Every file is written
+atomically (a temporary file beside it, renamed when complete): a full disk or an interrupt leaves
+an existing file as it was and no temporary behind. An output directory that gnipy creates
+(`gni convergence --out DIR`, `gni reproduce --out DIR`) gets the marker `.gnipy-owned`; in such a
+directory gnipy replaces its own files on a rerun, in any other directory only with `--overwrite`.
+`--overwrite` and `--yes` are command-line options only: a configuration file cannot grant them.
+
+**Terminal output.** Text from files and from the command line (paths, attributes, names) is
+printed literally (no rich markup), with control characters shown as escapes (`\\x1b`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import math
+import os
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -56,6 +71,8 @@ _OPTION_OF = {
     "lagrangian": "--set/--x0",
     "constraints": "--set/--x0",
     "affine": "--set/--x0",
+    "chunk_steps": "--checkpoint-every",
+    "chunk_steps/--checkpoint-every": "--checkpoint-every",
 }
 
 
@@ -84,9 +101,55 @@ def _version_callback(value: bool):
         raise typer.Exit()
 
 
+class _WriteFailure(Exception):
+    """A file could not be written after the run (the message names the option and the path)."""
+
+
+# control characters (C0, DEL, C1), lone surrogates (undecodable bytes of a path), and the
+# invisible characters that reorder or break lines on a terminal
+_UNSAFE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
+_NAMED_ESCAPES = {"\n": "\\n", "\t": "\\t", "\r": "\\r"}
+
+
+def _escape_char(m) -> str:
+    ch = m.group()
+    if ch in _NAMED_ESCAPES:
+        return _NAMED_ESCAPES[ch]
+    o = ord(ch)
+    return f"\\x{o:02x}" if o < 0x100 else f"\\u{o:04x}"
+
+
+def _safe(text) -> str:
+    """`text` for a terminal: control characters as visible escapes (`\\x1b`, `\\n`, `\\x07`, ...).
+    Print the result without markup (rich `Text`, or `markup=False`)."""
+    return _UNSAFE.sub(_escape_char, str(text))
+
+
+def _table(title=None, **kwargs):
+    """A rich `Table` whose title, headers and text cells are shown literally (:func:`_cell`)."""
+    from rich.table import Table
+
+    class SafeTable(Table):
+        def add_row(self, *cells, **kw):
+            return super().add_row(*(_cell(c) if isinstance(c, str) else c for c in cells), **kw)
+
+        def add_column(self, header="", *args, **kw):
+            return super().add_column(_cell(header) if isinstance(header, str) else header, *args, **kw)
+
+    return SafeTable(title=None if title is None else _cell(title), **kwargs)
+
+
+def _cell(text):
+    """A table cell that shows `text` literally (no rich markup, control characters escaped)."""
+    from rich.text import Text
+
+    return Text(_safe(text))
+
+
 def _fail(message: str, code: int) -> None:
-    """Print a one-line error on stderr and exit with `code` (no traceback)."""
-    typer.echo("Error: " + " ".join(str(message).split()), err=True)
+    """Print a one-line error on stderr and exit with `code` (no traceback). Runs of whitespace
+    become one space; other control characters are shown as escapes."""
+    typer.echo("Error: " + _safe(" ".join(str(message).split())), err=True)
     raise typer.Exit(code)
 
 
@@ -100,9 +163,11 @@ def _rename(message: str) -> str:
 
 
 def _console(stderr: bool = False):
+    """A rich console that interprets no markup or emoji codes in what it prints (text from files
+    and from the command line is shown as it is; pass it through :func:`_safe`)."""
     from rich.console import Console
 
-    return Console(highlight=False, soft_wrap=True, stderr=stderr)
+    return Console(highlight=False, soft_wrap=True, stderr=stderr, markup=False, emoji=False)
 
 
 def _progress(*columns):
@@ -182,21 +247,33 @@ def _check_positive(option: str, value, kind: str = "number"):
         raise _UsageError(option, f"must be a positive {kind}, got {value!r}")
 
 
-def _check_output(path: Path, option: str = "--out") -> None:
-    import os
-
-    if "\x00" in str(path):
-        raise _UsageError(option, f"{str(path)!r}: a path cannot contain a NUL character")
-    directory = path.parent if str(path.parent) else Path(".")
-    if path.is_dir():
-        raise _UsageError(option, f"{str(path)!r} is a directory")
-    if not directory.is_dir():
-        raise _UsageError(option, f"cannot write {str(path)!r}: directory {str(directory)!r} does not exist")
-    if not os.access(directory, os.W_OK | os.X_OK):
-        raise _UsageError(option, f"cannot write {str(path)!r}: directory {str(directory)!r} is not writable")
+def _relabel(option: str, message) -> str:
+    """An error message of gnipy.files / gnipy.io as one about the CLI `option`: its own argument
+    prefix (`path:`, `out:`, ...) replaced by the option, `overwrite=True` written as the flag."""
+    text = str(message).replace("overwrite=True (--overwrite)", "--overwrite").replace("overwrite=True", "--overwrite")
+    head, sep, rest = text.partition(": ")
+    if sep and head in ("path", "out", "plot", option):
+        text = rest
+    elif sep and re.fullmatch(r"--[\w-]+(/--[\w-]+)*", head):  # already about an option (e.g. --resume)
+        return text
+    return f"{option}: {text}"
 
 
-def _check_plot(path: Path) -> None:
+def _check_output(path: Path, option: str = "--out", overwrite: bool = False) -> Path:
+    """`path` may be written as a regular file (:func:`gnipy.files.check_destination`): its directory
+    exists and is writable, and nothing is there, or a regular file and `overwrite`; a symbolic
+    link, directory, FIFO or device never. Else `_UsageError` naming `option` and the path."""
+    from gnipy.files import OutputError, check_destination
+
+    try:
+        return check_destination(path, overwrite=overwrite, argument=option)
+    except OutputError as e:
+        raise _UsageError(option, _relabel(option, e).partition(": ")[2]) from None
+    except RuntimeError as e:  # Path.expanduser: "~user" of no such user
+        raise _UsageError(option, f"cannot use {str(path)!r}: {e}") from None
+
+
+def _check_plot(path: Path, overwrite: bool = False) -> None:
     """`--plot`: a writable path whose suffix is an image format matplotlib writes."""
     from matplotlib.backend_bases import FigureCanvasBase
 
@@ -207,25 +284,95 @@ def _check_plot(path: Path) -> None:
             "--plot", f"cannot tell the image format of {str(path)!r}: use one of the suffixes "
             + ", ".join(f".{k}" for k in sorted(formats))
         )
-    _check_output(path, "--plot")
+    _check_output(path, "--plot", overwrite)
 
 
-def _check_output_dir(path: Path) -> None:
-    """`--out DIR` of `gni convergence`: an existing directory, or one that can be created."""
-    import os
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.abspath(a) == os.path.abspath(b) or (a.exists() and b.exists() and os.path.samefile(a, b))
+    except (OSError, ValueError):
+        return False
 
-    if path.exists() and not path.is_dir():
-        raise _UsageError("--out", f"{str(path)!r} exists and is not a directory")
-    if not path.exists():
+
+def _check_output_dir(path: Path, names=(), overwrite: bool = False) -> bool:
+    """`--out DIR` (`gni convergence`): an existing directory, or one that can be created, in which
+    the files `names` may be written. Returns whether gnipy may replace existing files of those names:
+    in a directory gnipy created (it holds the marker :data:`gnipy.files.MARKER`), or with
+    `--overwrite`; a symbolic link, directory or special file at one of the names is always refused."""
+    import stat
+
+    from gnipy.files import MARKER, OutputError, check_destination, is_owned_dir
+
+    text = str(path)
+    if "\x00" in text:
+        raise _UsageError("--out", f"{text!r}: a path cannot contain a NUL character")
+    try:
+        st = os.stat(path)  # a link to a directory is that directory (not one gnipy owns)
+    except FileNotFoundError:
+        st = None
+    except OSError as e:
+        raise _UsageError("--out", f"cannot use {text!r}: {e.strerror or e}") from None
+    if st is None:
+        if os.path.islink(path):
+            raise _UsageError("--out", f"{text!r} is a dangling symbolic link")
         parent = path.parent if str(path.parent) else Path(".")
         while not parent.exists() and parent != parent.parent:
             parent = parent.parent
         if not parent.is_dir():
-            raise _UsageError("--out", f"cannot create directory {str(path)!r}: {str(parent)!r} is not a directory")
+            raise _UsageError("--out", f"cannot create directory {text!r}: {str(parent)!r} is not a directory")
         if not os.access(parent, os.W_OK | os.X_OK):
-            raise _UsageError("--out", f"cannot create directory {str(path)!r}: {str(parent)!r} is not writable")
-    elif not os.access(path, os.W_OK | os.X_OK):
-        raise _UsageError("--out", f"directory {str(path)!r} is not writable")
+            raise _UsageError("--out", f"cannot create directory {text!r}: {str(parent)!r} is not writable")
+        return True
+    if not stat.S_ISDIR(st.st_mode):
+        raise _UsageError("--out", f"{text!r} exists and is not a directory")
+    if not os.access(path, os.W_OK | os.X_OK):
+        raise _UsageError("--out", f"directory {text!r} is not writable")
+    replace = overwrite or is_owned_dir(path)
+    taken = []
+    for name in names:
+        try:
+            check_destination(path / name, overwrite=True, argument="--out")
+        except OutputError as e:  # a link, directory or special file: never
+            raise _UsageError("--out", _relabel("--out", e).partition(": ")[2]) from None
+        if (path / name).exists():
+            taken.append(name)
+    if taken and not replace:
+        raise _UsageError(
+            "--out", f"{text!r} is a directory gnipy did not create (no {MARKER} marker) and already holds "
+            f"{', '.join(taken)}; pass --overwrite to replace them, or choose another directory"
+        )
+    return replace
+
+
+def _create_output_dir(path: Path, purpose: str) -> bool:
+    """Create the directory `path` (and missing parents) with gnipy's marker, unless it exists;
+    returns whether it was created here."""
+    from gnipy.files import make_owned_dir
+
+    if os.path.isdir(path):
+        return False
+    parent = path.parent if str(path.parent) else Path(".")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise _WriteFailure(f"--out: cannot create {parent}: {e.strerror or e}") from None
+    make_owned_dir(path, purpose)
+    return True
+
+
+@contextlib.contextmanager
+def _writing(option: str, path):
+    """Turn a failure to write `path` (an `OSError`, the netCDF library's `HDF error`) into a
+    one-line error about `option` (exit code 1); other errors pass."""
+    from gnipy.files import as_output_error
+
+    try:
+        yield
+    except (OSError, RuntimeError) as e:
+        err = as_output_error(e, path)
+        if err is None:
+            raise
+        raise _WriteFailure(_relabel(option, err)) from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -260,6 +407,10 @@ _KIND_TEXT = {
 }
 
 
+#: A parameter name (what a key of the table form `set = { NAME = VALUE }` must be).
+_PARAM_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
 def _config_value(where: str, key: str, kind: str, value, base: Path):
     """Check one config value's type and turn it into what the CLI option would hold."""
 
@@ -285,7 +436,10 @@ def _config_value(where: str, key: str, kind: str, value, base: Path):
     if kind == "path":
         if not isinstance(value, str) or not value:
             raise bad()
-        path = Path(value).expanduser()
+        try:
+            path = Path(value).expanduser()
+        except RuntimeError as e:  # "~user" of no such user
+            raise _UsageError("--config", f"{where}: key {key!r}: cannot use {value!r}: {e}") from None
         return path if path.is_absolute() else base / path
     if kind == "vector":
         if isinstance(value, str):
@@ -301,6 +455,11 @@ def _config_value(where: str, key: str, kind: str, value, base: Path):
         if isinstance(value, dict):
             items = []
             for name, x in value.items():
+                if not _PARAM_NAME.fullmatch(name):  # e.g. { "m=2,g" = 1 } must not set m and g
+                    raise _UsageError(
+                        "--config", f"{where}: key {key!r}: {name!r} is not a parameter name (in the table form "
+                        "each key is one name, e.g. set = { m = 2 }; or write set = [\"m=2\", ...])"
+                    )
                 if isinstance(x, bool) or not isinstance(x, (int, float)):
                     raise _UsageError("--config", f"{where}: key 'set.{name}' must be a number, got {x!r}")
                 items.append(f"{name}={float(x)!r}")
@@ -417,6 +576,11 @@ def _prepare(model: str, method: str, h, steps, t_final, set_items, x0_text, v0_
     _check_positive("--steps", steps, "integer")
     _check_positive("--t-final", t_final)
     _check_positive("--save-every", save_every, "integer")
+    # the step count now, not at the run: h below the normal range, t_final / h that overflows or is
+    # more steps than any run can take, t_final not a whole number of steps (messages name the option)
+    from gnipy.simulate import resolve_steps
+
+    resolve_steps(h, steps, t_final)
     return _prepare_model(model, set_items, x0_text, v0_text)
 
 
@@ -456,11 +620,10 @@ def _report(
     title: str, spec, params, sol, exact, drifts, seconds: float, out: Path | str | None, note: str | None = None
 ) -> None:
     import numpy as np
-    from rich.table import Table
 
     e = np.asarray(sol.energy)
     r = np.asarray(sol.constraint_residual)
-    table = Table(title=title, show_header=False, title_justify="left")
+    table = _table(title=title, show_header=False, title_justify="left")
     table.add_column(style="bold")
     table.add_column(overflow="fold")
     table.add_row("model", f"{spec.name} ({', '.join(f'{k}={v:g}' for k, v in params.items())})")
@@ -489,9 +652,9 @@ def _report(
     con = _console()
     con.print(table)
     for warning in sol.warnings():  # the run-time diagnostics (gnipy.diagnostics): never silent
-        _console(stderr=True).print(warning, style="bold yellow", markup=False)
+        _console(stderr=True).print(_safe(warning), style="bold yellow", markup=False)
     if out is not None:
-        con.print(f"written: {out}", markup=False)
+        con.print(f"written: {_safe(out)}", markup=False)
 
 
 def _attrs_for(spec, params, sol, q0, v0, exact, drifts, extra: dict[str, Any]) -> dict[str, Any]:
@@ -538,11 +701,23 @@ def _guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--
         usage(msg if msg.startswith(method_option) else f"{method_option}: {msg}")
     except gnipy.SolverFailure as e:
         _fail(f"solver failure: {e}", EXIT_FAILURE)
+    except _WriteFailure as e:
+        _fail(str(e), EXIT_FAILURE)
     except OutputError as e:
-        _fail(f"--out: {e}", EXIT_FAILURE)
+        _fail(_relabel("--out", e), EXIT_FAILURE)
     except OSError as e:
         where = f": {e.filename}" if getattr(e, "filename", None) else ""
         _fail(f"--out: {e.strerror or e}{where}", EXIT_FAILURE)
+    except RuntimeError as e:  # the netCDF library's failed write ("NetCDF: HDF error"), else a bug
+        from gnipy.files import as_output_error
+
+        err = as_output_error(e, "the output")
+        if err is None:
+            raise
+        _fail(_relabel("--out", err), EXIT_FAILURE)
+    except MemoryError:
+        _fail("out of memory: save fewer nodes (--save-every) or stream the run (--checkpoint-every K)",
+              EXIT_FAILURE)
 
 
 # --------------------------------------------------------------------------------------------
@@ -618,6 +793,15 @@ def run(
         False, "--resume", help="Continue an interrupted streamed run of the same options from its last "
         "checkpoint (the result equals an uninterrupted run exactly).",
     ),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Replace existing --out and --plot files (without it they are refused; a "
+        "symbolic link, directory or special file is refused always). Not read from --config.",
+    ),
+    yes: bool = typer.Option(
+        False, "--yes", help="Run even when the memory or the file the run needs is estimated beyond gnipy's "
+        "bounds (memory: the smaller of 8 GiB and half the RAM; file: 64 GiB, and the free disk space), which "
+        "are otherwise refused before anything is compiled. Not read from --config.",
+    ),
 ):
     """Integrate MODEL with METHOD and write the trajectory to a netCDF file.
 
@@ -690,44 +874,64 @@ def run(
 
         spec, params, q0, v0_ = _prepare(model_, method_, h_, steps_, t_final_, set_items, x0_, v0_text, save_every_)
         R0_ = _parse_R0(spec, params, R0_text)
-        _check_output(out_)
+        # --resume may find the run finished: its file is then read back, not replaced
+        _check_output(out_, "--out", overwrite or resume)
         if plot_ is not None:
-            _check_plot(plot_)
+            _check_plot(plot_, overwrite)
+            if _same_file(out_, plot_):
+                raise _UsageError("--plot", f"{str(plot_)!r} is also --out: choose another path for the figure")
         chunk = pick("checkpoint_every", checkpoint_every)
         if chunk is not None and (isinstance(chunk, bool) or chunk < 1):
             raise _UsageError("--checkpoint-every", f"must be a positive integer, got {chunk!r}")
         if resume and chunk is None:
             raise _UsageError("--resume", "only streamed runs resume: give --checkpoint-every K as in the interrupted run")
-        n_steps = steps_ if steps_ is not None else round(float(t_final_) / float(h_))
-        if chunk is not None or n_steps // int(save_every_) > STREAM_NODES:
+        from gnipy.simulate import MAX_STEPS, resolve_steps
+
+        n_steps = resolve_steps(h_, steps_, t_final_)[1]
+        stride = min(int(save_every_), n_steps)  # the stride the run has (the last node is always saved)
+        streamed = chunk is not None or n_steps // stride > STREAM_NODES or n_steps > MAX_STEPS
+        if streamed:
             if method_ == "reference":
                 raise _UsageError("--checkpoint-every", "the continuous reference is not streamed")
             if plot_ is not None:
                 raise _UsageError("--plot", "not available for streamed runs: plot from the file (gnipy.plots)")
-            extra = {"save_every": int(save_every_), "project_v0": int(project), "command": "gni run",
+            if stride > MAX_STEPS:
+                raise _UsageError("--save-every", f"at most {MAX_STEPS} steps between saved nodes in a streamed run "
+                                  f"(a chunk holds at most {MAX_STEPS} steps), got {stride}")
+            if chunk is None:  # chunks of the default number of nodes, within the steps one chunk may hold
+                from gnipy.streaming import DEFAULT_CHUNK_NODES
+
+                chunk = stride * max(1, min(DEFAULT_CHUNK_NODES, MAX_STEPS // stride))
+        length = "--steps" if steps_ is not None else "--t-final"
+        if not yes:  # estimated before anything is compiled or allocated
+            _check_resources(spec.build(params), n_steps, stride, streamed, chunk, out_, length,
+                             chunk_given=pick("checkpoint_every", checkpoint_every) is not None)
+        if streamed:
+            extra = {"save_every": stride, "project_v0": int(project), "command": "gni run",
                      "q0": list(q0), "coordinates": ",".join(spec.coordinates)}
             if config is not None:
                 extra["config_file"] = str(config)
             if R0_ is not None:
                 extra["R0"] = list(R0_)
-            _run_streamed(spec, params, method_, q0, v0_, R0_, h_, steps_, t_final_, project, save_every_, chunk,
-                          resume, out_, extra)
+            _run_streamed(spec, params, method_, q0, v0_, R0_, h_, steps_, t_final_, project, stride, chunk,
+                          resume, out_, extra, overwrite=overwrite, yes=yes)
             return
         sol, v0_used, seconds = _simulate(
-            spec, params, method_, q0, v0_, h_, steps_, t_final_, project, save_every_, R0=R0_
+            spec, params, method_, q0, v0_, h_, steps_, t_final_, project, stride, R0=R0_
         )
         exact = _exact_errors(spec, params, sol, q0, v0_used)
         drifts = _invariant_drifts(spec, params, sol.q, sol.v, sol.R)
-        extra = {"save_every": int(save_every_), "project_v0": int(project), "command": "gni run"}
+        extra = {"save_every": stride, "project_v0": int(project), "command": "gni run"}
         if config is not None:
             extra["config_file"] = str(config)
         if R0_ is not None:
             extra["R0"] = list(R0_)
         attrs = _attrs_for(spec, params, sol, q0, v0_used, exact, drifts, extra)
-        write_netcdf(sol, out_, attrs=attrs)
+        with _writing("--out", out_):
+            write_netcdf(sol, out_, attrs=attrs, overwrite=overwrite)
         written = str(out_)
         if plot_ is not None:
-            _write_plot(sol, plot_)
+            _write_plot(sol, plot_, overwrite)
             written += f", {plot_}"
         _report("gni run", spec, params, sol, exact, drifts, seconds, written)
 
@@ -737,13 +941,101 @@ def run(
 #: `gni run` streams runs that save more nodes than this (memory stays bounded by one chunk).
 STREAM_NODES = 1_000_000
 
+#: `gni run` refuses (before compiling anything, unless --yes) a run whose saved nodes would need
+#: more memory than the smaller of this and half the machine's RAM (:func:`_memory_bound`) ...
+MAX_MEMORY_BYTES = 8 * 2**30
+#: ... or a result file larger than this, or than the free space of its file system.
+MAX_OUTPUT_BYTES = 64 * 2**30
+#: The memory of an in-memory run, as a multiple of its saved nodes' bytes (the device arrays,
+#: their host copies, the dataset written).
+MEMORY_COPIES = 3
+
+
+def _memory_bound() -> int:
+    """The memory bound of `gni run`: min(:data:`MAX_MEMORY_BYTES`, half the physical memory)."""
+    bound = MAX_MEMORY_BYTES
+    try:
+        phys = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+        if phys > 0:
+            bound = min(bound, phys // 2)
+    except (ValueError, OSError, AttributeError):  # not available on this system
+        pass
+    return bound
+
+
+def _node_bytes(system) -> int:
+    """Bytes of one saved node of a result (a generous estimate): t, q, v, p, the hidden momentum,
+    energy, energy of p+, the constraint residual (at most one entry per velocity), R, the node and
+    step indices."""
+    k = system.group.matrix_size if system.group is not None else 0
+    values = 1 + system.n + 4 * len(system.velocities) + k * k + 4
+    return 8 * values + 16
+
+
+def _human(n: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if n < 1024 or unit == "PiB":
+            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} EiB"  # pragma: no cover
+
+
+def _check_resources(system, n_steps: int, stride: int, streamed: bool, chunk, out: Path, length: str,
+                     chunk_given: bool = True) -> None:
+    """Refuse (`_UsageError`) a run whose memory or file is estimated beyond the bounds
+    (:data:`MAX_MEMORY_BYTES`, :data:`MAX_OUTPUT_BYTES`, the free disk space); `--yes` skips this."""
+    import shutil
+
+    per_node = _node_bytes(system)
+    nodes = 1 + -(-n_steps // stride)  # the initial node, every stride-th, and the last
+    file_bytes = nodes * per_node
+    if streamed:
+        from gnipy.streaming import DEFAULT_CHUNK_NODES
+
+        chunk_nodes = (chunk // stride if chunk is not None else DEFAULT_CHUNK_NODES) + 1
+        memory = min(chunk_nodes, nodes) * per_node * MEMORY_COPIES
+        disk = 2 * file_bytes  # the checkpoint parts and the file they are joined into, at the end
+        where = "in one chunk"
+        option = "--checkpoint-every" if chunk_given else f"{length}/--save-every"
+    else:
+        memory = nodes * per_node * MEMORY_COPIES
+        disk = file_bytes
+        where = "in memory"
+        option = f"{length}/--save-every"
+    bound = _memory_bound()
+    if memory > bound:
+        raise _UsageError(
+            option, f"the run would hold {min(nodes, chunk_nodes) if streamed else nodes:,} saved nodes {where}, "
+            f"about {_human(memory)}: more than gnipy's bound of {_human(bound)} (the smaller of "
+            f"{_human(MAX_MEMORY_BYTES)} and half the RAM); "
+            + ("choose a smaller --checkpoint-every" if streamed else
+               "stream the run with --checkpoint-every K (memory then holds one chunk) or save fewer nodes "
+               "(--save-every K)") + ", or pass --yes to run anyway"
+        )
+    parts = " (twice that on disk while the run goes on: the checkpoint parts and the file)" if streamed else ""
+    what = f"the file would hold {nodes:,} saved nodes, about {_human(file_bytes)}{parts}"
+    if file_bytes > MAX_OUTPUT_BYTES:
+        raise _UsageError(
+            f"{length}/--save-every", f"{what}: more than gnipy's bound of {_human(MAX_OUTPUT_BYTES)}; save fewer "
+            "nodes (--save-every K), or pass --yes to run anyway"
+        )
+    directory = out.parent if str(out.parent) else Path(".")
+    try:
+        free = shutil.disk_usage(directory).free
+    except OSError:
+        return
+    if disk > free:
+        raise _UsageError(
+            f"{length}/--save-every", f"{what}, but {str(directory)!r} has {_human(free)} free; save fewer nodes "
+            "(--save-every K) or free some space, or pass --yes to run anyway"
+        )
+
 
 def _run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, save_every, chunk, resume, out,
-                  extra) -> None:
+                  extra, *, overwrite: bool = False, yes: bool = False) -> None:
     """`gni run` in chunks through :func:`gnipy.streaming.simulate_to_file`, with a progress bar."""
     import numpy as np
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
-    from rich.table import Table
 
     from gnipy.streaming import simulate_to_file
 
@@ -753,19 +1045,25 @@ def _run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, 
     t0 = time.perf_counter()
     columns = (TextColumn("{task.description}"), BarColumn(), TextColumn("{task.completed:,.0f}/{task.total:,.0f} steps"),
                TimeElapsedColumn(), TimeRemainingColumn())
-    with Progress(*columns, console=_console(), transient=True) as bar:
+    console = _console()
+    with Progress(*columns, console=console, transient=True, disable=not console.is_terminal) as bar:
         total = steps if steps is not None else round(float(t_final) / float(h))
         task = bar.add_task(f"{spec.name} with {method}", total=total)
 
         def progress(done, total):
             bar.update(task, completed=done, total=total)
 
-        result = simulate_to_file(
-            system, method, q0, v0_used, R0=R0, path=out, h=h, steps=steps, t_final=t_final, save_every=save_every,
-            chunk_steps=chunk, resume=resume, attrs=extra, progress=progress,
-        )
+        # replacing an existing file: only with --overwrite (checked above, and again by the writer);
+        # --yes lifts the writer's own bound on the size of the run (max_bytes=None)
+        more = {"max_bytes": None} if yes else {}
+        with _writing("--out", out):
+            result = simulate_to_file(
+                system, method, q0, v0_used, R0=R0, path=out, h=h, steps=steps, t_final=t_final,
+                save_every=save_every, chunk_steps=chunk, resume=resume, overwrite=overwrite, attrs=extra,
+                progress=progress, **more,
+            )
     seconds = time.perf_counter() - t0
-    table = Table(title="gni run (streamed)", show_header=False, title_justify="left")
+    table = _table(title="gni run (streamed)", show_header=False, title_justify="left")
     table.add_column(style="bold")
     table.add_column(overflow="fold")
     table.add_row("model", f"{spec.name} ({', '.join(f'{k}={v:g}' for k, v in params.items())})")
@@ -778,18 +1076,20 @@ def _run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, 
     con = _console()
     con.print(table)
     for warning in result.warnings:  # the run-time diagnostics, as for in-memory runs
-        _console(stderr=True).print(warning, style="bold yellow", markup=False)
-    con.print(f"written: {out}", markup=False)
+        _console(stderr=True).print(_safe(warning), style="bold yellow", markup=False)
+    con.print(f"written: {_safe(out)}", markup=False)
 
 
-def _write_plot(sol, path: Path) -> None:
-    """The three-panel figure of a run (configuration path, energy error, constraint residual)."""
+def _write_plot(sol, path: Path, overwrite: bool = False) -> None:
+    """The three-panel figure of a run (configuration path, energy error, constraint residual),
+    written atomically."""
     from gnipy.plots import plot_solution
 
     try:
-        plot_solution(sol, path)
-    except OSError as e:
-        _fail(f"--plot: cannot write {path}: {e.strerror or e}", EXIT_FAILURE)
+        with _writing("--plot", path):
+            plot_solution(sol, path, overwrite=overwrite)
+    except _WriteFailure as e:
+        raise _WriteFailure(f"{e} (the result file was written; the figure was not)") from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -877,6 +1177,10 @@ def convergence(
         "velocity), state (the larger of the two), or auto (q; v on models without coordinates q)."
     ),
     out: Path = typer.Option(..., "--out", "-o", help="Output directory (created if missing).", show_default=False),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Replace convergence.csv and convergence.png in a directory gnipy did not "
+        "create (in one it created, marked by its .gnipy-owned file, they are replaced on a rerun).",
+    ),
 ):
     """Measure the order of convergence of methods on MODEL.
 
@@ -892,10 +1196,12 @@ def convergence(
 
     def go():
         import csv
+        import io
 
         import numpy as np
 
         import gnipy
+        from gnipy.files import atomic_write_text, remove_owned_dir
         from gnipy.plots import fitted_order, plot_convergence
 
         if error not in ("auto", "state", "q", "v"):
@@ -907,7 +1213,7 @@ def convergence(
         R0_ = _parse_R0(spec, params, R0)
         if measure == "q" and not spec.coordinates:
             raise _UsageError("--error", f"model {spec.name!r} has no coordinates q (it lives on a group): use v or state")
-        _check_output_dir(out)
+        replace = _check_output_dir(out, ("convergence.csv", "convergence.png"), overwrite)
 
         system = spec.build(params)
         b0, v0_used = system.check(q0, v0_, R0=R0_, project_v0=project_v0)
@@ -983,22 +1289,32 @@ def convergence(
             row["yardstick"] = "exact" if truth is not None else "reference"
             row["measure"] = measure
 
-        out.mkdir(parents=True, exist_ok=True)
         csv_path, png_path = out / "convergence.csv", out / "convergence.png"
         fields = ["method", "steps", "h", "t_final", "error", "error_q", "error_v", "used_in_fit",
                   "fitted_order", "expected_order", "yardstick", "measure"]
-        with open(csv_path, "w", newline="") as f:
-            writer = csv.DictWriter(f, fieldnames=fields)
-            writer.writeheader()
-            for row in rows:
-                writer.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()})
+        table = io.StringIO(newline="")
+        writer = csv.DictWriter(table, fieldnames=fields)
+        writer.writeheader()
+        for row in rows:
+            writer.writerow({k: (repr(v) if isinstance(v, float) else v) for k, v in row.items()})
         guides = sorted({p for p in expected.values() if p is not None}) or [1, 2]
         what = {"state": "max(|q − q*|, |v − v*|)", "q": "|q − q*|", "v": "|v − v*|"}[measure]
-        plot_convergence(
-            hs, errors, png_path, guides=guides, floor=floor,
-            title=f"{spec.name}: error at t = {T:g} against the {yardstick.split(' (')[0]}",
-            ylabel=f"{what} at t = {T:g}",
-        )
+        with _writing("--out", out):
+            created = _create_output_dir(out, "gni convergence: convergence.csv, convergence.png")
+        try:
+            # each file whole or not at all (a full disk leaves an earlier file as it was)
+            with _writing("--out", csv_path):
+                atomic_write_text(csv_path, table.getvalue(), overwrite=replace, argument="--out")
+            with _writing("--out", png_path):
+                plot_convergence(
+                    hs, errors, png_path, guides=guides, floor=floor,
+                    title=f"{spec.name}: error at t = {T:g} against the {yardstick.split(' (')[0]}",
+                    ylabel=f"{what} at t = {T:g}", overwrite=replace,
+                )
+        except BaseException:
+            if created:  # nothing of this study is left behind (the csv, if written, goes too)
+                remove_owned_dir(out, ("convergence.csv", "convergence.png"))
+            raise
         _convergence_report(spec, params, names, counts, T, errors, orders, expected, yardstick, measure, floor,
                             failures, seconds, csv_path, png_path)
 
@@ -1009,13 +1325,12 @@ def _convergence_report(spec, params, names, counts, T, errors, orders, expected
                         failures, seconds, csv_path, png_path) -> None:
     import math
 
-    from rich.table import Table
 
     con = _console()
     con.print(f"gni convergence: {spec.name} ({', '.join(f'{k}={v:g}' for k, v in params.items())}), "
               f"t = 0 .. {T:g}", markup=False)
     con.print(f"errors at t = {T:g} ({error}, max-norm) against the {yardstick}", markup=False)
-    table = Table(title_justify="left")
+    table = _table(title_justify="left")
     for head in ("method", "steps", "h", f"error ({error})"):
         table.add_column(head, justify="left" if head == "method" else "right", no_wrap=True)
     for name in names:
@@ -1026,7 +1341,7 @@ def _convergence_report(spec, params, names, counts, T, errors, orders, expected
     con.print(table)
     if any(not (e > floor) for name in names for e in errors[name] if math.isfinite(e)):
         con.print(f"* at or below round-off ({floor:.1e}): not used in the fit", markup=False)
-    orders_table = Table(title="fitted orders (least squares, log error against log h)", title_justify="left")
+    orders_table = _table(title="fitted orders (least squares, log error against log h)", title_justify="left")
     orders_table.add_column("method")
     orders_table.add_column("fitted order", justify="right")
     orders_table.add_column("expected", justify="right")
@@ -1041,7 +1356,7 @@ def _convergence_report(spec, params, names, counts, T, errors, orders, expected
     for f in failures:
         con.print(f"warning: solver failure for {f} (left out)", markup=False)
     con.print(f"time: {seconds:.2f} s (including compilation)", markup=False)
-    con.print(f"written: {csv_path}, {png_path}", markup=False)
+    con.print(f"written: {_safe(csv_path)}, {_safe(png_path)}", markup=False)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1064,12 +1379,19 @@ _SWEEP_OPTION_OF = {
 def _sweep_message(message: str) -> str:
     """A gnipy.sweep error message with its argument names written as the CLI options."""
     head, sep, rest = str(message).partition(":")
+    extra = {"connect_timeout": "--connect-timeout", "max_bytes": "--yes"}
     if sep and head.strip() in _SWEEP_OPTION_OF:
         message = f"{_SWEEP_OPTION_OF[head.strip()]}:{rest}"
+    elif sep and head.strip() in extra:
+        message = f"{extra[head.strip()]}:{rest}"
     else:
         message = _rename(message)
     for name, option in (("overwrite=True", "--overwrite"), ("project_v0=True", "--project-v0"),
-                         ("set_params", "--set")):
+                         ("set_params", "--set"), ("pass max_bytes=None", "pass --yes"),
+                         ("the bound max_bytes = ", "the bound of "), ("a smaller chunk_size", "a smaller --chunk-size"),
+                         ("a larger save_every", "a larger --save-every"),
+                         ("raise connect_timeout", "raise --connect-timeout"),
+                         ("write the store elsewhere", "choose another --out")):
         message = message.replace(name, option)
     return message
 
@@ -1087,6 +1409,9 @@ def _sweep_report(report, spec: dict[str, Any]) -> None:
               markup=False)
     con.print(f"  chunks: {report.chunks_computed} computed, {report.chunks_skipped} skipped (done before), "
               f"{report.chunks_remaining} remaining", markup=False)
+    repaired = getattr(report, "chunks_repaired", 0)
+    if repaired:
+        con.print(f"  damaged chunks found and computed again: {repaired}", markup=False)
     con.print(f"  failed members: {report.failed_members}", markup=False)
     rate = ""
     if report.members_computed:
@@ -1094,9 +1419,9 @@ def _sweep_report(report, spec: dict[str, Any]) -> None:
                 f"{report.member_steps_per_second:.3g} member-steps/s")
     con.print(f"  time: {report.wall_time:.2f} s (including cluster start and compilation){rate}", markup=False)
     if report.complete:
-        con.print(f"written: {report.path}", markup=False)
+        con.print(f"written: {_safe(report.path)}", markup=False)
     else:
-        con.print(f"written (incomplete, run the same command again to resume): {report.path}", markup=False)
+        con.print(f"written (incomplete, run the same command again to resume): {_safe(report.path)}", markup=False)
 
 
 @app.command()
@@ -1134,20 +1459,27 @@ def sweep(
         1000, "--chunk-size", help="Members per task (one vmapped batch) and per zarr chunk along `member`."
     ),
     scheduler: str | None = typer.Option(
-        None, "--scheduler", help="Address of an existing dask scheduler, e.g. tcp://host:8786 (its workers need "
-        "gnipy). [default: start a local cluster]", show_default=False,
+        None, "--scheduler", help="An existing dask scheduler: its address, e.g. tcp://host:8786, or a scheduler "
+        "file (JSON); its workers need gnipy. [default: start a local cluster]", show_default=False,
+    ),
+    connect_timeout: float = typer.Option(
+        10.0, "--connect-timeout", help="Seconds to wait for the connection to --scheduler.",
     ),
     workers: int | None = typer.Option(
         None, "--workers", help="Number of worker processes of the local cluster. [default: the number of cores]",
         show_default=False,
     ),
     overwrite: bool = typer.Option(
-        False, "--overwrite", help="Delete an existing sweep store at --out and start afresh (without it, the "
-        "same sweep is resumed).",
+        False, "--overwrite", help="Replace an existing sweep store at --out (only one gnipy created) and start "
+        "afresh (without it, the same sweep is resumed).",
     ),
     max_chunks: int | None = typer.Option(
         None, "--max-chunks", help="Compute at most this many chunks, then stop (run again to go on), e.g. under "
         "a batch-job time limit.", show_default=False,
+    ),
+    yes: bool = typer.Option(
+        False, "--yes", help="Create a store larger than 100 GiB (estimated, uncompressed): lift the size bound. "
+        "(The free disk space is checked anyway.)",
     ),
     out: Path = typer.Option(
         ..., "--out", "-o", help="Output zarr store, a directory (e.g. sweep.zarr); its parent must exist.",
@@ -1160,12 +1492,20 @@ def sweep(
     batch, on a local dask.distributed cluster (or an existing one: --scheduler), and each chunk
     is written to the zarr store OUT as it completes, with a progress display on a terminal.
     Running the same command again resumes an interrupted sweep: the chunks already written are
-    skipped. Read the result with gnipy.sweep.open_sweep(OUT), which gives the grid axes as
-    dimensions.
+    read back and checked, and skipped (a damaged one is computed again). Read the result with
+    gnipy.sweep.open_sweep(OUT), which gives the grid axes as dimensions.
+
+    Exit codes: 0 when every member ran; 1 when members failed (the store is written, and the
+    first failed members are listed), a chunk failed on the cluster or the store cannot be
+    written; 2 for bad input (also a store that holds another sweep or is damaged, a sweep over
+    the size bound, or a scheduler that cannot be reached).
     """
 
     def go():
-        from gnipy.sweep import SweepError, SweepFailure, run_sweep
+        import warnings
+
+        import gnipy.sweep as sweep_module
+        from gnipy.sweep import SweepError, SweepFailure, SweepWarning, run_sweep
 
         if not grid:
             raise _UsageError("--grid", "missing: give at least one --grid NAME=START:STOP:COUNT")
@@ -1177,12 +1517,37 @@ def sweep(
         _check_positive("--steps", steps, "integer")
         _check_positive("--t-final", t_final)
         set_params = _parse_set(set_)
+
+        def _sweep_failures(report) -> str:
+            """The error line of a sweep with failed members: how many, and the first few."""
+            def one(f) -> str:
+                grid = ", ".join(f"{k}={v:.6g}" for k, v in f["grid"].items())
+                residual = "n/a" if math.isnan(f["residual"]) else f"{f['residual']:.3e}"
+                return f"member {f['member']} ({grid}): step {f['step']}, t = {f['time']:.6g}, residual {residual}"
+
+            listed = "; ".join(one(f) for f in report.failures)
+            more = ", ..." if report.failed_members > len(report.failures) else ""
+            return (f"{report.failed_members} of {report.members} members failed (a step's solve did not converge): "
+                    f"{listed}{more}. Their data are NaN after their failed step (result = 1; failed_step, failed_time, "
+                    "failed_residual in the store); the others are written")
+
+        original = warnings.showwarning
+
+        def show(message, category, *args, **kwargs):  # a damaged chunk computed again: one line
+            if not issubclass(category, SweepWarning):
+                return original(message, category, *args, **kwargs)
+            typer.echo("warning: " + _safe(" ".join(_sweep_message(str(message)).split())), err=True)
+
         try:
-            report = run_sweep(
-                model, list(grid), out=out, h=h, steps=steps, t_final=t_final, method=method, save_every=save_every,
-                set_params=set_params, project_v0=project_v0, chunk_size=chunk_size, scheduler=scheduler,
-                workers=workers, overwrite=overwrite, max_chunks=max_chunks, progress=True,
-            )
+            with warnings.catch_warnings():
+                warnings.simplefilter("always", SweepWarning)
+                warnings.showwarning = show
+                report = run_sweep(
+                    model, list(grid), out=out, h=h, steps=steps, t_final=t_final, method=method,
+                    save_every=save_every, set_params=set_params, project_v0=project_v0, chunk_size=chunk_size,
+                    scheduler=scheduler, workers=workers, overwrite=overwrite, max_chunks=max_chunks, progress=True,
+                    max_bytes=None if yes else sweep_module.DEFAULT_MAX_BYTES, connect_timeout=connect_timeout,
+                )
         except SweepError as e:
             _fail(_sweep_message(str(e)), EXIT_USAGE)
         except SweepFailure as e:
@@ -1190,6 +1555,8 @@ def sweep(
         except KeyboardInterrupt:
             _fail("interrupted; the chunks done are kept: run the same command again to resume", 130)
         _sweep_report(report, report.spec)
+        if report.failed_members:
+            _fail(_sweep_failures(report), EXIT_FAILURE)
 
     _guarded(go)
 
@@ -1199,7 +1566,8 @@ def sweep(
 # --------------------------------------------------------------------------------------------
 _SHOWN_ATTRS = {"model", "params", "method", "h", "steps", "start", "save_every", "t_final", "gnipy_version",
                 "jax_version", "created", "command", "config_file", "result", "newton_iterations_total",
-                "newton_iterations_max", "units_convention", "q0", "v0", "R0", "project_v0", "coordinates"}
+                "newton_iterations_max", "units_convention", "q0", "v0", "R0", "project_v0", "coordinates",
+                "gnipy_checksum"}
 
 
 def _fmt_attr(v) -> str:
@@ -1223,12 +1591,15 @@ def info(
     def go():
         from gnipy.io import OutputError, read_netcdf
 
+        _check_readable(file, "FILE")
         try:
             ds = read_netcdf(file)
         except OutputError as e:
             raise _UsageError("FILE", str(e)) from None
+        except RuntimeError as e:  # the netCDF library on a damaged file ("NetCDF: HDF error")
+            raise _UsageError("FILE", f"cannot read {str(file)!r}: {e}") from None
         try:
-            _info_table(file, ds)
+            _info_table(file, ds, _checksum_text(file))
         except (ValueError, TypeError, AttributeError, OverflowError, KeyError, IndexError) as e:
             raise _UsageError(
                 "FILE", f"{str(file)!r} is not a result file gnipy can summarize ({type(e).__name__}: {e})"
@@ -1237,15 +1608,47 @@ def info(
     _guarded(go)
 
 
-def _info_table(file, ds) -> None:
+def _check_readable(path: Path, option: str) -> None:
+    """`path` is a regular file (or a link to one) to read; else `_UsageError` (a FIFO or device
+    is never opened: reading one could block)."""
+    import stat
+
+    text = str(path)
+    if "\x00" in text:
+        raise _UsageError(option, f"{text!r}: a path cannot contain a NUL character")
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise _UsageError(option, f"cannot read {text!r}: no such file") from None
+    except OSError as e:
+        raise _UsageError(option, f"cannot read {text!r}: {e.strerror or e}") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise _UsageError(option, f"cannot read {text!r}: it is a directory")
+    if not stat.S_ISREG(st.st_mode):
+        raise _UsageError(option, f"cannot read {text!r}: not a regular file (a FIFO, socket or device)")
+
+
+def _checksum_text(path: Path) -> str:
+    """What `gni info` says of a file's checksum (:func:`gnipy.io.verify_netcdf`)."""
+    from gnipy.io import OutputError, verify_netcdf
+
+    try:
+        ok, message = verify_netcdf(path)
+    except OutputError as e:
+        return f"cannot be verified: {e}"
+    prefix = f"{Path(path)}: "
+    message = message[len(prefix):] if message.startswith(prefix) else message
+    return f"verified: {message}" if ok else f"NOT verified: {message}"
+
+
+def _info_table(file, ds, checksum: str | None = None) -> None:
     """Print the summary table of `gni info` (raises on attributes of unexpected types)."""
     import json
 
     import numpy as np
-    from rich.table import Table
 
     a = dict(ds.attrs)
-    table = Table(title=f"gni info: {file}", show_header=False, title_justify="left", box=None)
+    table = _table(title=f"gni info: {file}", show_header=False, title_justify="left", box=None)
     table.add_column(style="bold")
     table.add_column(overflow="fold")
     params = {}
@@ -1305,7 +1708,103 @@ def _info_table(file, ds) -> None:
         if k in _SHOWN_ATTRS or k.startswith(("param_", "invariant_drift_", "max_error_")):
             continue
         table.add_row(k, _fmt_attr(a[k]))
+    if checksum is not None:
+        table.add_row("checksum", checksum)
     _console().print(table)
+
+
+# --------------------------------------------------------------------------------------------
+# gni verify
+# --------------------------------------------------------------------------------------------
+def _is_parts_dir(path: Path) -> bool:
+    """Whether `path` is the checkpoint directory `OUT.parts` of a streamed run."""
+    return path.name.endswith(".parts") and path.is_dir() and (
+        (path / "spec.json").exists() or any(path.glob("part_*.nc"))
+    )
+
+
+def _unfinished(parts: Path) -> None:
+    result = parts.with_name(parts.name[: -len(".parts")])
+    _fail(f"PATH: {parts} holds the checkpoints of an unfinished streamed run of {result} (not a result yet): "
+          "run the same `gni run ... --checkpoint-every K` again with --resume, which verifies the parts and "
+          "completes the file", EXIT_FAILURE)
+
+
+def _verify_store(path: Path) -> None:
+    """`gni verify` of a directory: a sweep store, through gnipy.sweep.verify_sweep."""
+    try:
+        from gnipy import sweep as sweep_module
+    except ImportError as e:  # pragma: no cover - the sweep's dependencies are installed with gnipy
+        raise _UsageError("PATH", f"{str(path)!r} is a directory, and sweep stores cannot be read here ({e})") from None
+    verify_sweep = getattr(sweep_module, "verify_sweep", None)
+    if verify_sweep is None:
+        raise _UsageError("PATH", f"{str(path)!r} is a directory: this version of gnipy cannot verify sweep stores "
+                          "(gnipy.sweep.verify_sweep is missing)")
+    from gnipy.files import OutputError
+
+    sweep_error = getattr(sweep_module, "SweepError", OutputError)
+    try:
+        ok, message, bad = verify_sweep(path)
+    except sweep_error as e:  # not a sweep store, or one that cannot be read
+        raise _UsageError("PATH", re.sub(r"^(--out|path|out): ", "", _sweep_message(str(e)))) from None
+    except (OutputError, OSError, ValueError, KeyError, TypeError) as e:
+        raise _UsageError("PATH", f"cannot verify {str(path)!r}: {e}") from None
+    if ok:
+        _console().print(_safe(message), markup=False)
+        return
+    if bad:
+        shown = ", ".join(str(c) for c in list(bad)[:10]) + (", ..." if len(bad) > 10 else "")
+        message = f"{message} (damaged chunks: {shown})" if shown not in str(message) else message
+    _fail(f"PATH: {message}", EXIT_FAILURE)
+
+
+@app.command()
+def verify(
+    path: Path = typer.Argument(..., help="A result file (FILE.nc), a sweep store (DIR.zarr) or the checkpoint "
+                                "directory of a streamed run (FILE.nc.parts).", show_default=False, metavar="PATH"),
+):
+    """Check that a file gnipy wrote is whole: recompute the checksums it carries.
+
+    A result file (`gni run`, gnipy.io.write_netcdf) carries the checksum of its data in its
+    attribute gnipy_checksum; a sweep store one per chunk. Exit code 0: the data match ("ok");
+    1: they do not (the file is damaged: the message says what), the file carries no checksum, or
+    PATH is an unfinished streamed run (resume it with `gni run ... --resume`); 2: PATH does not
+    exist or cannot be read.
+    """
+
+    def go():
+        import stat
+
+        from gnipy.io import OutputError, verify_netcdf
+
+        text = str(path)
+        if "\x00" in text:
+            raise _UsageError("PATH", f"{text!r}: a path cannot contain a NUL character")
+        try:
+            st = os.stat(path)
+        except FileNotFoundError:
+            parts = path.with_name(path.name + ".parts") if path.name else None
+            if parts is not None and _is_parts_dir(parts):
+                _unfinished(parts)
+            raise _UsageError("PATH", f"cannot read {text!r}: no such file or directory") from None
+        except OSError as e:
+            raise _UsageError("PATH", f"cannot read {text!r}: {e.strerror or e}") from None
+        if stat.S_ISDIR(st.st_mode):
+            if _is_parts_dir(path):
+                _unfinished(path)
+            _verify_store(path)
+            return
+        if not stat.S_ISREG(st.st_mode):
+            raise _UsageError("PATH", f"cannot read {text!r}: not a regular file (a FIFO, socket or device)")
+        try:
+            ok, message = verify_netcdf(path)
+        except OutputError as e:
+            raise _UsageError("PATH", str(e)) from None
+        if not ok:
+            _fail(f"PATH: {message}", EXIT_FAILURE)
+        _console().print(_safe(message), markup=False)
+
+    _guarded(go)
 
 
 DEMO_MODEL, DEMO_METHOD, DEMO_H, DEMO_T = "rotating-table-ball", "gni-trapezoid", 0.01, 10.0
@@ -1314,6 +1813,7 @@ DEMO_MODEL, DEMO_METHOD, DEMO_H, DEMO_T = "rotating-table-ball", "gni-trapezoid"
 @app.command()
 def demo(
     out: Path = typer.Option(Path("gnipy-demo.nc"), "--out", "-o", help="Output netCDF file."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace an existing --out file."),
 ):
     """Roll a ball on a rotating table (paper §7.4) with the GNI and compare with the exact solution.
 
@@ -1329,7 +1829,7 @@ def demo(
         from gnipy.io import write_netcdf
 
         spec, params, q0, v0 = _prepare(DEMO_MODEL, DEMO_METHOD, DEMO_H, None, DEMO_T, None, None, None, 1)
-        _check_output(out)
+        _check_output(out, "--out", overwrite)
         sol, v0, seconds = _simulate(spec, params, DEMO_METHOD, q0, v0, DEMO_H, None, DEMO_T, False, 1)
         exact = _exact_errors(spec, params, sol, q0, v0)
         drifts = _invariant_drifts(spec, params, sol.q, sol.v)
@@ -1337,7 +1837,8 @@ def demo(
         ds["q_exact"] = (("time", "coordinate"), np.asarray(exact[0]), {"long_name": "exact configuration"})
         ds["v_exact"] = (("time", "velocity"), np.asarray(exact[1]), {"long_name": "exact velocity"})
         attrs = _attrs_for(spec, params, sol, q0, v0, exact, drifts, {"command": "gni demo"})
-        write_netcdf(ds, out, attrs=attrs)
+        with _writing("--out", out):
+            write_netcdf(ds, out, attrs=attrs, overwrite=overwrite)
         _report(
             "gni demo: ball on a rotating table, GNI (trapezoid) against the exact solution",
             spec, params, sol, exact, drifts, seconds, out,
@@ -1351,6 +1852,8 @@ def demo(
 @app.command()
 def models():
     """List the models with their parameters (defaults), coordinates and initial condition."""
+    from rich.text import Text
+
     import gnipy
 
     con = _console()
@@ -1360,8 +1863,7 @@ def models():
         q0, v0 = spec.initial_condition(spec.params)
         extras = ["exact solution" if spec.exact is not None else None,
                   f"invariants: {', '.join(spec.invariants)}" if spec.invariants else None]
-        con.print(f"[bold]{name}[/bold]: ", end="")
-        con.print(spec.description, markup=False)
+        con.print(Text.assemble((_safe(name), "bold"), ": ", _safe(spec.description)))
         con.print(f"    params: {params}", markup=False)
         con.print(f"    q = ({', '.join(spec.coordinates)}); default q0 = {q0}, v0 = {v0}", markup=False)
         more = "; ".join(x for x in extras if x)
@@ -1373,13 +1875,14 @@ def models():
 @app.command()
 def methods():
     """List the method names with one-line descriptions."""
+    from rich.text import Text
+
     from gnipy.methods import METHOD_DESCRIPTIONS
 
     con = _console()
     width = max(len(k) for k in METHOD_DESCRIPTIONS)
     for name, desc in METHOD_DESCRIPTIONS.items():
-        con.print(f"[bold]{name:<{width}}[/bold]  ", end="")
-        con.print(desc, markup=False)
+        con.print(Text.assemble((f"{_safe(name):<{width}}", "bold"), "  ", _safe(desc)))
 
 
 # --------------------------------------------------------------------------------------------

@@ -102,7 +102,10 @@ def _as_path(path, argument: str) -> Path:
         raise OutputError(f"{argument}: the path is empty")
     if "\x00" in text:
         raise OutputError(f"{argument}: {text!r}: a path cannot contain a NUL character")
-    return Path(text).expanduser()
+    try:
+        return Path(text).expanduser()
+    except RuntimeError as e:  # "~nosuchuser/...": no home directory to expand to
+        raise OutputError(f"{argument}: {text!r}: {e}") from None
 
 
 def _check_parent(path: Path, argument: str) -> Path:
@@ -311,8 +314,16 @@ def make_owned_dir(path, purpose: str) -> Path:
     path = Path(os.fspath(path))
     try:
         path.mkdir()
+    except OSError as e:
+        raise OutputError(f"cannot create {path}: {e.strerror or e}") from None
+    try:
         (path / MARKER).write_text(json.dumps({"created_by": "gnipy", "purpose": purpose}) + "\n")
     except OSError as e:
+        try:  # the directory is ours and empty but for a partial marker: leave nothing behind
+            (path / MARKER).unlink(missing_ok=True)
+            path.rmdir()
+        except OSError:
+            pass
         raise OutputError(f"cannot create {path}: {e.strerror or e}") from None
     return path
 

@@ -206,14 +206,17 @@ def plot_constraint_residual(obj, ax=None):
     return ax
 
 
-def plot_solution(obj, path=None, *, title: str | None = None):
+def plot_solution(obj, path=None, *, title: str | None = None, overwrite: bool = False):
     """A three-panel figure: configuration path, energy error, constraint residual.
 
     Arguments:
         obj: a :class:`~gnipy.Solution` or a result `xarray.Dataset`.
         path: where to save the figure (the format follows the suffix: .png, .pdf, .svg, ...);
-            None: do not save.
+            None: do not save. The file is written atomically (:func:`gnipy.files.atomic_savefig`).
         title: the figure title (default: model, method and step size).
+        overwrite: replace an existing regular file at `path` (without it, an existing file is an
+            :class:`~gnipy.files.OutputError`, as for every file gnipy writes). A symbolic link,
+            directory or special file at `path` is always refused.
 
     Returns:
         The `matplotlib.figure.Figure`.
@@ -239,7 +242,7 @@ def plot_solution(obj, path=None, *, title: str | None = None):
     if title:
         fig.suptitle(title)
     if path is not None:
-        _save(fig, path)
+        _save(fig, path, overwrite)
     return fig
 
 
@@ -291,19 +294,22 @@ def plot_convergence(
     title: str | None = None,
     ylabel: str = "error at the final time",
     ax=None,
+    overwrite: bool = False,
 ):
     """A log-log plot of errors against step sizes, with the fitted slopes in the legend.
 
     Arguments:
         h: the step sizes: one array for all methods, or a mapping method → array.
         errors: method name → errors (same length as its step sizes).
-        path: where to save the figure (None: do not save).
+        path: where to save the figure (None: do not save); written atomically.
         guides: orders p of dashed reference lines C·hᵖ (through the middle of the data).
         floor: the round-off level below which points are not used in the fit
             (see :func:`fitted_order`); such points are drawn with open markers.
         title: the axes title.
         ylabel: the label of the error axis.
         ax: the matplotlib axes to draw on (default: a new figure).
+        overwrite: replace an existing regular file at `path` (without it, an existing file is an
+            error; never a link or special file).
 
     Returns:
         The `matplotlib.figure.Figure`.
@@ -343,11 +349,13 @@ def plot_convergence(
     if title:
         ax.set_title(title, fontsize="medium")
     if path is not None:
-        _save(fig, path)
+        _save(fig, path, overwrite)
     return fig
 
 
-def _save(fig, path) -> Path:
-    path = Path(os.fspath(path))
-    fig.savefig(path, dpi=110)
-    return path
+def _save(fig, path, overwrite: bool = False) -> Path:
+    """Write `fig` to `path` atomically (the old file stays whole if writing fails; never through a
+    link or into a special file): :func:`gnipy.files.atomic_savefig`."""
+    from .files import atomic_savefig
+
+    return atomic_savefig(fig, Path(os.fspath(path)), overwrite=overwrite, argument="path", dpi=110)

@@ -112,11 +112,30 @@ def test_markdown_and_self_contained_html(tmp_path):
 
 
 def test_rewrite_replaces_atomically(tmp_path):
-    fig = _figure(tmp_path, 1)
-    write_report(tmp_path, [fig], ROWS, ERRATA, META)
-    md, html = write_report(tmp_path, [fig], ROWS[:1], ERRATA, dict(META, machine="other box"))
+    # a folder write_report creates carries gnipy's marker: a rerun replaces the report there
+    out = tmp_path / "out"
+    write_report(out, [], ROWS, ERRATA, META)
+    assert (out / ".gnipy-owned").is_file()
+    fig = _figure(out, 1)
+    write_report(out, [fig], ROWS, ERRATA, META)
+    md, html = write_report(out, [fig], ROWS[:1], ERRATA, dict(META, machine="other box"))
     assert "other box" in md.read_text(encoding="utf-8") and "other box" in html.read_text(encoding="utf-8")
     assert "1 of 1" in md.read_text(encoding="utf-8")
+    assert [p.name for p in out.iterdir() if p.suffix == ".tmp"] == []
+
+
+def test_rewrite_in_a_foreign_folder_needs_overwrite(tmp_path):
+    """A folder gnipy did not create (no marker): an existing report is not replaced unless asked."""
+    from gnipy.files import OutputError
+
+    fig = _figure(tmp_path, 1)
+    md, _ = write_report(tmp_path, [fig], ROWS, ERRATA, META)
+    before = md.read_bytes()
+    with pytest.raises(OutputError, match="report.md exists"):
+        write_report(tmp_path, [fig], ROWS[:1], ERRATA, dict(META, machine="other box"))
+    assert md.read_bytes() == before
+    write_report(tmp_path, [fig], ROWS[:1], ERRATA, dict(META, machine="other box"), overwrite=True)
+    assert "other box" in md.read_text(encoding="utf-8")
     assert [p.name for p in tmp_path.iterdir() if p.suffix == ".tmp"] == []
 
 

@@ -301,11 +301,11 @@ _RUN_OVERHEAD = 4000
 
 
 def _write(fig, out_dir: Path, name: str) -> list[Path]:
-    out_dir.mkdir(parents=True, exist_ok=True)
-    files = [out_dir / f"{name}.png", out_dir / f"{name}.pdf"]
-    fig.savefig(files[0], dpi=150)
-    fig.savefig(files[1])
-    return files
+    """`NAME.png` and `NAME.pdf` in `out_dir`, each written atomically; an existing file is replaced
+    only in a folder gnipy created or when asked (:func:`gnipy.experiments.report.save_figure`)."""
+    from .report import save_figure
+
+    return save_figure(fig, out_dir, name, dpi=150)
 
 
 def _new_figure(width: float, height: float):

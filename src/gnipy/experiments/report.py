@@ -5,7 +5,14 @@
 resource: the page can be mailed or archived alone). Both hold the provenance (gnipy version, date,
 machine, quick or full run, run time), each figure with its caption, table and notes, the theorem
 table with pass/fail, and the errata. Files are written atomically (a temporary file in the same
-folder, then `os.replace`), so a reader never sees half a report.
+folder, then `os.replace`: :func:`gnipy.files.atomic_write_text`), so a reader never sees half a
+report, and a failed write (a full disk) leaves an earlier report as it was.
+
+**Output folders** (shared by the figures of :mod:`.figures` and :mod:`.struggles`). A folder that
+does not exist is created with gnipy's marker (:func:`gnipy.files.make_owned_dir`); in such a folder
+gnipy replaces its own files on a rerun. In a folder gnipy did not create, an existing file of the
+same name is replaced only when asked (`overwrite=True`, `gni reproduce --overwrite`, or inside
+:func:`overwriting`); a symbolic link or special file is never written through.
 """
 
 from __future__ import annotations
@@ -13,13 +20,15 @@ from __future__ import annotations
 import base64
 import html
 import math
+import contextlib
+import contextvars
 import os
-import uuid
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-__all__ = ["write_report", "REPORT_TITLE", "PAPER"]
+__all__ = ["write_report", "REPORT_TITLE", "PAPER", "ensure_output_dir", "may_replace", "overwriting",
+           "save_figure"]
 
 REPORT_TITLE = "gnipy: reproduction of the Geometric Nonholonomic Integrator paper"
 PAPER = ('S. Ferraro, F. Jiménez, D. Martín de Diego, "New developments on the Geometric Nonholonomic '
@@ -283,26 +292,64 @@ def _html(out_dir: Path, figures, theorems, errata, meta, struggles=()) -> str:
     return "\n".join(parts) + "\n"
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    """Write `text` to `path` through a temporary file in the same folder and `os.replace` (the
-    temporary file is created like any other file, so the report gets the usual permissions)."""
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+# ------------------------------------------------------------------------------------------------
+# Output folders and files (through gnipy.files)
+# ------------------------------------------------------------------------------------------------
+_OVERWRITE: contextvars.ContextVar[bool] = contextvars.ContextVar("gnipy_experiments_overwrite", default=False)
+
+
+@contextlib.contextmanager
+def overwriting(flag: bool = True):
+    """Within this context, the experiments' writers replace existing files of their names even in a
+    folder gnipy did not create (`gni reproduce --overwrite`)."""
+    token = _OVERWRITE.set(bool(flag))
     try:
-        with open(tmp, "x", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except OSError:
-            pass
-        raise
+        yield
+    finally:
+        _OVERWRITE.reset(token)
+
+
+def may_replace(out_dir) -> bool:
+    """Whether the experiments may replace their own existing files in `out_dir`: it is a folder
+    gnipy created (:func:`gnipy.files.is_owned_dir`), or :func:`overwriting` is on."""
+    from ..files import is_owned_dir
+
+    return _OVERWRITE.get() or is_owned_dir(out_dir)
+
+
+def ensure_output_dir(out_dir, purpose: str = "gni reproduce: figures and report") -> Path:
+    """`out_dir` as a Path, created with gnipy's marker if it does not exist (its missing parents as
+    plain folders). Raises :class:`gnipy.files.OutputError` if it cannot be, or is not a folder."""
+    from ..files import OutputError, make_owned_dir
+
+    out_dir = Path(out_dir)
+    if out_dir.is_dir():
+        return out_dir
+    if os.path.lexists(out_dir):
+        raise OutputError(f"--out: {out_dir} exists and is not a directory")
+    try:
+        out_dir.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise OutputError(f"--out: cannot create {out_dir.parent}: {e.strerror or e}") from None
+    return make_owned_dir(out_dir, purpose)
+
+
+def save_figure(fig, out_dir, name: str, dpi: float) -> list[Path]:
+    """Write `fig` as `out_dir/NAME.png` (at `dpi`) and `out_dir/NAME.pdf`, each atomically
+    (:func:`gnipy.files.atomic_savefig`), replacing earlier files as :func:`may_replace` allows."""
+    from ..files import atomic_savefig
+
+    out_dir = ensure_output_dir(out_dir)
+    replace = may_replace(out_dir)
+    files = [out_dir / f"{name}.png", out_dir / f"{name}.pdf"]
+    atomic_savefig(fig, files[0], overwrite=replace, argument="--out", dpi=dpi)
+    atomic_savefig(fig, files[1], overwrite=replace, argument="--out")
+    return files
 
 
 def write_report(out_dir, figures: Sequence, theorems: Sequence, errata: Sequence,
-                 meta: Mapping[str, Any], struggles: Sequence = ()) -> tuple[Path, Path]:
+                 meta: Mapping[str, Any], struggles: Sequence = (), *,
+                 overwrite: bool | None = None) -> tuple[Path, Path]:
     """Write `report.md` and the self-contained `report.html` into `out_dir`.
 
     Arguments:
@@ -316,13 +363,23 @@ def write_report(out_dir, figures: Sequence, theorems: Sequence, errata: Sequenc
             in that order), then any other keys.
         struggles: the figures of the section "Where the GNI struggles"
             (:mod:`gnipy.experiments.struggles`), after the paper's figures.
+        overwrite: replace existing `report.md` / `report.html`; None (the default): in a folder
+            gnipy created, or inside :func:`overwriting` (see the module docstring).
+
+    Raises:
+        gnipy.files.OutputError: a file could not be written (a full disk: an earlier report stays as
+            it was), or exists and may not be replaced.
 
     Returns:
         `(md_path, html_path)`.
     """
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    from ..files import atomic_write_text
+
+    out_dir = ensure_output_dir(out_dir)
+    replace = may_replace(out_dir) if overwrite is None else bool(overwrite)
     md_path, html_path = out_dir / "report.md", out_dir / "report.html"
-    _write_atomic(md_path, _markdown(out_dir, figures, theorems, errata, meta, struggles))
-    _write_atomic(html_path, _html(out_dir, figures, theorems, errata, meta, struggles))
+    md, page = (_markdown(out_dir, figures, theorems, errata, meta, struggles),
+                _html(out_dir, figures, theorems, errata, meta, struggles))
+    atomic_write_text(md_path, md, overwrite=replace, argument="--out")
+    atomic_write_text(html_path, page, overwrite=replace, argument="--out")
     return md_path, html_path

@@ -9,12 +9,21 @@ command (`gni reproduce`), which exits with code 1 when a theorem row fails or a
 
 A stage that raises does not stop the others: its failure is recorded in the report (a figure
 with the error as its note, or a failed theorem row) and makes the command exit non-zero.
+
+**The output folder** (:func:`check_output_dir`). A folder that does not exist is created with
+gnipy's marker `.gnipy-owned`, and in such a folder a rerun replaces gnipy's own files (so
+`gni reproduce` can always be run again into its own folder). In a folder gnipy did not create,
+existing files of the names in :data:`OUTPUT_FILES` are replaced only with `overwrite=True`
+(`--overwrite`); without it the run is refused before anything is computed. Every file is written
+atomically (:mod:`gnipy.files`): a full disk leaves earlier files as they were, and the command
+ends with a one-line message and exit code 1.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import datetime
+import os
 import platform
 import time
 import traceback
@@ -23,9 +32,18 @@ from pathlib import Path
 
 import typer
 
-__all__ = ["reproduce", "reproduce_command", "ReproductionResult", "run_reproduction"]
+__all__ = ["reproduce", "reproduce_command", "ReproductionResult", "run_reproduction", "check_output_dir",
+           "OUTPUT_FILES"]
 
 FIGURE_NAMES = ("figure_1", "figure_2", "figure_3")
+
+#: The files a reproduction writes into its folder (the figures of :mod:`.figures` and
+#: :mod:`.struggles`, PNG and PDF, and the report).
+OUTPUT_FILES = tuple(
+    f"{stem}.{ext}"
+    for stem in ("figure1", "figure2", "figure3", "struggles_sleigh", "struggles_suslov", "struggles_oscillator")
+    for ext in ("png", "pdf")
+) + ("report.md", "report.html")
 
 
 @dataclasses.dataclass
@@ -123,8 +141,69 @@ def _console(stderr: bool = False):
     return Console(stderr=stderr, highlight=False, soft_wrap=True)
 
 
-def run_reproduction(out_dir: Path, quick: bool, *, console=None) -> ReproductionResult:
-    """Run every stage and write the report (see :func:`reproduce`); returns everything produced."""
+def check_output_dir(out_dir, overwrite: bool = False) -> Path:
+    """Check, before anything is computed, that a reproduction may write into `out_dir`.
+
+    Allowed: a folder that does not exist and can be created; a folder gnipy created (marker
+    `.gnipy-owned`); any other folder when none of :data:`OUTPUT_FILES` is there, or with
+    `overwrite`. Never: a symbolic link, directory or special file at one of those names.
+
+    Raises:
+        gnipy.files.OutputError: the message (starting with `--out:`) says why.
+    """
+    from ..files import MARKER, OutputError, check_destination, is_owned_dir
+
+    out_dir = Path(out_dir)
+    text = str(out_dir)
+    if "\x00" in text:
+        raise OutputError(f"--out: {text!r}: a path cannot contain a NUL character")
+    if not out_dir.exists():
+        if out_dir.is_symlink():
+            raise OutputError(f"--out: {text!r} is a dangling symbolic link")
+        parent = out_dir.parent
+        while not parent.exists() and parent != parent.parent:
+            parent = parent.parent
+        if not parent.is_dir():
+            raise OutputError(f"--out: cannot create the folder {text!r}: {str(parent)!r} is not a directory")
+        if not os.access(parent, os.W_OK | os.X_OK):
+            raise OutputError(f"--out: cannot create the folder {text!r}: {str(parent)!r} is not writable")
+        return out_dir
+    if not out_dir.is_dir():
+        raise OutputError(f"--out: {text!r} is not a directory")
+    replace = overwrite or is_owned_dir(out_dir)
+    taken = []
+    for name in OUTPUT_FILES:
+        check_destination(out_dir / name, overwrite=True, argument="--out")  # links, special files: never
+        if (out_dir / name).exists():
+            taken.append(name)
+    if taken and not replace:
+        raise OutputError(
+            f"--out: {text!r} is a folder gnipy did not create (no {MARKER} marker) and already holds "
+            f"{', '.join(taken[:4])}{', ...' if len(taken) > 4 else ''}; pass --overwrite to replace gnipy's "
+            "files there, or choose another folder"
+        )
+    return out_dir
+
+
+def run_reproduction(out_dir: Path, quick: bool, *, console=None, overwrite: bool = False) -> ReproductionResult:
+    """Run every stage and write the report (see :func:`reproduce`); returns everything produced.
+
+    `overwrite`: replace the files of a reproduction in a folder gnipy did not create (see the
+    module docstring; :func:`check_output_dir` is checked first, before anything is computed).
+
+    Raises:
+        gnipy.files.OutputError: the folder may not be written (see :func:`check_output_dir`), or
+            the report could not be written (a full disk); a figure that cannot be written is a
+            failed stage, recorded in the report."""
+    from .report import ensure_output_dir, overwriting
+
+    t_start = time.perf_counter()
+    out_dir = ensure_output_dir(check_output_dir(out_dir, overwrite))
+    with overwriting(overwrite):
+        return _run_stages(out_dir, quick, console or _console(), t_start)
+
+
+def _run_stages(out_dir: Path, quick: bool, console, t_start: float) -> ReproductionResult:
     from rich.progress import (
         BarColumn,
         Progress,
@@ -137,10 +216,6 @@ def run_reproduction(out_dir: Path, quick: bool, *, console=None) -> Reproductio
     from .report import write_report
     from .theorems import Row, errata_rows, theorem_table
 
-    t_start = time.perf_counter()
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
-    console = console or _console()
     figure_fns = _figure_functions()
     stages: list[tuple[str, str]] = [(name, f"Figure {name[-1]}") for name in FIGURE_NAMES]
     stages += [("theorems", "Theorem table"), ("errata", "Errata"), ("struggles", "Where the GNI struggles")]
@@ -208,6 +283,8 @@ def _print_summary(console, result: ReproductionResult, quick: bool) -> None:
     from rich.markup import escape
     from rich.table import Table
 
+    from ..cli import _safe
+
     table = Table(title=f"Theorem table ({'quick' if quick else 'full'} run)", show_lines=False, expand=True)
     table.add_column("#", justify="right")
     table.add_column("claim (paper)", overflow="fold", ratio=4)
@@ -222,8 +299,9 @@ def _print_summary(console, result: ReproductionResult, quick: bool) -> None:
     console.print(f"{n_pass} of {len(result.theorems)} theorem rows pass; {len(result.errata)} errata measured; "
                   f"{len(result.figures)} figures; {result.runtime_s:.1f} s.")
     for f in result.failures:
-        console.print(f"[bold red]stage failed[/bold red] {escape(f)}")
-    console.print(f"Report: {escape(str(result.report))} (self-contained HTML) and {escape(str(result.markdown))}")
+        console.print(f"[bold red]stage failed[/bold red] {escape(_safe(f))}")
+    console.print(f"Report: {escape(_safe(result.report))} (self-contained HTML) and "
+                  f"{escape(_safe(result.markdown))}")
 
 
 def reproduce(out_dir: Path, quick: bool) -> Path:
@@ -245,21 +323,38 @@ def reproduce_command(
                              help="Output folder for the figures (PNG, PDF) and the report (report.md, report.html)."),
     quick: bool = typer.Option(False, "--quick",
                                help="Short run, under a minute: fewer step sizes and shorter runs (full: a few minutes)."),
+    overwrite: bool = typer.Option(False, "--overwrite",
+                                   help="Replace the figures and reports in a folder gnipy did not create (in one it "
+                                   "created, marked by its .gnipy-owned file, a rerun replaces them)."),
 ) -> None:
     """Reproduce the paper: figures 1–3 (§7.4), the theorem table (orders of Thm 5.1 and the
     remarks, adjointness of Thm 5.2, exact constraints, energy conservation on SO(3), the explicit
     schemes equal to the GNI) and the errata, each measured by running gnipy; writes report.md and
-    a self-contained report.html into --out. Exits with code 1 if a theorem row fails or a stage
-    fails."""
+    a self-contained report.html into --out (a folder gnipy creates is marked .gnipy-owned and
+    rerunning into it replaces the files; in another folder existing files need --overwrite).
+    Exits with code 1 if a theorem row fails, a stage fails, or a file cannot be written; 2 if --out
+    may not be written."""
+    from ..files import OutputError
+
     out = Path(out)
-    if "\x00" in str(out) or out.exists() and not out.is_dir():
-        typer.echo(f"Error: --out: {str(out)!r} is not a directory", err=True)
-        raise typer.Exit(2)
     try:
-        out.mkdir(parents=True, exist_ok=True)
-    except OSError as e:
-        typer.echo(f"Error: --out: cannot create the folder {str(out)!r}: {e.strerror or e}", err=True)
-        raise typer.Exit(2) from None
-    result = run_reproduction(out, quick)
+        check_output_dir(out, overwrite)
+    except OutputError as e:
+        _error(e, 2)
+    try:
+        result = run_reproduction(out, quick, overwrite=overwrite)
+    except OutputError as e:  # the folder, or the report, could not be written (a full disk)
+        _error(e, 1)
     if not result.ok:
         raise typer.Exit(1)
+
+
+def _error(message, code: int) -> None:
+    """A one-line error about --out on stderr (control characters escaped), and exit `code`."""
+    from ..cli import _safe
+
+    text = " ".join(str(message).split()).replace("overwrite=True (--overwrite)", "--overwrite")
+    if not text.startswith("--out"):
+        text = f"--out: {text}"
+    typer.echo("Error: " + _safe(text), err=True)
+    raise typer.Exit(code)

@@ -79,10 +79,17 @@ def _energy_and_diagnostic(fig, axes, runs, gni, label: str, out_dir: Path, name
 
 
 def _save(fig, out_dir: Path, name: str) -> list[Path]:
-    paths = [out_dir / f"{name}.png", out_dir / f"{name}.pdf"]
-    fig.savefig(paths[0], dpi=110)
-    fig.savefig(paths[1])
-    return paths
+    """`NAME.png` and `NAME.pdf` in `out_dir`, each written atomically (through gnipy.files:
+    :func:`gnipy.experiments.report.save_figure`)."""
+    from .report import save_figure
+
+    try:
+        return save_figure(fig, out_dir, name, dpi=110)
+    except BaseException:  # a failed write (a full disk): the pyplot figure is not left open
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+        raise
 
 
 def _figure_result(**fields):
@@ -239,8 +246,9 @@ STRUGGLES: dict[str, Callable] = {"sleigh": sleigh_figure, "suslov": suslov_figu
 
 def struggle_figures(out_dir: Path, quick: bool, progress: Progress = None) -> list:
     """The three figures of "Where the GNI struggles" (FigureResult objects), written to `out_dir`."""
-    out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    from .report import ensure_output_dir
+
+    out_dir = ensure_output_dir(out_dir)
     out = []
     for i, fn in enumerate(STRUGGLES.values()):
         out.append(fn(out_dir, quick, None))
