@@ -79,7 +79,7 @@ def test_resume_after_an_interruption_gives_the_same_file(ball, streamed, tmp_pa
     first = _run(ball, path, stop_after_chunks=2)
     assert not first.complete and not path.exists()
     parts = sorted(p.name for p in parts_directory(path).iterdir())
-    assert parts == ["part_000000.nc", "part_000001.nc", "spec.json"]
+    assert parts == [".gnipy-owned", "part_000000.nc", "part_000001.nc", "spec.json"]  # the marker: gnipy's
     second = _run(ball, path, resume=True)
     assert second.complete and second.chunks_resumed == 2
     ds = xr.load_dataset(path)
