@@ -86,8 +86,13 @@ def test_step_size_and_length(knife, h, steps, t_final):
 @example(q0=np.zeros((2, 3)), v0=[1.0, 1.0, 1.0], t0=0.0)
 def test_initial_conditions(knife, q0, v0, t0):
     """q0, v0 (wrong lengths, NaN, complex, empty batches) and t0: a run or a named error."""
-    _check(lambda: gnipy.simulate(knife, "gni-trapezoid", q0, v0, h=0.1, steps=4, save_every=4, t0=t0,
-                                  project_v0=True))
+    def call():
+        sol = gnipy.simulate(knife, "gni-trapezoid", q0, v0, h=0.1, steps=4, save_every=4, t0=t0, project_v0=True)
+        assert len(sol.t) == 2 and np.all(np.isfinite(np.asarray(sol.q)))
+        # what was accepted is on the constraints (projected), to round-off
+        assert np.max(np.abs(np.asarray(sol.constraint_residual))) < 1e-12
+
+    _check(call)
 
 
 @FUZZ
