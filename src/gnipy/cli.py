@@ -39,6 +39,8 @@ from typing import Any
 
 import typer
 
+from gnipy.files import format_bytes
+
 __all__ = ["app", "main"]
 
 EXIT_USAGE = 2
@@ -972,12 +974,7 @@ def _node_bytes(system) -> int:
     return 8 * values + 16
 
 
-def _human(n: float) -> str:
-    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
-        if n < 1024 or unit == "PiB":
-            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.3g} {unit}"
-        n /= 1024
-    return f"{n:.3g} EiB"  # pragma: no cover
+
 
 
 def _check_resources(system, n_steps: int, stride: int, streamed: bool, chunk, out: Path, length: str,
@@ -1006,17 +1003,17 @@ def _check_resources(system, n_steps: int, stride: int, streamed: bool, chunk, o
     if memory > bound:
         raise _UsageError(
             option, f"the run would hold {min(nodes, chunk_nodes) if streamed else nodes:,} saved nodes {where}, "
-            f"about {_human(memory)}: more than gnipy's bound of {_human(bound)} (the smaller of "
-            f"{_human(MAX_MEMORY_BYTES)} and half the RAM); "
+            f"about {format_bytes(memory)}: more than gnipy's bound of {format_bytes(bound)} (the smaller of "
+            f"{format_bytes(MAX_MEMORY_BYTES)} and half the RAM); "
             + ("choose a smaller --checkpoint-every" if streamed else
                "stream the run with --checkpoint-every K (memory then holds one chunk) or save fewer nodes "
                "(--save-every K)") + ", or pass --yes to run anyway"
         )
     parts = " (twice that on disk while the run goes on: the checkpoint parts and the file)" if streamed else ""
-    what = f"the file would hold {nodes:,} saved nodes, about {_human(file_bytes)}{parts}"
+    what = f"the file would hold {nodes:,} saved nodes, about {format_bytes(file_bytes)}{parts}"
     if file_bytes > MAX_OUTPUT_BYTES:
         raise _UsageError(
-            f"{length}/--save-every", f"{what}: more than gnipy's bound of {_human(MAX_OUTPUT_BYTES)}; save fewer "
+            f"{length}/--save-every", f"{what}: more than gnipy's bound of {format_bytes(MAX_OUTPUT_BYTES)}; save fewer "
             "nodes (--save-every K), or pass --yes to run anyway"
         )
     directory = out.parent if str(out.parent) else Path(".")
@@ -1026,7 +1023,7 @@ def _check_resources(system, n_steps: int, stride: int, streamed: bool, chunk, o
         return
     if disk > free:
         raise _UsageError(
-            f"{length}/--save-every", f"{what}, but {str(directory)!r} has {_human(free)} free; save fewer nodes "
+            f"{length}/--save-every", f"{what}, but {str(directory)!r} has {format_bytes(free)} free; save fewer nodes "
             "(--save-every K) or free some space, or pass --yes to run anyway"
         )
 

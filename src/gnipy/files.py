@@ -62,6 +62,7 @@ __all__ = [
     "DataChecksum",
     "array_checksum",
     "as_output_error",
+    "format_bytes",
 ]
 
 #: The marker file of a directory gnipy created (holds JSON: what the directory is for).
@@ -70,6 +71,16 @@ MARKER = ".gnipy-owned"
 
 class OutputError(OSError):
     """A file could not be written or read (the message names the path and why)."""
+
+
+def format_bytes(n: float) -> str:
+    """A size for messages: `512 bytes`, `1.5 GiB`, ... (three significant digits)."""
+    n = float(n)
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024:
+            return f"{n:.0f} bytes" if unit == "bytes" else f"{n:.3g} {unit}"
+        n /= 1024
+    return f"{n:.3g} PiB"
 
 
 # ------------------------------------------------------------------------------------------

@@ -84,6 +84,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .files import format_bytes
+
 from .diagnostics import StreamedVerdicts, conserved_quantity, energy_is_invariant, saved_node_diagnostics
 from .files import (
     MARKER,
@@ -182,12 +184,6 @@ def _part_path(parts: Path, c: int) -> Path:
     return parts / f"part_{c:06d}.nc"
 
 
-def _human(n: float) -> str:
-    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
-        if n < 1024 or unit == "PiB":
-            return f"{n:.0f} {unit}" if unit == "bytes" else f"{n:.1f} {unit}"
-        n /= 1024
-    return f"{n:.1f} PiB"  # pragma: no cover
 
 
 # ------------------------------------------------------------------------------------------
@@ -746,8 +742,8 @@ def _check_size(system, b0, steps, save_every, n_chunks, gni_family, path: Path,
     allow = "pass max_bytes=None (gni run --yes) to write it anyway"
     if size > max_bytes:
         raise OutputError(
-            f"path: {path} would hold {nodes:,} saved nodes of {per_node} bytes, about {_human(size)}, more than "
-            f"max_bytes = {_human(max_bytes)}; save fewer nodes (a larger save_every/--save-every, fewer steps), "
+            f"path: {path} would hold {nodes:,} saved nodes of {per_node} bytes, about {format_bytes(size)}, more than "
+            f"max_bytes = {format_bytes(max_bytes)}; save fewer nodes (a larger save_every/--save-every, fewer steps), "
             f"or {allow}"
         )
     parts_size = size - 8 * nodes + n_chunks * _FILE_OVERHEAD  # the parts: no node index, a header each
@@ -766,9 +762,9 @@ def _check_size(system, b0, steps, save_every, n_chunks, gni_family, path: Path,
         return
     if need > free:
         raise OutputError(
-            f"path: the run needs about {_human(need)} of disk space ({nodes:,} saved nodes: the checkpoint parts "
-            f"and {path}, about {_human(size)}, coexist while they are merged), and {directory} has "
-            f"{_human(free)} free; free some space, save fewer nodes, or {allow}"
+            f"path: the run needs about {format_bytes(need)} of disk space ({nodes:,} saved nodes: the checkpoint parts "
+            f"and {path}, about {format_bytes(size)}, coexist while they are merged), and {directory} has "
+            f"{format_bytes(free)} free; free some space, save fewer nodes, or {allow}"
         )
 
 

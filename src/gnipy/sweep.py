@@ -94,6 +94,8 @@ from typing import Any
 
 import numpy as np
 
+from .files import format_bytes
+
 from . import files
 from .system import SystemError
 
@@ -373,13 +375,6 @@ def _saved_steps(steps: int, save_every: int) -> np.ndarray:
     ).astype(np.int64)
 
 
-def _fmt_bytes(n: float) -> str:
-    n = float(n)
-    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
-        if n < 1024 or unit == "PiB":
-            return f"{n:.0f} bytes" if unit == "bytes" else f"{n:.3g} {unit}"
-        n /= 1024
-    return f"{n:.3g} PiB"  # pragma: no cover
 
 
 def _memory_total() -> int | None:
@@ -399,11 +394,11 @@ def _check_size(axes, *, members, chunk, saved, node_bytes, member_bytes, max_by
     chunks = -(-members // chunk)
     store = members * (saved * node_bytes + member_bytes) + chunks * 33
     what = (f"grid: {grid} gives {members:,} member(s) x {saved:,} saved node(s): the store "
-            f"would hold about {_fmt_bytes(store)} ({node_bytes} bytes per member and node, "
+            f"would hold about {format_bytes(store)} ({node_bytes} bytes per member and node, "
             "uncompressed)")
     if max_bytes is not None and store > max_bytes:
         raise SweepError(
-            f"{what}, more than the bound max_bytes = {_fmt_bytes(max_bytes)}; sweep a "
+            f"{what}, more than the bound max_bytes = {format_bytes(max_bytes)}; sweep a "
             "coarser grid or save fewer nodes (a larger save_every), or pass "
             "max_bytes=None to go ahead"
         )
@@ -414,16 +409,16 @@ def _check_size(axes, *, members, chunk, saved, node_bytes, member_bytes, max_by
         if 4 * driver > memory:
             raise SweepError(
                 f"grid: {grid} gives {members:,} members: their indices and grid values "
-                f"alone take about {_fmt_bytes(driver)} of memory, more than a quarter of "
-                f"this machine's {_fmt_bytes(memory)}; sweep a coarser grid"
+                f"alone take about {format_bytes(driver)} of memory, more than a quarter of "
+                f"this machine's {format_bytes(memory)}; sweep a coarser grid"
             )
         per_chunk = chunk * saved * node_bytes
         if 4 * per_chunk > memory:
             raise SweepError(
                 f"chunk_size: a chunk of {chunk:,} member(s) x {saved:,} saved node(s) "
-                f"holds about {_fmt_bytes(per_chunk)} in memory (a worker, and this "
+                f"holds about {format_bytes(per_chunk)} in memory (a worker, and this "
                 "process while writing it, hold whole chunks), more than a quarter of this "
-                f"machine's {_fmt_bytes(memory)}; choose a smaller chunk_size or save "
+                f"machine's {format_bytes(memory)}; choose a smaller chunk_size or save "
                 "fewer nodes (a larger save_every)"
             )
     if disk is not None:
@@ -433,7 +428,7 @@ def _check_size(axes, *, members, chunk, saved, node_bytes, member_bytes, max_by
             free = None
         if free is not None and store > free:
             raise SweepError(
-                f"out: {what.partition(': ')[2]}, and only {_fmt_bytes(free)} are free "
+                f"out: {what.partition(': ')[2]}, and only {format_bytes(free)} are free "
                 f"in {str(disk)!r}; free some space or write the store elsewhere"
             )
     return store
