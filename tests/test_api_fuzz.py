@@ -19,7 +19,7 @@ import gnipy
 from gnipy.io import OutputError, write_netcdf
 
 #: The errors the API may raise for bad input: gnipy's own, each naming its argument.
-ALLOWED = (gnipy.SystemError, gnipy.MethodError, gnipy.SolverFailure)
+ALLOWED = (gnipy.InputError, gnipy.MethodError, gnipy.SolverFailure)
 #: Argument names an error message must start with (`name: ...`, `name[i]: ...`).
 NAMED = re.compile(r"^(?:(?:--[a-z0-9-]+/)?[a-z_0-9]+(?:\[\d+\])?(?:/[a-z_0-9]+)*|member \d+|batch|lagrangian|constraints|affine)"
                    r"(?:\[\d+\])?:")

@@ -416,7 +416,7 @@ def expectation_for_step_count(base, argument: str):
             kwargs["steps"] = None
         try:
             resolve_steps(**kwargs)
-        except gnipy.SystemError:
+        except gnipy.InputError:
             return "fuzzed"
         return "sentinel"
 

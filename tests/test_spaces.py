@@ -145,12 +145,12 @@ def test_right_reconstruction_moves_R_from_the_left_and_nothing_else():
 
 def test_right_reconstruction_is_refused_where_the_system_depends_on_R():
     _, groupoid = _systems()
-    with pytest.raises(gnipy.SystemError, match=r"^reconstruction: 'right' .*\(depends_on_orientation=True\)"):
+    with pytest.raises(gnipy.InputError, match=r"^reconstruction: 'right' .*\(depends_on_orientation=True\)"):
         gnipy.System(groupoid.lagrangian, groupoid.constraints, n=1, group=SO3(), depends_on_orientation=True,
                      reconstruction="right")
-    with pytest.raises(gnipy.SystemError, match=r"^reconstruction: expected 'left' or 'right'"):
+    with pytest.raises(gnipy.InputError, match=r"^reconstruction: expected 'left' or 'right'"):
         gnipy.System(groupoid.lagrangian, groupoid.constraints, n=1, group=SO3(), reconstruction="space")
-    with pytest.raises(gnipy.SystemError, match=r"^reconstruction: only meaningful with a group"):
+    with pytest.raises(gnipy.InputError, match=r"^reconstruction: only meaningful with a group"):
         gnipy.System(lambda q, v: 0.5 * v @ v, lambda q: jnp.ones((1, 2)), n=2, reconstruction="right")
 
 
@@ -167,9 +167,9 @@ def test_gni_on_a_group_keeps_R_orthogonal_and_constraints_exact():
 
 def test_initial_orientation_is_validated():
     reduced, _ = _systems()
-    with pytest.raises(gnipy.SystemError, match=r"R0: not a rotation matrix"):
+    with pytest.raises(gnipy.InputError, match=r"R0: not a rotation matrix"):
         gnipy.simulate(reduced, "gni-trapezoid", [0.0], [0.2, 0.5, 0.3, 0.2], R0=2 * np.eye(3), h=0.1, steps=1)
-    with pytest.raises(gnipy.SystemError, match=r"R0: expected a 3x3"):
+    with pytest.raises(gnipy.InputError, match=r"R0: expected a 3x3"):
         gnipy.simulate(reduced, "gni-trapezoid", [0.0], [0.2, 0.5, 0.3, 0.2], R0=np.eye(2), h=0.1, steps=1)
-    with pytest.raises(gnipy.SystemError, match=r"v0: expected a vector of length 4"):
+    with pytest.raises(gnipy.InputError, match=r"v0: expected a vector of length 4"):
         gnipy.simulate(reduced, "gni-trapezoid", [0.0], [0.2, 0.5, 0.2], h=0.1, steps=1)

@@ -97,7 +97,7 @@ def test_resume_refuses_a_different_run(ball, tmp_path):
 
 
 def test_chunk_must_be_a_multiple_of_the_stride(ball, tmp_path):
-    with pytest.raises(gnipy.SystemError, match=r"not a multiple of the save stride 10"):
+    with pytest.raises(gnipy.InputError, match=r"not a multiple of the save stride 10"):
         simulate_to_file(ball[0], "gni-trapezoid", ball[1], ball[2], path=tmp_path / "x.nc", h=H, steps=100,
                          save_every=10, chunk_steps=25)
 

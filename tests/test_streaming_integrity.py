@@ -380,7 +380,7 @@ def test_the_output_size_is_bounded_up_front(knife, reference, tmp_path, monkeyp
     with pytest.raises(OutputError, match=r"would hold 1,000,000,000,000,001 saved nodes .* more than max_bytes = "
                                           r"64 GiB.*max_bytes=None \(gni run --yes\)"):
         _run(knife, path, steps=10**15, save_every=1, chunk_steps=10**6, stop_after_chunks=0)  # (no endless run)
-    with pytest.raises(gnipy.SystemError, match=r"steps: .* more than any run can take"):
+    with pytest.raises(gnipy.InputError, match=r"steps: .* more than any run can take"):
         _run(knife, path, steps=10**20)
     with pytest.raises(OutputError, match=r"about \d+\.\d KiB, more than max_bytes = 1000 bytes"):
         _run(knife, path, max_bytes=1000, stop_after_chunks=0)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import gnipy
-from gnipy import System, SystemError
+from gnipy import System, InputError
 
 
 def _particle(**kw):
@@ -42,44 +42,44 @@ def test_derived_quantities_match_hand_computation():
 
 def test_lagrangian_not_quadratic_in_v():
     bad = System(lambda q, v: 0.25 * jnp.sum(v**4) + 0.5 * v @ v, lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3)
-    with pytest.raises(SystemError, match=r"lagrangian: not of mechanical type"):
+    with pytest.raises(InputError, match=r"lagrangian: not of mechanical type"):
         bad.check(jnp.zeros(3), jnp.array([1.0, 1.0, 0.0]))
 
 
 def test_lagrangian_with_linear_term():
     bad = System(lambda q, v: 0.5 * v @ v + q[0] * v[1], lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3)
-    with pytest.raises(SystemError, match=r"linear term"):
+    with pytest.raises(InputError, match=r"linear term"):
         bad.check(jnp.array([1.0, 0.0, 0.0]), jnp.array([1.0, 1.0, 0.0]))
 
 
 def test_indefinite_and_singular_metric():
     indefinite = System(lambda q, v: 0.5 * (v[0] ** 2 - v[1] ** 2 + v[2] ** 2), lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3)
-    with pytest.raises(SystemError, match=r"not positive definite"):
+    with pytest.raises(InputError, match=r"not positive definite"):
         indefinite.check(jnp.zeros(3), jnp.zeros(3))
     singular = System(lambda q, v: 0.5 * (v[0] ** 2 + v[2] ** 2), lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3)
-    with pytest.raises(SystemError, match=r"not positive definite"):
+    with pytest.raises(InputError, match=r"not positive definite"):
         singular.check(jnp.zeros(3), jnp.zeros(3))
 
 
 def test_rank_deficient_constraints():
     bad = System(lambda q, v: 0.5 * v @ v, lambda q: jnp.array([[1.0, q[1], 0.0], [2.0, 2 * q[1], 0.0]]), n=3)
-    with pytest.raises(SystemError, match=r"constraints: mu\(q0\) is rank deficient"):
+    with pytest.raises(InputError, match=r"constraints: mu\(q0\) is rank deficient"):
         bad.check(jnp.ones(3), jnp.zeros(3))
 
 
 def test_too_many_constraints_and_wrong_shape():
     full = System(lambda q, v: 0.5 * v @ v, lambda q: jnp.eye(2), n=2)
-    with pytest.raises(SystemError, match=r"constraints:"):
+    with pytest.raises(InputError, match=r"constraints:"):
         full.check(jnp.zeros(2), jnp.zeros(2))
     wrong = System(lambda q, v: 0.5 * v @ v, lambda q: jnp.ones((1, 2)), n=3)
-    with pytest.raises(SystemError, match=r"shape"):
+    with pytest.raises(InputError, match=r"shape"):
         wrong.check(jnp.zeros(3), jnp.zeros(3))
 
 
 def test_no_constraints_is_a_clear_error():
     """mu(q) of shape (0, N) gave an IndexError (issue 12, defect 13)."""
     none = System(lambda q, v: 0.5 * v @ v, lambda q: jnp.zeros((0, 3)), n=3)
-    with pytest.raises(SystemError, match=r"constraints: mu\(q0\) has no rows \(shape \(0, 3\)\)"):
+    with pytest.raises(InputError, match=r"constraints: mu\(q0\) has no rows \(shape \(0, 3\)\)"):
         gnipy.simulate(none, "gni-midpoint", np.zeros(3), np.ones(3), h=0.1, steps=3)
 
 
@@ -90,7 +90,7 @@ def test_float32_mode_is_named_not_blamed_on_the_lagrangian():
 
     jax.config.update("jax_enable_x64", False)
     try:
-        with pytest.raises(SystemError, match=r"jax_enable_x64: gnipy computes in float64"):
+        with pytest.raises(InputError, match=r"jax_enable_x64: gnipy computes in float64"):
             gnipy.simulate(_particle(), "gni-trapezoid", [0.0, 1.0, 0.0], [1.0, 0.0, 1.0], h=0.1, steps=2)
     finally:
         jax.config.update("jax_enable_x64", True)
@@ -100,7 +100,7 @@ def test_float32_mode_is_named_not_blamed_on_the_lagrangian():
 
 def test_initial_velocity_off_constraints_reports_residual():
     s = _particle()
-    with pytest.raises(SystemError, match=r"v0: .*residual 5\.000e-01"):
+    with pytest.raises(InputError, match=r"v0: .*residual 5\.000e-01"):
         s.check(jnp.array([0.0, 1.0, 0.0]), jnp.array([1.0, 0.0, 0.5]))
 
 
@@ -156,23 +156,23 @@ def test_project_v0_is_the_metric_orthogonal_projection():
 def test_simulate_rejects_bad_arguments(kwargs, pattern):
     args = dict(q0=[0.0, 1.0, 0.0], v0=[1.0, 0.0, 1.0], h=0.01, steps=10)
     args.update(kwargs)
-    with pytest.raises(SystemError, match=pattern):
+    with pytest.raises(InputError, match=pattern):
         gnipy.simulate(_particle(), "gni-trapezoid", **args)
 
 
 def test_unknown_method_and_model():
     with pytest.raises(gnipy.MethodError, match=r"method: unknown method 'nope'"):
         gnipy.simulate(_particle(), "nope", [0.0, 1.0, 0.0], [1.0, 0.0, 1.0], h=0.1, steps=1)
-    with pytest.raises(SystemError, match=r"model: unknown model 'nope'"):
+    with pytest.raises(InputError, match=r"model: unknown model 'nope'"):
         gnipy.make_system("nope")
-    with pytest.raises(SystemError, match=r"unknown parameter 'kk'"):
+    with pytest.raises(InputError, match=r"unknown parameter 'kk'"):
         gnipy.make_system("nonholonomic-particle", kk=1.0)
 
 
 def test_constructor_errors():
-    with pytest.raises(SystemError, match=r"lagrangian: expected a callable"):
+    with pytest.raises(InputError, match=r"lagrangian: expected a callable"):
         System(1.0, lambda q: q, n=2)
-    with pytest.raises(SystemError, match=r"n: give the dimension"):
+    with pytest.raises(InputError, match=r"n: give the dimension"):
         System(lambda q, v: 0.0, lambda q: q)
-    with pytest.raises(SystemError, match=r"coordinates: expected 3 names"):
+    with pytest.raises(InputError, match=r"coordinates: expected 3 names"):
         System(lambda q, v: 0.0, lambda q: q, n=3, coordinates=("x", "y"))

@@ -25,7 +25,6 @@ from .integrators import (  # noqa: E402
     EulerABComposition,
     Integrator,
     McLachlanPerlmutter,
-    MethodError,
     NonholonomicEulerA,
     NonholonomicEulerB,
     Rattle,
@@ -42,17 +41,18 @@ from .ensembles import model_systems, stack_systems  # noqa: E402
 from .simulate import simulate  # noqa: E402
 from .streaming import simulate_to_file  # noqa: E402
 from .sweep import open_sweep, run_sweep  # noqa: E402
-from .io import OutputError, read_netcdf, verify_netcdf, write_netcdf  # noqa: E402
-from .solution import Solution, SolverFailure  # noqa: E402
+from .io import read_netcdf, verify_netcdf, write_netcdf  # noqa: E402
+from .solution import Solution  # noqa: E402
+from .errors import InputError, MethodError, OutputError, SolverFailure  # noqa: E402
 from .spaces import EuclideanSpace, GroupSpace, Point  # noqa: E402
-from .system import System, SystemError  # noqa: E402
+from .system import System  # noqa: E402
 
 __all__ = [
     "EnergyVerdict",
     "HiddenMomentumVerdict",
     "__version__",
     "System",
-    "SystemError",
+    "InputError",
     "DiscreteLagrangian",
     "EulerA",
     "EulerB",

@@ -548,11 +548,11 @@ def _prepare_model(model: str, set_items, x0_text, v0_text):
 
     try:
         spec = gnipy.get_model(model)
-    except gnipy.SystemError as e:
+    except gnipy.InputError as e:
         raise _UsageError("MODEL", str(e).partition(":")[2].strip()) from None
     try:
         params = spec.resolve_params(_parse_set(set_items))
-    except gnipy.SystemError as e:
+    except gnipy.InputError as e:
         raise _UsageError("--set", str(e).partition(":")[2].strip()) from None
     names = spec.coordinates
     x0 = _parse_vector("--x0", x0_text, len(names), names)
@@ -568,7 +568,7 @@ def _prepare(model: str, method: str, h, steps, t_final, set_items, x0_text, v0_
 
     try:
         gnipy.get_model(model)
-    except gnipy.SystemError as e:
+    except gnipy.InputError as e:
         raise _UsageError("MODEL", str(e).partition(":")[2].strip()) from None
     if method not in gnipy.method_names():
         raise _UsageError("--method", f"unknown method {method!r} (known: {', '.join(gnipy.method_names())})")
@@ -696,7 +696,7 @@ def _guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--
         return fn()
     except _UsageError as e:
         usage(str(e))
-    except gnipy.SystemError as e:
+    except gnipy.InputError as e:
         usage(_rename(str(e)))
     except gnipy.MethodError as e:
         msg = _rename(str(e))

@@ -23,7 +23,8 @@ import numpy as np
 
 from .compilation import jit
 from .spaces import Point
-from .system import System, SystemError, real_array
+from .errors import InputError
+from .system import System, real_array
 
 __all__ = ["stack_systems", "model_systems", "broadcast_initial_conditions", "check_batch", "member_initial_conditions",
            "member_params"]
@@ -37,15 +38,15 @@ def stack_systems(systems: Sequence[System]) -> System:
         length `len(systems)`; run it with `eqx.filter_vmap(..., in_axes=eqx.if_array(0))`.
 
     Raises:
-        SystemError: an empty sequence, a member that is not a System, or members with different
+        InputError: an empty sequence, a member that is not a System, or members with different
             structure (other functions, groups, names or array shapes).
     """
     systems = list(systems)
     if not systems:
-        raise SystemError("system: an empty sequence of systems")
+        raise InputError("system: an empty sequence of systems")
     for i, s in enumerate(systems):
         if not isinstance(s, System):
-            raise SystemError(f"system[{i}]: expected a gnipy.System, got {type(s).__name__}")
+            raise InputError(f"system[{i}]: expected a gnipy.System, got {type(s).__name__}")
     cores = [s.without_metadata() for s in systems]
     arrays0, static0 = eqx.partition(cores[0], eqx.is_array)
     tdef0 = jax.tree_util.tree_structure(arrays0)
@@ -69,7 +70,7 @@ def stack_systems(systems: Sequence[System]) -> System:
                     why = f"it has another {_describe_static(a, b)}"
                     break
         if why is not None:
-            raise SystemError(
+            raise InputError(
                 f"system[{i}]: a batch of systems must differ only in the values of array parameters "
                 f"(the same model, functions and dimensions as system[0]), but {why}. Build the members "
                 "from one function with the parameters as JAX arrays (jax.tree_util.Partial(l, m), as the "
@@ -112,7 +113,7 @@ def model_systems(name: str, **params) -> list[System]:
         A list of Systems, one per member, for :func:`gnipy.simulate`.
 
     Raises:
-        SystemError: an unknown model or parameter, non-finite values, arrays of different lengths.
+        InputError: an unknown model or parameter, non-finite values, arrays of different lengths.
     """
     from .models import get_model
 
@@ -122,13 +123,13 @@ def model_systems(name: str, **params) -> list[System]:
         try:
             a = np.asarray(v, dtype=np.float64)
         except (TypeError, ValueError) as e:
-            raise SystemError(f"params: parameter {k!r} must be numbers, got {v!r}") from e
+            raise InputError(f"params: parameter {k!r} must be numbers, got {v!r}") from e
         if a.ndim > 1:
-            raise SystemError(f"params: parameter {k!r} must be a scalar or a 1-D array, got shape {a.shape}")
+            raise InputError(f"params: parameter {k!r} must be a scalar or a 1-D array, got shape {a.shape}")
         arrays[k] = np.atleast_1d(a)
     sizes = {len(a) for a in arrays.values() if len(a) != 1}
     if len(sizes) > 1:
-        raise SystemError(f"params: parameter arrays have different lengths {sorted(sizes)}")
+        raise InputError(f"params: parameter arrays have different lengths {sorted(sizes)}")
     size = sizes.pop() if sizes else 1
     out = []
     for i in range(size):
@@ -142,7 +143,7 @@ def _batch_size_of(name: str, a: np.ndarray, single_ndim: int) -> int | None:
         return None
     if a.ndim == single_ndim + 1:
         return a.shape[0]
-    raise SystemError(f"{name}: expected {single_ndim} or {single_ndim + 1} dimensions, got shape {a.shape}")
+    raise InputError(f"{name}: expected {single_ndim} or {single_ndim + 1} dimensions, got shape {a.shape}")
 
 
 def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
@@ -157,7 +158,7 @@ def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
         `(B, q0, v0, R0)` with leading axis B on all three (R0 None on R^n).
 
     Raises:
-        SystemError: naming the argument (and the member) that is wrong.
+        InputError: naming the argument (and the member) that is wrong.
     """
     n, N = system.n, system.dim
 
@@ -179,28 +180,28 @@ def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
             sizes["R0"] = R.shape[0]
             R = R.reshape(-1, k, k)
         else:
-            raise SystemError(f"R0: expected a {k}x{k} matrix or a batch of them, got shape {R.shape}")
+            raise InputError(f"R0: expected a {k}x{k} matrix or a batch of them, got shape {R.shape}")
     elif R0 is not None:
-        raise SystemError("R0: this system has no group part")
+        raise InputError("R0: this system has no group part")
     else:
         R = None
     given = {k: s for k, s in sizes.items() if s is not None}
     if len(set(given.values())) > 1:
         desc = ", ".join(f"{k}: {s}" for k, s in given.items())
-        raise SystemError(f"batch: the batch sizes differ ({desc})")
+        raise InputError(f"batch: the batch sizes differ ({desc})")
     B = next(iter(given.values())) if given else 1
     if B < 1:
-        raise SystemError("batch: the batch is empty")
+        raise InputError("batch: the batch is empty")
     q0 = np.broadcast_to(q0, (B, *q0.shape[-1:])) if q0.ndim == 1 else q0
     v0 = np.broadcast_to(v0, (B, *v0.shape[-1:])) if v0.ndim == 1 else v0
     if q0.shape[1] != n:
-        raise SystemError(f"q0: expected vectors of length {n}, got shape {q0.shape}")
+        raise InputError(f"q0: expected vectors of length {n}, got shape {q0.shape}")
     if v0.shape[1] != N:
-        raise SystemError(f"v0: expected vectors of length {N}, got shape {v0.shape}")
+        raise InputError(f"v0: expected vectors of length {N}, got shape {v0.shape}")
     for name, a in (("q0", q0), ("v0", v0)):
         bad = ~np.all(np.isfinite(a), axis=1)
         if bad.any():
-            raise SystemError(f"{name}[{int(np.argmax(bad))}]: contains NaN or infinite values")
+            raise InputError(f"{name}[{int(np.argmax(bad))}]: contains NaN or infinite values")
     if system.group is not None:
         k = system.group.matrix_size
         if R is None:
@@ -209,7 +210,7 @@ def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
             R = np.broadcast_to(R, (B, k, k))
         bad = ~np.all(np.isfinite(R), axis=(1, 2))
         if bad.any():
-            raise SystemError(f"R0[{int(np.argmax(bad))}]: contains NaN or infinite values")
+            raise InputError(f"R0[{int(np.argmax(bad))}]: contains NaN or infinite values")
         from .lie_groups import SO3
 
         if isinstance(system.group, SO3):
@@ -218,7 +219,7 @@ def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
             bad = (err > 1e-10) | (det <= 0)
             if bad.any():
                 i = int(np.argmax(bad))
-                raise SystemError(f"R0[{i}]: not a rotation matrix (|RᵀR − I| = {err[i]:.3e}, det = {det[i]:.3g})")
+                raise InputError(f"R0[{i}]: not a rotation matrix (|RᵀR − I| = {err[i]:.3e}, det = {det[i]:.3g})")
     return B, q0, v0, R
 
 
@@ -257,7 +258,7 @@ def check_batch(system: System, batched: bool, q0, v0, R0, *, project_v0: bool =
         `(b0, v0)` batched (b0 a :class:`~gnipy.spaces.Point` of batched arrays on R^n × G).
 
     Raises:
-        SystemError: naming the first failing member, e.g. `v0[17]: ... violates the constraints`.
+        InputError: naming the first failing member, e.g. `v0[17]: ... violates the constraints`.
     """
     b0 = jnp.asarray(q0) if system.group is None else Point(jnp.asarray(q0), jnp.asarray(R0))
     d = {k: np.asarray(x) for k, x in _batch_diagnostics(system, batched, b0, jnp.asarray(v0)).items()}
@@ -268,26 +269,26 @@ def check_batch(system: System, batched: bool, q0, v0, R0, *, project_v0: bool =
 
     bad = ~d["finite"]
     if bad.any():
-        raise SystemError(f"{which} {first(bad)}: the metric, mu(q0) or Y(q0) is not finite at q0[{first(bad)}]")
+        raise InputError(f"{which} {first(bad)}: the metric, mu(q0) or Y(q0) is not finite at q0[{first(bad)}]")
     bad = d["asym"] > tol * np.maximum(1.0, d["gmax"])
     if bad.any():
-        raise SystemError(f"lagrangian: the metric d²l/dv² is not symmetric at q0[{first(bad)}]")
+        raise InputError(f"lagrangian: the metric d²l/dv² is not symmetric at q0[{first(bad)}]")
     bad = d["eig_min"] <= tol * np.maximum(1.0, d["eig_max"])
     if bad.any():
         i = first(bad)
-        raise SystemError(
+        raise InputError(
             f"lagrangian: the metric d²l/dv² is not positive definite at q0[{i}] "
             f"(smallest eigenvalue {d['eig_min'][i]:.3e})"
         )
     bad = d["sv_min"] <= 1e-10 * np.maximum(1.0, d["sv_max"])
     if bad.any():
         i = first(bad)
-        raise SystemError(f"constraints: mu(q0[{i}]) is rank deficient (smallest singular value {d['sv_min'][i]:.3e})")
+        raise InputError(f"constraints: mu(q0[{i}]) is rank deficient (smallest singular value {d['sv_min'][i]:.3e})")
     bad = d["res"] > tol * d["scale"]
     if bad.any():
         if not project_v0:
             i = first(bad)
-            raise SystemError(
+            raise InputError(
                 f"v0[{i}]: the initial velocity violates the constraints mu(q0)(v0 - Y(q0)) = 0 "
                 f"(residual {d['res'][i]:.3e}); pass project_v0=True to project it"
             )

@@ -46,6 +46,8 @@ import uuid
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
 
+from .errors import OutputError
+
 __all__ = [
     "OutputError",
     "MARKER",
@@ -67,10 +69,6 @@ __all__ = [
 
 #: The marker file of a directory gnipy created (holds JSON: what the directory is for).
 MARKER = ".gnipy-owned"
-
-
-class OutputError(OSError):
-    """A file could not be written or read (the message names the path and why)."""
 
 
 def format_bytes(n: float) -> str:

@@ -11,7 +11,8 @@ import numpy as np
 from .compilation import jit
 from .integrators.base import Integrator, MethodError
 from .solution import RESULT_SOLVER_FAILED, Solution, SolverFailure
-from .system import System, SystemError, describe_orientations
+from .errors import InputError
+from .system import System, describe_orientations
 
 __all__ = ["simulate", "resolve_steps", "MAX_STEPS", "MAX_TOTAL_STEPS", "MIN_STEP_SIZE"]
 
@@ -32,48 +33,48 @@ def resolve_steps(h, steps=None, t_final=None) -> tuple[float, int]:
     to within 1e-9 relative.
     """
     if isinstance(h, (complex, np.complexfloating)):
-        raise SystemError(f"h: expected a positive real number, got {h!r}")
+        raise InputError(f"h: expected a positive real number, got {h!r}")
     try:
         h = float(h)
     except (TypeError, ValueError, OverflowError) as e:
-        raise SystemError(f"h: expected a positive number, got {h!r}") from e
+        raise InputError(f"h: expected a positive number, got {h!r}") from e
     if not math.isfinite(h) or h <= 0:
-        raise SystemError(f"h: the step size must be a positive finite number, got {h!r}")
+        raise InputError(f"h: the step size must be a positive finite number, got {h!r}")
     if h < MIN_STEP_SIZE:
-        raise SystemError(
+        raise InputError(
             f"h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision (subnormal numbers; "
             "the time t0 + k h and the momenta divided by h would be meaningless)"
         )
     if (steps is None) == (t_final is None):
-        raise SystemError("steps/t_final: give exactly one of steps and t_final")
+        raise InputError("steps/t_final: give exactly one of steps and t_final")
     if t_final is not None:
         if isinstance(t_final, (complex, np.complexfloating)):
-            raise SystemError(f"t_final: expected a positive real number, got {t_final!r}")
+            raise InputError(f"t_final: expected a positive real number, got {t_final!r}")
         try:
             t_final = float(t_final)
         except (TypeError, ValueError, OverflowError) as e:
-            raise SystemError(f"t_final: expected a positive number, got {t_final!r}") from e
+            raise InputError(f"t_final: expected a positive number, got {t_final!r}") from e
         if not math.isfinite(t_final) or t_final <= 0:
-            raise SystemError(f"t_final: must be a positive finite number, got {t_final!r}")
+            raise InputError(f"t_final: must be a positive finite number, got {t_final!r}")
         ratio = t_final / h
         if not math.isfinite(ratio) or ratio > MAX_TOTAL_STEPS:
-            raise SystemError(
+            raise InputError(
                 f"t_final: {t_final!r} / h = {ratio:.3g} steps, more than any run can take "
                 f"(at most {MAX_TOTAL_STEPS:.3g}); choose a larger h or a shorter t_final"
             )
         steps = round(ratio)
         if steps < 1 or abs(steps * h - t_final) > 1e-9 * t_final:
-            raise SystemError(f"t_final: {t_final!r} is not a whole number of steps of h = {h!r}")
+            raise InputError(f"t_final: {t_final!r} is not a whole number of steps of h = {h!r}")
     if isinstance(steps, bool) or isinstance(steps, (complex, np.complexfloating)):
-        raise SystemError(f"steps: must be a positive integer, got {steps!r}")
+        raise InputError(f"steps: must be a positive integer, got {steps!r}")
     try:
         whole = int(steps) == steps
     except (TypeError, ValueError, OverflowError):
-        raise SystemError(f"steps: must be a positive integer, got {steps!r}") from None
+        raise InputError(f"steps: must be a positive integer, got {steps!r}") from None
     if not whole or steps < 1:
-        raise SystemError(f"steps: must be a positive integer, got {steps!r}")
+        raise InputError(f"steps: must be a positive integer, got {steps!r}")
     if steps > MAX_TOTAL_STEPS:
-        raise SystemError(
+        raise InputError(
             f"steps: {int(steps)} steps is more than any run can take (at most {MAX_TOTAL_STEPS:.3g}: the "
             "step index must stay exact in float64)"
         )
@@ -91,7 +92,7 @@ def default_initial_condition(system: System, q0, v0, R0):
         q0 = ()
     if q0 is None or v0 is None:
         if system.defaults is None:
-            raise SystemError(f"q0/v0: the system {system.name!r} has no default initial condition; give q0 and v0")
+            raise InputError(f"q0/v0: the system {system.name!r} has no default initial condition; give q0 and v0")
         q0 = system.defaults[0] if q0 is None else q0
         v0 = system.defaults[1] if v0 is None else v0
         if R0 is None and len(system.defaults) > 2:
@@ -228,7 +229,7 @@ def simulate(
     and parameter scans compile once.
 
     Raises:
-        SystemError: bad arguments or initial conditions (the message names the argument and,
+        InputError: bad arguments or initial conditions (the message names the argument and,
             in a batch, the member).
         MethodError: a method that cannot integrate this system.
         SolverFailure: a step did not converge (step index, time, residual in the message; in
@@ -243,13 +244,13 @@ def simulate(
     if isinstance(system, (list, tuple)):
         systems = list(system)
         if not systems:
-            raise SystemError("system: an empty sequence of systems")
+            raise InputError("system: an empty sequence of systems")
         if not all(isinstance(s, System) for s in systems):
             bad = next(i for i, s in enumerate(systems) if not isinstance(s, System))
-            raise SystemError(f"system[{bad}]: expected a gnipy.System, got {type(systems[bad]).__name__}")
+            raise InputError(f"system[{bad}]: expected a gnipy.System, got {type(systems[bad]).__name__}")
         system = systems[0]
     if not isinstance(system, System):
-        raise SystemError(f"system: expected a gnipy.System or a sequence of them, got {type(system).__name__}")
+        raise InputError(f"system: expected a gnipy.System or a sequence of them, got {type(system).__name__}")
     if method is None:
         from .models.registry import default_method_for
 
@@ -260,19 +261,19 @@ def simulate(
         raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
     h, steps = resolve_steps(h, steps, t_final)
     if steps > MAX_STEPS:
-        raise SystemError(
+        raise InputError(
             f"steps: at most {MAX_STEPS} steps per call (the step counters are int32), got {steps}; "
             "stream longer runs with gnipy.simulate_to_file"
         )
     if isinstance(save_every, bool) or int(save_every) != save_every or save_every < 1:
-        raise SystemError(f"save_every: must be a positive integer, got {save_every!r}")
+        raise InputError(f"save_every: must be a positive integer, got {save_every!r}")
     save_every = int(min(save_every, steps))
     try:
         t0 = float(t0)
     except (TypeError, ValueError) as e:
-        raise SystemError(f"t0: expected a number, got {t0!r}") from e
+        raise InputError(f"t0: expected a number, got {t0!r}") from e
     if not math.isfinite(t0):
-        raise SystemError(f"t0: must be finite, got {t0!r}")
+        raise InputError(f"t0: must be finite, got {t0!r}")
     q0, v0, R0 = default_initial_condition(systems if systems and len(systems) > 1 else system, q0, v0, R0)
 
     n_blocks, remainder = divmod(steps, save_every)

@@ -9,25 +9,13 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from .errors import SolverFailure
+
 __all__ = ["Solution", "SolverFailure", "RESULT_SUCCESS", "RESULT_SOLVER_FAILED", "set_variable_attrs"]
 
 RESULT_SUCCESS = 0
 RESULT_SOLVER_FAILED = 1
 
-
-class SolverFailure(RuntimeError):
-    """An implicit step did not converge or produced a non-finite value.
-
-    Attributes: `step` (index of the failed step), `time`, `residual`, and `solution` (the
-    solution up to the last good saved node).
-    """
-
-    def __init__(self, message: str, *, step: int, time: float, residual: float, solution=None):
-        super().__init__(message)
-        self.step = step
-        self.time = time
-        self.residual = residual
-        self.solution = solution
 
 
 def set_variable_attrs(ds) -> None:

@@ -104,7 +104,8 @@ from .integrators.base import Integrator, MethodError
 from .models.registry import registered_invariants
 from .simulate import MAX_STEPS, _init_one, _integrate, default_initial_condition, resolve_steps
 from .solution import RESULT_SOLVER_FAILED, SolverFailure
-from .system import System, SystemError
+from .errors import InputError
+from .system import System
 
 __all__ = ["simulate_to_file", "StreamResult", "parts_directory", "DEFAULT_CHUNK_NODES", "DEFAULT_MAX_BYTES",
            "SPEC_ATTR"]
@@ -512,7 +513,7 @@ def simulate_to_file(
         A :class:`StreamResult`.
 
     Raises:
-        SystemError, MethodError: bad arguments (named).
+        InputError, MethodError: bad arguments (named).
         OutputError: the destination or its parts directory cannot be written (or is not
             gnipy's to write), the estimated output is too large, a resumed run's spec differs or
             its `spec.json` cannot be read, or a finished destination is damaged.
@@ -525,7 +526,7 @@ def simulate_to_file(
 
     release_compiled_programs_if_needed()
     if not isinstance(system, System):
-        raise SystemError(f"system: expected a gnipy.System, got {type(system).__name__}")
+        raise InputError(f"system: expected a gnipy.System, got {type(system).__name__}")
     if method is None:  # as simulate: the model's measured default
         from .models.registry import default_method_for
 
@@ -538,26 +539,26 @@ def simulate_to_file(
         raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
     h, steps = resolve_steps(h, steps, t_final)  # steps <= MAX_TOTAL_STEPS
     if isinstance(save_every, bool) or int(save_every) != save_every or save_every < 1:
-        raise SystemError(f"save_every: must be a positive integer, got {save_every!r}")
+        raise InputError(f"save_every: must be a positive integer, got {save_every!r}")
     save_every = int(min(save_every, steps))
     if chunk_steps is None:
         chunk_steps = save_every * DEFAULT_CHUNK_NODES
     if isinstance(chunk_steps, bool) or int(chunk_steps) != chunk_steps or chunk_steps < 1:
-        raise SystemError(f"chunk_steps/--checkpoint-every: must be a positive integer, got {chunk_steps!r}")
+        raise InputError(f"chunk_steps/--checkpoint-every: must be a positive integer, got {chunk_steps!r}")
     chunk_steps = int(chunk_steps)
     if chunk_steps > MAX_STEPS:
-        raise SystemError(f"chunk_steps/--checkpoint-every: at most {MAX_STEPS} steps per chunk, got {chunk_steps}")
+        raise InputError(f"chunk_steps/--checkpoint-every: at most {MAX_STEPS} steps per chunk, got {chunk_steps}")
     if chunk_steps % save_every:
-        raise SystemError(
+        raise InputError(
             f"chunk_steps/--checkpoint-every: {chunk_steps} is not a multiple of the save stride {save_every}"
         )
     chunk_steps = min(chunk_steps, steps + (-steps) % save_every)
     if max_bytes is not None and (isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, float, np.integer))
                                   or not max_bytes >= 0):
-        raise SystemError(f"max_bytes: expected a number of bytes >= 0 or None, got {max_bytes!r}")
+        raise InputError(f"max_bytes: expected a number of bytes >= 0 or None, got {max_bytes!r}")
     t0 = float(t0)
     if not math.isfinite(t0):
-        raise SystemError(f"t0: must be finite, got {t0!r}")
+        raise InputError(f"t0: must be finite, got {t0!r}")
     q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
     b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
     method.check(system, b0)

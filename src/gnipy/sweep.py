@@ -97,7 +97,7 @@ import numpy as np
 from .files import format_bytes
 
 from . import files
-from .system import SystemError
+from .errors import InputError
 
 __all__ = [
     "GridAxis",
@@ -139,11 +139,11 @@ _MAX_ZARR_CHUNK_BYTES = 64 * 2**20
 _MAX_PREFLIGHT = 64
 
 
-class SweepError(SystemError):
+class SweepError(InputError):
     """Bad sweep input, or a store that does not hold the requested sweep.
 
     The message starts with the argument it is about (`grid: ...`, `out: ...`,
-    `chunk_size: ...`). A subclass of :class:`gnipy.SystemError`.
+    `chunk_size: ...`). A subclass of :class:`gnipy.InputError`.
     """
 
 
@@ -450,7 +450,7 @@ def _plan(
     disk=None,
 ) -> _Plan:
     """Validate a sweep's input and work out its specification (or raise SweepError,
-    SystemError or MethodError). The sizes are checked (:func:`_check_size`, with
+    InputError or MethodError). The sizes are checked (:func:`_check_size`, with
     `max_bytes` and `disk`) before anything of the sweep's size is allocated."""
     from . import __version__
     from .methods import method_names
@@ -463,7 +463,7 @@ def _plan(
 
     if not isinstance(model, str):
         raise SweepError(f"model: expected a model name, got {model!r}")
-    spec = get_model(model)  # SystemError "model: unknown model ..."
+    spec = get_model(model)  # InputError "model: unknown model ..."
     if not isinstance(method, str) or method not in method_names():
         raise SweepError(
             f"method: unknown method {method!r} (known: {', '.join(method_names())})"
@@ -483,7 +483,7 @@ def _plan(
     set_params = dict(set_params or {})
     try:
         params = spec.resolve_params(set_params)
-    except SystemError as e:
+    except InputError as e:
         raise SweepError(f"set_params: {str(e).partition(':')[2].strip()}") from None
     system = spec.build(params)
     coordinates, velocities = tuple(spec.coordinates), tuple(system.velocities)
@@ -584,7 +584,7 @@ def _check_member(system, sweep_spec, columns, i, member, q0, v0, R0):
     project = sweep_spec["project_v0"]
     try:
         b0, _ = system.check(q0[i], None if project else v0[i], R0=R0)
-    except SystemError as e:
+    except InputError as e:
         msg = str(e).replace(
             "pass project_v0=True to project it",
             "sweep with project_v0=True to project it",
@@ -699,7 +699,7 @@ def run_chunk(
             project_v0=job["project_v0"],
             throw=False,
         )
-    except SystemError:
+    except InputError:
         # name the member at fault: check them one by one (only on this error path)
         for i in range(B):
             s = systems[i] if isinstance(systems, list) else systems
@@ -1628,7 +1628,7 @@ def run_sweep(
             `scheduler:`, ...), a sweep over the size bounds, a scheduler that cannot be
             reached, a store whose metadata or arrays are damaged, or a member whose
             parameters or initial condition are not acceptable.
-        gnipy.SystemError: bad `h`, `steps`, `t_final` or model name.
+        gnipy.InputError: bad `h`, `steps`, `t_final` or model name.
         gnipy.MethodError: a method that cannot integrate this model.
         gnipy.files.OutputError: the store cannot be created or written.
         SweepFailure: a chunk failed on the cluster (e.g. a worker died), or the local
@@ -1799,7 +1799,7 @@ def _compute(path, plan, todo, c, bar, task, name) -> tuple[int, int]:
             i = futures[f]
             try:
                 result = f.result()
-            except (SystemError, MethodError):
+            except (InputError, MethodError):
                 raise  # bad input (a member's parameters, the method)
             except Exception as e:  # noqa: BLE001 - a worker died, ...
                 a, b = plan.member_range(i)

@@ -28,11 +28,9 @@ import numpy as np
 from .compilation import jit
 from .spaces import EuclideanSpace, GroupSpace, Point
 
-__all__ = ["System", "SystemError"]
+from .errors import InputError
 
-
-class SystemError(ValueError):
-    """A system or an initial condition is not acceptable (the message says which argument and why)."""
+__all__ = ["System"]
 
 
 def _fmt(x: float) -> str:
@@ -71,7 +69,7 @@ class System(eqx.Module):
         defaults: optional default initial condition `(q0, v0)` or `(q0, v0, R0)`.
 
     Raises:
-        SystemError: on inconsistent dimensions or names.
+        InputError: on inconsistent dimensions or names.
     """
 
     lagrangian: Callable[..., Any]
@@ -105,32 +103,32 @@ class System(eqx.Module):
         orientation_note: str | None = None,
     ):
         if not callable(lagrangian):
-            raise SystemError(f"lagrangian: expected a callable l(q, v), got {type(lagrangian).__name__}")
+            raise InputError(f"lagrangian: expected a callable l(q, v), got {type(lagrangian).__name__}")
         if not callable(constraints):
-            raise SystemError(f"constraints: expected a callable mu(q), got {type(constraints).__name__}")
+            raise InputError(f"constraints: expected a callable mu(q), got {type(constraints).__name__}")
         if affine is not None and not callable(affine):
-            raise SystemError(f"affine: expected a callable Y(q) or None, got {type(affine).__name__}")
+            raise InputError(f"affine: expected a callable Y(q) or None, got {type(affine).__name__}")
         if n is None and coordinates is None:
             if group is None:
-                raise SystemError("n: give the dimension n of the configuration space (or coordinates=...)")
+                raise InputError("n: give the dimension n of the configuration space (or coordinates=...)")
             n = 0
         if n is None:
             n = len(tuple(coordinates))
         if isinstance(n, bool) or int(n) != n or n < (1 if group is None else 0):
-            raise SystemError(f"n: expected a {'positive' if group is None else 'non-negative'} integer, got {n!r}")
+            raise InputError(f"n: expected a {'positive' if group is None else 'non-negative'} integer, got {n!r}")
         n = int(n)
         if coordinates is None:
             coordinates = tuple(f"q{i}" for i in range(n))
         coordinates = tuple(str(c) for c in coordinates)
         if len(coordinates) != n:
-            raise SystemError(f"coordinates: expected {n} names, got {len(coordinates)}")
+            raise InputError(f"coordinates: expected {n} names, got {len(coordinates)}")
         if reconstruction not in ("left", "right"):
-            raise SystemError(f"reconstruction: expected 'left' or 'right', got {reconstruction!r}")
+            raise InputError(f"reconstruction: expected 'left' or 'right', got {reconstruction!r}")
         if group is None:
             if depends_on_orientation:
-                raise SystemError("depends_on_orientation: only meaningful with a group")
+                raise InputError("depends_on_orientation: only meaningful with a group")
             if reconstruction != "left":
-                raise SystemError("reconstruction: only meaningful with a group")
+                raise InputError("reconstruction: only meaningful with a group")
             space = EuclideanSpace(n)
             group_names: tuple[str, ...] = ()
         else:
@@ -138,16 +136,16 @@ class System(eqx.Module):
             from .retractions import Retraction, get_retraction
 
             if not isinstance(group, MatrixLieGroup):
-                raise SystemError(f"group: expected a gnipy.lie_groups group (e.g. SO3()), got {type(group).__name__}")
+                raise InputError(f"group: expected a gnipy.lie_groups group (e.g. SO3()), got {type(group).__name__}")
             if isinstance(retraction, str):
                 try:
                     retraction = get_retraction(retraction)
                 except ValueError as e:
-                    raise SystemError(str(e)) from e
+                    raise InputError(str(e)) from e
             if not isinstance(retraction, Retraction):
-                raise SystemError(f"retraction: expected 'cayley', 'exp' or a Retraction, got {retraction!r}")
+                raise InputError(f"retraction: expected 'cayley', 'exp' or a Retraction, got {retraction!r}")
             if reconstruction == "right" and depends_on_orientation:
-                raise SystemError(
+                raise InputError(
                     "reconstruction: 'right' (R from the space velocity, dR/dt = hat(xi) R) is for reduced "
                     "systems only; a system that depends on the orientation (depends_on_orientation=True) "
                     "needs the left-trivialized equations, reconstruction='left'"
@@ -158,7 +156,7 @@ class System(eqx.Module):
             velocities = tuple(f"d{c}" for c in coordinates) + tuple(group_names)
         velocities = tuple(str(c) for c in velocities)
         if len(velocities) != space.dim:
-            raise SystemError(f"velocities: expected {space.dim} names, got {len(velocities)}")
+            raise InputError(f"velocities: expected {space.dim} names, got {len(velocities)}")
         self.lagrangian = lagrangian
         self.constraints = constraints
         self.affine = affine
@@ -310,7 +308,7 @@ class System(eqx.Module):
         x0 = _as_vector("q0", q0, self.n)
         if self.group is None:
             if R0 is not None:
-                raise SystemError("R0: this system has no group part")
+                raise InputError("R0: this system has no group part")
             return jnp.asarray(x0)
         k = self.group.matrix_size
         if R0 is None:
@@ -320,15 +318,15 @@ class System(eqx.Module):
             if R.size == k * k:
                 R = R.reshape(k, k)
             if R.shape != (k, k):
-                raise SystemError(f"R0: expected a {k}x{k} group matrix, got shape {R.shape}")
+                raise InputError(f"R0: expected a {k}x{k} group matrix, got shape {R.shape}")
             if not np.all(np.isfinite(R)):
-                raise SystemError("R0: contains NaN or infinite values")
+                raise InputError("R0: contains NaN or infinite values")
             from .lie_groups import SO3
 
             if isinstance(self.group, SO3):
                 err = np.max(np.abs(R.T @ R - np.eye(3)))
                 if err > 1e-10 or np.linalg.det(R) <= 0:
-                    raise SystemError(f"R0: not a rotation matrix (|RᵀR − I| = {_fmt(err)}, det = {np.linalg.det(R):.3g})")
+                    raise InputError(f"R0: not a rotation matrix (|RᵀR − I| = {_fmt(err)}, det = {np.linalg.det(R):.3g})")
         return Point(jnp.asarray(x0), jnp.asarray(R))
 
     def check(self, q0, v0=None, *, R0=None, project_v0: bool = False, tol: float = 1e-10):
@@ -348,7 +346,7 @@ class System(eqx.Module):
             tol: tolerance of the checks.
 
         Raises:
-            SystemError: naming the argument and the problem.
+            InputError: naming the argument and the problem.
         """
         require_float64()
         b0 = self.initial_point(q0, R0)
@@ -358,47 +356,47 @@ class System(eqx.Module):
         self._check_mechanical_values(vals, tol=1e-9)
         G = vals["G"]
         if not np.all(np.isfinite(G)):
-            raise SystemError("lagrangian: the metric d²l/dv² is not finite at q0")
+            raise InputError("lagrangian: the metric d²l/dv² is not finite at q0")
         if np.max(np.abs(G - G.T)) > tol * max(1.0, np.max(np.abs(G))):
-            raise SystemError("lagrangian: the metric d²l/dv² is not symmetric at q0")
+            raise InputError("lagrangian: the metric d²l/dv² is not symmetric at q0")
         eig = np.linalg.eigvalsh(G)
         if eig[0] <= tol * max(1.0, eig[-1]):
-            raise SystemError(
+            raise InputError(
                 "lagrangian: the metric d²l/dv² is not positive definite at q0 "
                 f"(smallest eigenvalue {_fmt(eig[0])})"
             )
         mu = vals["mu"]
         N = self.dim
         if mu.ndim != 2 or mu.shape[1] != N:
-            raise SystemError(f"constraints: mu(q) must have shape (m, {N}), got {mu.shape}")
+            raise InputError(f"constraints: mu(q) must have shape (m, {N}), got {mu.shape}")
         if not np.all(np.isfinite(mu)):
-            raise SystemError("constraints: mu(q0) is not finite")
+            raise InputError("constraints: mu(q0) is not finite")
         m = mu.shape[0]
         if m == 0:
-            raise SystemError(
+            raise InputError(
                 f"constraints: mu(q0) has no rows (shape {mu.shape}); gnipy integrates constrained systems, give "
                 "at least one constraint"
             )
         if m >= N:
-            raise SystemError(f"constraints: {m} constraints on a {N}-dimensional velocity space leave no motion")
+            raise InputError(f"constraints: {m} constraints on a {N}-dimensional velocity space leave no motion")
         sv = np.linalg.svd(mu, compute_uv=False)
         if sv[-1] <= 1e-10 * max(1.0, sv[0]):
-            raise SystemError(
+            raise InputError(
                 f"constraints: mu(q0) is rank deficient (rank {int(np.sum(sv > 1e-10 * max(1.0, sv[0])))} "
                 f"< {m} constraints; smallest singular value {_fmt(sv[-1])})"
             )
         Y = vals["Y"]
         if Y.shape != (N,):
-            raise SystemError(f"affine: Y(q) must have shape ({N},), got {Y.shape}")
+            raise InputError(f"affine: Y(q) must have shape ({N},), got {Y.shape}")
         if not np.all(np.isfinite(Y)):
-            raise SystemError("affine: Y(q0) is not finite")
+            raise InputError("affine: Y(q0) is not finite")
         if v0 is None:
             return b0, None
         res = mu @ (v0 - Y)
         scale = max(1.0, float(np.max(np.abs(v0))), float(np.max(np.abs(Y))))
         if np.max(np.abs(res)) > tol * scale:
             if not project_v0:
-                raise SystemError(
+                raise InputError(
                     "v0: the initial velocity violates the constraints mu(q0)(v0 - Y(q0)) = 0 "
                     f"(residual {_fmt(np.max(np.abs(res)))}); pass project_v0=True to project it"
                 )
@@ -410,7 +408,7 @@ class System(eqx.Module):
     def _validation_values(self, b0) -> dict:
         """Everything the checks need, in one compiled evaluation (op by op, the derivatives cost
         seconds of small compilations): l, G, V and ∂l/∂v(0) at `b0` and at nearby points, and
-        G, μ, Y at `b0`. A failure of the user's functions becomes a SystemError."""
+        G, μ, Y at `b0`. A failure of the user's functions becomes a InputError."""
         rng = np.random.default_rng(0)
         N = self.dim
         ws = 0.1 * rng.standard_normal((self._SAMPLES, N))
@@ -418,10 +416,10 @@ class System(eqx.Module):
         vs = rng.standard_normal((self._SAMPLES, N))
         try:
             out = _validation_values(self.without_metadata(), b0, jnp.asarray(ws), jnp.asarray(vs))
-        except SystemError:
+        except InputError:
             raise
         except Exception as e:  # the user's function failed while being traced: say where
-            raise SystemError(f"lagrangian/constraints/affine: evaluating the system's functions failed: {e}") from e
+            raise InputError(f"lagrangian/constraints/affine: evaluating the system's functions failed: {e}") from e
         out = {k: np.asarray(v) for k, v in out.items()}
         out["vs"] = vs
         return out
@@ -430,18 +428,18 @@ class System(eqx.Module):
         for i in range(self._SAMPLES):
             lv, G, V, lin, v = vals["lv"][i], vals["Gs"][i], vals["Vs"][i], vals["lin"][i], vals["vs"][i]
             if not np.isfinite(lv):
-                raise SystemError("lagrangian: l(q, v) is not finite near q0")
+                raise InputError("lagrangian: l(q, v) is not finite near q0")
             quad = 0.5 * v @ G @ v - V
             scale = max(1.0, abs(lv), abs(quad))
             if np.max(np.abs(lin)) > tol * scale or abs(lv - quad) > tol * scale:
-                raise SystemError(
+                raise InputError(
                     "lagrangian: not of mechanical type ½ vᵀG(q)v − V(q) "
                     f"(linear term {_fmt(np.max(np.abs(lin)))}, "
                     f"mismatch with the quadratic part {_fmt(abs(lv - quad))})"
                 )
 
     def check_mechanical(self, b0, *, tol: float = 1e-9, samples: int = 3):
-        """Raise :class:`SystemError` unless `l(b, v) = ½vᵀG(b)v − V(b)` at and near `b0`
+        """Raise :class:`InputError` unless `l(b, v) = ½vᵀG(b)v − V(b)` at and near `b0`
         (`samples` points: `b0` and random nearby ones; compiled once per system structure)."""
         del samples  # fixed at _SAMPLES so that the compiled check is shared
         self._check_mechanical_values(self._validation_values(b0), tol=tol)
@@ -503,25 +501,25 @@ def _metric_derivatives(system, b0, ws):
 
 
 def real_array(name: str, x, what: str = "real numbers") -> np.ndarray:
-    """`x` as a float64 array; :class:`SystemError` naming `name` if it is not numbers, or is
+    """`x` as a float64 array; :class:`InputError` naming `name` if it is not numbers, or is
     complex (an imaginary part would otherwise be dropped with only a NumPy warning)."""
     try:
         a = np.asarray(x)
     except (TypeError, ValueError) as e:
-        raise SystemError(f"{name}: expected {what}, got {x!r}") from e
+        raise InputError(f"{name}: expected {what}, got {x!r}") from e
     if a.dtype.kind == "c":
-        raise SystemError(f"{name}: expected {what}, got complex values (gnipy integrates real systems)")
+        raise InputError(f"{name}: expected {what}, got complex values (gnipy integrates real systems)")
     try:
         return np.asarray(a, dtype=np.float64)
     except (TypeError, ValueError, OverflowError) as e:
-        raise SystemError(f"{name}: expected {what}, got {x!r}") from e
+        raise InputError(f"{name}: expected {what}, got {x!r}") from e
 
 
 def require_float64() -> None:
-    """:class:`SystemError` unless JAX computes in float64 (`jax_enable_x64`, which importing
+    """:class:`InputError` unless JAX computes in float64 (`jax_enable_x64`, which importing
     gnipy turns on): in float32 nothing gnipy computes reaches its stated accuracy."""
     if not jax.config.jax_enable_x64:
-        raise SystemError(
+        raise InputError(
             "jax_enable_x64: gnipy computes in float64, but JAX's jax_enable_x64 is off (something turned it "
             "off after importing gnipy); turn it back on with jax.config.update('jax_enable_x64', True)"
         )
@@ -530,9 +528,9 @@ def require_float64() -> None:
 def _as_vector(name: str, x, n: int) -> np.ndarray:
     a = real_array(name, x, f"{n} real numbers")
     if a.ndim != 1 or a.shape[0] != n:
-        raise SystemError(f"{name}: expected a vector of length {n}, got shape {a.shape}")
+        raise InputError(f"{name}: expected a vector of length {n}, got shape {a.shape}")
     if not np.all(np.isfinite(a)):
-        raise SystemError(f"{name}: contains NaN or infinite values: {a.tolist()}")
+        raise InputError(f"{name}: contains NaN or infinite values: {a.tolist()}")
     return a
 
 

@@ -137,10 +137,10 @@ def test_parameter_overrides_reach_the_system(name):
 
 @pytest.mark.parametrize("name", NEW_MODELS)
 def test_unknown_or_bad_parameters_raise(name):
-    with pytest.raises(gnipy.SystemError, match="unknown parameter 'nonsense'"):
+    with pytest.raises(gnipy.InputError, match="unknown parameter 'nonsense'"):
         gnipy.make_system(name, nonsense=1.0)
     first = next(iter(gnipy.get_model(name).params))
-    with pytest.raises(gnipy.SystemError, match="finite"):
+    with pytest.raises(gnipy.InputError, match="finite"):
         gnipy.make_system(name, **{first: float("nan")})
 
 

@@ -18,12 +18,9 @@ import optimistix as optx
 
 from ..linalg import solve as small_solve
 from ..linalg import solve_spd
+from ..errors import MethodError
 
 __all__ = ["Integrator", "StepInfo", "MethodError", "solve_step", "newton", "default_root_finder"]
-
-
-class MethodError(ValueError):
-    """A method cannot be applied to a system (the message says why)."""
 
 
 class StepInfo(NamedTuple):

@@ -7,7 +7,8 @@ import dataclasses
 from collections.abc import Callable, Mapping
 from typing import Any
 
-from ..system import System, SystemError
+from ..errors import InputError
+from ..system import System
 
 __all__ = ["ModelSpec", "register", "get_model", "model_names", "make_system", "registered_invariants",
            "default_method_for"]
@@ -49,20 +50,20 @@ class ModelSpec:
     notes: str = ""
 
     def resolve_params(self, overrides: Mapping[str, Any] | None = None) -> dict[str, float]:
-        """Defaults updated with `overrides`; unknown names and non-finite values raise SystemError."""
+        """Defaults updated with `overrides`; unknown names and non-finite values raise InputError."""
         import math
 
         params = dict(self.params)
         for k, v in (overrides or {}).items():
             if k not in params:
                 known = ", ".join(params) or "none"
-                raise SystemError(f"--set/params: unknown parameter {k!r} of model {self.name!r} (known: {known})")
+                raise InputError(f"--set/params: unknown parameter {k!r} of model {self.name!r} (known: {known})")
             try:
                 v = float(v)
             except (TypeError, ValueError) as e:
-                raise SystemError(f"--set/params: parameter {k!r} must be a number, got {v!r}") from e
+                raise InputError(f"--set/params: parameter {k!r} must be a number, got {v!r}") from e
             if not math.isfinite(v):
-                raise SystemError(f"--set/params: parameter {k!r} must be finite, got {v!r}")
+                raise InputError(f"--set/params: parameter {k!r} must be finite, got {v!r}")
             params[k] = v
         return params
 
@@ -106,9 +107,9 @@ def register(spec: ModelSpec) -> ModelSpec:
 
 
 def get_model(name: str) -> ModelSpec:
-    """The model called `name`; unknown names raise SystemError listing the known ones."""
+    """The model called `name`; unknown names raise InputError listing the known ones."""
     if name not in _REGISTRY:
-        raise SystemError(f"model: unknown model {name!r} (known: {', '.join(sorted(_REGISTRY))})")
+        raise InputError(f"model: unknown model {name!r} (known: {', '.join(sorted(_REGISTRY))})")
     return _REGISTRY[name]
 
 
