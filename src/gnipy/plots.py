@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from .analysis.orders import ROUND_OFF, fit_points, fitted_order
+
 __all__ = [
     "as_dataset",
     "plot_path",
@@ -36,8 +38,6 @@ __all__ = [
     "ROUND_OFF",
 ]
 
-#: Errors below this are treated as round-off by :func:`fitted_order` (not used in the fit).
-ROUND_OFF = 1e-11
 
 # Residuals that are exactly zero are drawn at this level on the logarithmic axis.
 _ZERO_LEVEL = 1e-18
@@ -244,44 +244,6 @@ def plot_solution(obj, path=None, *, title: str | None = None, overwrite: bool =
     if path is not None:
         _save(fig, path, overwrite)
     return fig
-
-
-def fit_points(h, errors, floor: float = ROUND_OFF, *, stop_at_minimum: bool = False) -> np.ndarray:
-    """The mask of the points :func:`fitted_order` fits on: finite, h > 0, error above `floor`, and
-    with `stop_at_minimum` no step size smaller than the one with the smallest error."""
-    h = np.asarray(h, dtype=float)
-    e = np.asarray(errors, dtype=float)
-    keep = np.isfinite(e) & np.isfinite(h) & (e > floor) & (h > 0)
-    if stop_at_minimum and keep.any():
-        keep &= h >= h[keep][np.argmin(e[keep])]
-    return keep
-
-
-def fitted_order(h, errors, floor: float = ROUND_OFF, *, min_points: int = 2,
-                 stop_at_minimum: bool = False) -> float:
-    """The least-squares slope of log(error) against log(h), on the points above `floor`.
-
-    Points at or below `floor` (round-off, or an exact result) and non-finite points are left out;
-    with fewer than `min_points` step sizes left the result is NaN. The one implementation of the
-    fitted order in gnipy (`gni convergence`, the theorem table and the figures of `gni reproduce`).
-
-    Arguments:
-        h: step sizes.
-        errors: the errors at those step sizes.
-        floor: the round-off level (default :data:`ROUND_OFF` = 1e-11).
-        min_points: the fewest step sizes a slope is fitted on.
-        stop_at_minimum: also leave out the step sizes smaller than the one with the smallest
-            error (past it the error grows as h shrinks: round-off, not truncation).
-
-    Returns:
-        The fitted order (a float, NaN when it cannot be fitted).
-    """
-    h = np.asarray(h, dtype=float)
-    e = np.asarray(errors, dtype=float)
-    keep = fit_points(h, e, floor, stop_at_minimum=stop_at_minimum)
-    if np.unique(h[keep]).size < max(2, min_points):
-        return float("nan")
-    return float(np.polyfit(np.log(h[keep]), np.log(e[keep]), 1)[0])
 
 
 def plot_convergence(
