@@ -42,7 +42,8 @@ from .simulate import simulate  # noqa: E402
 from .streaming import simulate_to_file  # noqa: E402
 from .sweep import open_sweep, run_sweep  # noqa: E402
 from .io import read_netcdf, verify_netcdf, write_netcdf  # noqa: E402
-from .solution import Solution  # noqa: E402
+from .solution import RESULTS, Solution  # noqa: E402
+from .saveat import SaveAt  # noqa: E402
 from .errors import InputError, MethodError, OutputError, SolverFailure  # noqa: E402
 from .spaces import EuclideanSpace, GroupSpace, Point  # noqa: E402
 from .system import System  # noqa: E402
@@ -52,7 +53,6 @@ __all__ = [
     "HiddenMomentumVerdict",
     "__version__",
     "System",
-    "InputError",
     "DiscreteLagrangian",
     "EulerA",
     "EulerB",
@@ -82,6 +82,9 @@ __all__ = [
     "verify_netcdf",
     "stack_systems",
     "Solution",
+    "SaveAt",
+    "RESULTS",
+    "InputError",
     "SolverFailure",
     "projectors",
     "reflect_momentum",

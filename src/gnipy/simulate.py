@@ -1,23 +1,35 @@
-"""The simulation driver: jit-compiled `lax.scan` over any one-step method, with a save stride."""
+"""The simulation driver :func:`simulate`: arguments checked, the run planned (:mod:`gnipy.saveat`)
+and stepped by the one loop (:mod:`gnipy.stepping`), the result assembled (:class:`gnipy.Solution`).
+
+Repeated calls are cheap: what depends only on the system, the method and the initial condition
+(the checks, the method's preparation, the diagnostics' sentences) is kept per call signature
+(:mod:`gnipy.preparation`), and the compiled programs are shared between runs that save as many
+nodes. Under a JAX transformation (`jax.grad`, `jax.jacrev`, `jax.jacfwd`, `jax.jit`) the run is
+differentiable: the loop has static trip counts in checkpointed blocks and the implicit steps are
+differentiated by the implicit function theorem.
+"""
 
 from __future__ import annotations
 
 import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .compilation import jit
-from .integrators.base import Integrator, MethodError
-from .solution import RESULT_SOLVER_FAILED, Solution, SolverFailure
-from .errors import InputError
+from .errors import InputError, MethodError, SolverFailure
+from .integrators.base import Integrator
+from .saveat import GRID_RTOL, SaveAt, schedule
+from .solution import RESULTS, Solution
+from .stepping import progress_reporter, run_nodes, run_nodes_checkpointed
 from .system import System, describe_orientations
 
-__all__ = ["simulate", "resolve_steps", "MAX_STEPS", "MAX_TOTAL_STEPS", "MIN_STEP_SIZE"]
+__all__ = ["simulate", "resolve_steps", "resolve_run", "SaveAt", "MAX_STEPS", "MAX_TOTAL_STEPS", "MIN_STEP_SIZE"]
 
 #: Most steps in one `simulate` call (the compiled loop counts steps in int32).
-MAX_STEPS = 2**31 - 1
+MAX_STEPS = 2**31 - 2
 
 #: The most steps of any run, streamed ones included (t = t0 + k h needs k exact in float64).
 MAX_TOTAL_STEPS = 2**53
@@ -26,45 +38,50 @@ MAX_TOTAL_STEPS = 2**53
 MIN_STEP_SIZE = float(np.finfo(np.float64).tiny)
 
 
-def resolve_steps(h, steps=None, t_final=None) -> tuple[float, int]:
-    """Validate `h` and exactly one of `steps`, `t_final`; return `(h, steps)`.
-
-    With `t_final`, the number of steps is `round(t_final / h)`; `t_final` must be a multiple of `h`
-    to within 1e-9 relative.
-    """
-    if isinstance(h, (complex, np.complexfloating)):
-        raise InputError(f"h: expected a positive real number, got {h!r}")
+def _concrete(x):
+    """The value of `x` when it is known now (a Python/NumPy value, or a tracer of `jax.grad` or
+    `jax.jacfwd` called outside `jit`), else None (an abstract tracer of `jax.jit`)."""
+    if not isinstance(x, jax.core.Tracer):
+        return x
     try:
-        h = float(h)
+        from jax._src.core import to_concrete_value  # private: absent in some versions, then None
+    except ImportError:  # pragma: no cover
+        return None
+    try:
+        return to_concrete_value(x)
+    except Exception:  # pragma: no cover
+        return None
+
+
+def _traced(*trees) -> bool:
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
+
+
+def _concrete_tree(tree):
+    """`tree` with every tracer replaced by its concrete value, or None if one has none."""
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    out = []
+    for x in leaves:
+        c = _concrete(x)
+        if c is None:
+            return None
+        out.append(c)
+    return jax.tree_util.tree_unflatten(treedef, out)
+
+
+def _number(name: str, x, *, positive: bool) -> float:
+    if isinstance(x, (complex, np.complexfloating)) or (hasattr(x, "dtype") and np.iscomplexobj(x)):
+        raise InputError(f"{name}: expected a {'positive ' if positive else ''}real number, got {x!r}")
+    try:
+        value = float(x)
     except (TypeError, ValueError, OverflowError) as e:
-        raise InputError(f"h: expected a positive number, got {h!r}") from e
-    if not math.isfinite(h) or h <= 0:
-        raise InputError(f"h: the step size must be a positive finite number, got {h!r}")
-    if h < MIN_STEP_SIZE:
-        raise InputError(
-            f"h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision (subnormal numbers; "
-            "the time t0 + k h and the momenta divided by h would be meaningless)"
-        )
-    if (steps is None) == (t_final is None):
-        raise InputError("steps/t_final: give exactly one of steps and t_final")
-    if t_final is not None:
-        if isinstance(t_final, (complex, np.complexfloating)):
-            raise InputError(f"t_final: expected a positive real number, got {t_final!r}")
-        try:
-            t_final = float(t_final)
-        except (TypeError, ValueError, OverflowError) as e:
-            raise InputError(f"t_final: expected a positive number, got {t_final!r}") from e
-        if not math.isfinite(t_final) or t_final <= 0:
-            raise InputError(f"t_final: must be a positive finite number, got {t_final!r}")
-        ratio = t_final / h
-        if not math.isfinite(ratio) or ratio > MAX_TOTAL_STEPS:
-            raise InputError(
-                f"t_final: {t_final!r} / h = {ratio:.3g} steps, more than any run can take "
-                f"(at most {MAX_TOTAL_STEPS:.3g}); choose a larger h or a shorter t_final"
-            )
-        steps = round(ratio)
-        if steps < 1 or abs(steps * h - t_final) > 1e-9 * t_final:
-            raise InputError(f"t_final: {t_final!r} is not a whole number of steps of h = {h!r}")
+        raise InputError(f"{name}: expected a {'positive ' if positive else ''}number, got {x!r}") from e
+    if not math.isfinite(value) or (positive and value <= 0):
+        raise InputError(f"{name}: must be a {'positive ' if positive else ''}finite number, got {x!r}")
+    return value
+
+
+def _whole_steps(steps) -> int:
     if isinstance(steps, bool) or isinstance(steps, (complex, np.complexfloating)):
         raise InputError(f"steps: must be a positive integer, got {steps!r}")
     try:
@@ -78,7 +95,55 @@ def resolve_steps(h, steps=None, t_final=None) -> tuple[float, int]:
             f"steps: {int(steps)} steps is more than any run can take (at most {MAX_TOTAL_STEPS:.3g}: the "
             "step index must stay exact in float64)"
         )
-    return h, int(steps)
+    return int(steps)
+
+
+def resolve_run(h, steps=None, t_final=None, t0: float = 0.0, *, shorten: bool = True) -> tuple[float, int, float]:
+    """Validate `h` and exactly one of `steps`, `t_final` (the final time); return `(h, steps,
+    partial)`: the number of full steps of h and the shortened last step as a fraction of h (0
+    when `t_final - t0` is a whole number of steps to within 1e-9 relative). With `shorten=False`
+    a fraction is refused with an error that says how to choose h or t_final."""
+    h = _number("h", h, positive=True)
+    if h < MIN_STEP_SIZE:
+        raise InputError(
+            f"h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision (subnormal numbers; "
+            "the time t0 + k h and the momenta divided by h would be meaningless)"
+        )
+    if (steps is None) == (t_final is None):
+        raise InputError("steps/t_final: give exactly one of steps and t_final")
+    if steps is not None:
+        return h, _whole_steps(steps), 0.0
+    t_final = _number("t_final", t_final, positive=False)
+    span = t_final - t0
+    if span <= 0:
+        raise InputError(f"t_final: must be after t0 = {t0!r}, got {t_final!r}")
+    ratio = span / h
+    if not math.isfinite(ratio) or ratio > MAX_TOTAL_STEPS:
+        raise InputError(
+            f"t_final: {span!r} / h = {ratio:.3g} steps, more than any run can take "
+            f"(at most {MAX_TOTAL_STEPS:.3g}); choose a larger h or an earlier t_final"
+        )
+    n = round(ratio)
+    if n >= 1 and abs(n - ratio) <= GRID_RTOL * ratio:
+        return h, n, 0.0
+    full = math.floor(ratio)
+    if not shorten:
+        up = full + 1
+        raise InputError(
+            f"t_final: t_final - t0 = {span!r} is not a whole number of steps of h = {h!r} ({ratio:.6g} steps); "
+            f"choose h = {span / up!r} ({up} steps) or t_final = {t0 + up * h!r}"
+        )
+    if full < 1:
+        raise InputError(f"t_final: the run {span!r} is shorter than one step of h = {h!r}; choose a smaller h")
+    return h, full, ratio - full
+
+
+def resolve_steps(h, steps=None, t_final=None) -> tuple[float, int]:
+    """Validate `h` and exactly one of `steps`, `t_final`; return `(h, steps)`, where `t_final`
+    (measured from 0) must be a whole number of steps of `h` to within 1e-9 relative (the error
+    says how to choose otherwise). For runs saved in chunks (streamed runs, sweeps)."""
+    h, steps, _ = resolve_run(h, steps, t_final, 0.0, shorten=False)
+    return h, steps
 
 
 def default_initial_condition(system: System, q0, v0, R0):
@@ -100,69 +165,29 @@ def default_initial_condition(system: System, q0, v0, R0):
     return q0, v0, R0
 
 
-def _tree_finite(tree) -> jax.Array:
-    leaves = [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(tree) if eqx.is_inexact_array(x)]
-    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
 
-
-def _integrate_core(method, system, state0, h, n_blocks: int, block, remainder, has_remainder: bool):
-    """Run `n_blocks * block + remainder` steps, observing every `block` steps and at the end.
-
-    `block` and `remainder` are traced (only the number of saved nodes fixes the shapes), so runs
-    that differ in their step count but save as many nodes share one compilation.
-    """
-    int_t = jnp.int32
-
-    def one_step(_, carry):
-        state, k, fail_k, fail_res, it_tot, it_max = carry
-        new, info = method.step(system, state, h)
-        ok = info.ok & _tree_finite(new) & (fail_k < 0)
-        newly_failed = (~ok) & (fail_k < 0)
-        state = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, state)
-        res = jnp.where(jnp.isfinite(info.residual), info.residual, jnp.inf)
-        fail_k = jnp.where(newly_failed, k, fail_k)
-        fail_res = jnp.where(newly_failed, res, fail_res)
-        it = jnp.where(ok, info.iterations, 0).astype(int_t)
-        return state, k + 1, fail_k, fail_res, it_tot + it, jnp.maximum(it_max, it)
-
-    def block_loop(carry, length):
-        return jax.lax.fori_loop(0, length, one_step, carry)
-
-    def observe(state):
-        b, v, p = method.observe(system, state, h)
-        return b, v, p, method.hidden_momentum(system, state, h)
-
-    carry = (state0, jnp.asarray(0, int_t), jnp.asarray(-1, int_t), jnp.asarray(0.0), jnp.asarray(0, int_t),
-             jnp.asarray(0, int_t))
-
-    def outer(carry, i):
-        # block 0 has no steps: it observes the initial node (observe is traced once, not twice)
-        carry = block_loop(carry, jnp.where(i == 0, 0, block))
-        return carry, observe(carry[0])
-
-    carry, obs = jax.lax.scan(outer, carry, jnp.arange(n_blocks + 1, dtype=int_t))
-    if has_remainder:
-        carry = block_loop(carry, remainder)
-        last = observe(carry[0])
-        obs = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]), obs, last)
-    b, v, p, hidden = obs
-    energy = jax.vmap(system.energy)(b, v)
-    residual = jax.vmap(system.constraint_residual)(b, v)
-    _, _, fail_k, fail_res, it_tot, it_max = carry
-    # hidden: the GNI family's p⁺ − p̄ at the saved nodes (None for other methods); what derives from
-    # it is computed apart (gnipy.diagnostics.saved_node_diagnostics), not compiled into every run
-    return b, v, p, energy, residual, fail_k, fail_res, jnp.stack([it_tot, it_max]), carry[0], hidden
-
-
-_integrate = jit(_integrate_core)
+_PROGRAMS = {}
 
 
 @jit
-def _integrate_batch(method, system, system_batched: bool, state0, h, n_blocks: int, block, remainder,
-                     has_remainder: bool):
-    """:func:`_integrate_core` vmapped over the members (states, and the systems when batched)."""
+def _init_one(method, system, b0, v0, h):
+    return method.init(system, b0, v0, h)
+
+
+@jit
+def _run_one(method, system, state0, h, lengths, tail, h_last, partial: bool, save_final: bool, save_states: bool,
+             progress: bool, progress_stride):
+    return run_nodes(method, system, state0, h, lengths, tail, h_last, partial=partial, save_final=save_final,
+                     save_states=save_states, progress=progress, progress_stride=progress_stride)
+
+
+@jit
+def _run_batch(method, system, system_batched: bool, state0, h, lengths, tail, h_last, partial: bool,
+               save_final: bool, save_states: bool, progress: bool, progress_stride):
+    """:func:`gnipy.stepping.run_nodes` vmapped over the members (states, and systems when batched)."""
     def one(s, st):
-        return _integrate_core(method, s, st, h, n_blocks, block, remainder, has_remainder)
+        return run_nodes(method, s, st, h, lengths, tail, h_last, partial=partial, save_final=save_final,
+                         save_states=save_states, progress=progress, progress_stride=progress_stride)
 
     return eqx.filter_vmap(one, in_axes=(eqx.if_array(0) if system_batched else None, 0))(system, state0)
 
@@ -172,11 +197,6 @@ def _init_batch(method, system, system_batched: bool, b0, v0, h):
     return eqx.filter_vmap(
         lambda s, b, v: method.init(s, b, v, h), in_axes=(eqx.if_array(0) if system_batched else None, 0, 0)
     )(system, b0, v0)
-
-
-@jit
-def _init_one(method, system, b0, v0, h):
-    return method.init(system, b0, v0, h)
 
 
 def simulate(
@@ -189,10 +209,13 @@ def simulate(
     h,
     steps: int | None = None,
     t_final: float | None = None,
-    save_every: int = 1,
+    saveat: SaveAt | None = None,
+    save_every: int | None = None,
     t0: float = 0.0,
+    state0=None,
     project_v0: bool = False,
     throw: bool = True,
+    progress=False,
 ) -> Solution:
     """Integrate a nonholonomic system, or an ensemble of them.
 
@@ -208,21 +231,41 @@ def simulate(
             Arrays with a leading batch axis, (B, n) and (B, N), run B trajectories at once.
         R0: the initial orientation on $\\mathbb{R}^n \\times G$ (default: the system's, or the
             identity); (k, k), or (B, k, k) for a batch.
-        h: step size (> 0); the reference saves at the same times.
-        steps / t_final: the number of steps, or the final time (a whole number of steps).
-        save_every: the save stride K: nodes 0, K, 2K, ... and always the last one are saved.
+        h: step size (> 0).
+        steps / t_final: the number of steps, or the final time. When `t_final - t0` is not a
+            whole number of steps, the last step is shortened to end at `t_final` where the method
+            allows it (`method.can_change_step`: the GNI family rescales its hidden impulse to
+            the new step); other methods raise an error that says how to choose h.
+        saveat: which nodes to save, a :class:`~gnipy.SaveAt` (every K steps, given times, first
+            and/or last, every node; optionally the integrator states). Default: every node.
+        save_every: shorthand for `saveat=SaveAt(every=save_every)`.
         t0: initial time.
+        state0: start from this integrator state (`Solution.final_state` of an earlier run of the
+            same method and system) instead of `q0, v0`; with `t0` its time. A long run is then a
+            loop of calls: `sol = simulate(..., state0=sol.final_state, t0=float(sol.t[-1]))`.
         project_v0: project `v0` onto the constraints instead of raising when it violates them.
         throw: raise :class:`~gnipy.SolverFailure` if a step fails; with `False`, return the
-            solution up to the last good saved node with `result = 1` (in a batch: a failed
-            member's nodes after its failure are NaN; :meth:`Solution.failures` gives each
+            solution up to the last good saved node with `result = RESULTS.solve_failed` (in a batch:
+            a failed member's nodes after its failure are NaN; :meth:`Solution.failures` gives each
             failure's member, step, time and residual).
+        progress: `True` shows a progress bar (rich) updated as the steps advance; a callable is
+            called as `progress(steps_done, steps_total)` instead.
 
     Returns:
-        A :class:`~gnipy.Solution`. For a batch (B members: the batch size of the systems and
-        of the initial conditions, which broadcast against each other) the arrays carry a leading
-        member axis, `sol.member(i)` is the i-th trajectory, and `sol.results`,
-        `sol.failed_steps` hold each member's result code and failed step.
+        A :class:`~gnipy.Solution` (`sol.success`, `sol.result`, `sol.message` say how it ended). For a
+        batch (B members: the batch size of the systems and of the initial conditions, which
+        broadcast against each other) the arrays carry a leading member axis, `sol.member(i)` is
+        the i-th trajectory, and `sol.results`, `sol.failed_steps` hold each member's result code and
+        failed step.
+
+    **Differentiation.** `jax.grad`, `jax.jacrev` and `jax.jacfwd` of a function of the solution
+    work with respect to `q0`, `v0`, `h`, `t0` and the system's parameters (a System is a pytree:
+    its parameters are array leaves of its functions, e.g. `jax.tree_util.Partial` arguments; a
+    model's are reached by building the system inside the differentiated function, see the
+    systems guide). Under a transformation the run uses static trip counts in checkpointed blocks
+    and the implicit steps' solves are differentiated by the implicit function theorem; `steps`
+    must then be given (or `t_final` with a concrete `h`). Inside `jax.jit` the values of the
+    initial condition cannot be checked (shapes are); a failed step raises at run time.
 
     Compilation is shared between runs that save the same number of nodes: the step count, h and
     the parameter values are traced, so convergence studies (one saved node per run, varying h)
@@ -236,7 +279,6 @@ def simulate(
             a batch, the first failing member).
     """
     from .compilation import release_compiled_programs_if_needed
-    from .methods import get_method
     from .reference import ContinuousReference
 
     release_compiled_programs_if_needed()
@@ -251,6 +293,103 @@ def simulate(
         system = systems[0]
     if not isinstance(system, System):
         raise InputError(f"system: expected a gnipy.System or a sequence of them, got {type(system).__name__}")
+    method = _method(system, method)
+    if saveat is not None and save_every is not None:
+        raise InputError("saveat/save_every: give one of them (save_every=K is saveat=SaveAt(every=K))")
+    if saveat is None:
+        if save_every is not None and (isinstance(save_every, bool) or not isinstance(save_every, (int, np.integer))
+                                       or save_every < 1):
+            raise InputError(f"save_every: must be a positive integer, got {save_every!r}")
+        saveat = SaveAt(every=1 if save_every is None else int(save_every))
+    elif not isinstance(saveat, SaveAt):
+        raise InputError(f"saveat: expected a gnipy.SaveAt, got {type(saveat).__name__}")
+    if progress is not False and progress is not None and progress is not True and not callable(progress):
+        raise InputError(f"progress: expected True, False or a callable(steps_done, steps_total), got {progress!r}")
+
+    traced = _traced(system if systems is None else systems, q0, v0, R0, h, t0, state0)
+    if traced:
+        return _simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, saveat, t0, state0,
+                                project_v0, throw)
+
+    t0 = _number("t0", t0, positive=False)
+    h, n, partial = resolve_run(h, steps, t_final, t0)
+    if n > MAX_STEPS:
+        raise InputError(
+            f"steps: at most {MAX_STEPS} steps per call (the step counters are int32), got {n}; "
+            "continue the run from sol.final_state (state0=), or stream it with gnipy.simulate_to_file"
+        )
+    if partial and not getattr(method, "can_change_step", isinstance(method, ContinuousReference)):
+        raise InputError(
+            f"t_final: t_final - t0 is {n + partial:.6g} steps of h = {h!r}, and {method.name} cannot shorten its last "
+            f"step; choose h = {(t_final - t0) / (n + 1)!r} ({n + 1} steps) or t_final = {t0 + (n + 1) * h!r}"
+        )
+    plan = schedule(saveat, n, partial, h=h, t0=t0)
+    times = plan.times(t0, h)
+
+    if state0 is not None and (q0 is not None or v0 is not None or R0 is not None):
+        raise InputError("state0: give either state0 or the initial condition q0/v0/R0, not both")
+    q0, v0, R0 = (q0, v0, R0) if state0 is not None else default_initial_condition(
+        systems if systems and len(systems) > 1 else system, q0, v0, R0)
+    meta = dict(system=system.name, method=method.name, h=h, coordinates=system.coordinates,
+                velocities=system.velocities, params=system.params,
+                orientation=describe_orientations(systems or [system]))
+    reporter = _Progress(progress, n + (1 if partial else 0))
+
+    batched = systems is not None or (state0 is None and _is_batch(system, q0, v0, R0))
+    if isinstance(method, ContinuousReference):
+        if batched:
+            raise MethodError("method: the continuous reference runs one trajectory at a time; pass one system and one initial condition")
+        if state0 is not None or saveat.states:
+            raise MethodError("method: the continuous reference has no integrator state (state0, saveat.states)")
+        b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
+        with reporter:
+            return method.solve(system, b0, jnp.asarray(v0), times, h=h)
+    if batched:
+        if state0 is not None:
+            raise InputError("state0: continuing from a state is for single trajectories")
+        with reporter:
+            return _simulate_batch(systems or [system], method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0,
+                                   throw, meta, reporter)
+
+    prep = _prepare(system, method, q0, v0, R0, project_v0, state0)
+    hj = np.float64(h)
+    if state0 is None:
+        state0 = _init_one(prep.method, prep.core, prep.b0, prep.v0, hj)
+    with reporter:
+        out = _run_one(prep.method, prep.core, state0, hj, np.asarray(plan.lengths, np.int32), np.int32(plan.tail),
+                       np.float64(partial * h), bool(partial), plan.save_final, saveat.states, reporter.active,
+                       np.int32(reporter.stride))
+        if reporter.active:
+            jax.block_until_ready(out)
+    meta |= _diagnostic_meta(system, prep.core, prep.b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
+                             cached=prep.cache)
+    fail_k = int(out["fail_k"])
+    space = system.space
+    q, R = space.coordinates(out["b"]), space.orientation(out["b"])
+    common = dict(iterations=out["iterations"], R=R, final_state=out["final_state"], states=out["states"], **meta)
+    if fail_k < 0:
+        return Solution(jnp.asarray(times), q, out["v"], out["p"], out["energy"], out["residual"], **common)
+    good = int(np.searchsorted(np.asarray(plan.nodes), fail_k, side="right"))  # saved nodes with index <= fail_k
+    cut = {k: (None if common.get(k) is None else jax.tree_util.tree_map(lambda a: a[:good], common[k]))
+           for k in ("R", "states", *_DIAGNOSTIC_ARRAYS)}
+    fail_res = float(out["fail_res"])
+    partial_sol = Solution(
+        jnp.asarray(times[:good]), q[:good], out["v"][:good], out["p"][:good], out["energy"][:good],
+        out["residual"][:good], **(common | cut), result=RESULTS.solve_failed, failed_step=fail_k,
+        failed_residual=fail_res,
+    )
+    t_fail = float(times[-1]) if fail_k >= n else t0 + h * fail_k
+    msg = (f"{method.name}: step {fail_k} (t = {t_fail:.6g} -> {min(t_fail + h, t0 + h * (n + partial)):.6g}) failed: "
+           f"{RESULTS.solve_failed.message} (residual {fail_res:.3e})")
+    if throw:
+        raise SolverFailure(msg, step=fail_k, time=t_fail, residual=fail_res, solution=partial_sol)
+    return partial_sol
+
+
+def _method(system, method):
+    from .methods import get_method
+    from .reference import ContinuousReference
+
     if method is None:
         from .models.registry import default_method_for
 
@@ -259,86 +398,214 @@ def simulate(
         method = get_method(method)
     if not isinstance(method, (Integrator, ContinuousReference)):
         raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
-    h, steps = resolve_steps(h, steps, t_final)
-    if steps > MAX_STEPS:
-        raise InputError(
-            f"steps: at most {MAX_STEPS} steps per call (the step counters are int32), got {steps}; "
-            "stream longer runs with gnipy.simulate_to_file"
-        )
-    if isinstance(save_every, bool) or int(save_every) != save_every or save_every < 1:
-        raise InputError(f"save_every: must be a positive integer, got {save_every!r}")
-    save_every = int(min(save_every, steps))
-    try:
-        t0 = float(t0)
-    except (TypeError, ValueError) as e:
-        raise InputError(f"t0: expected a number, got {t0!r}") from e
-    if not math.isfinite(t0):
-        raise InputError(f"t0: must be finite, got {t0!r}")
-    q0, v0, R0 = default_initial_condition(systems if systems and len(systems) > 1 else system, q0, v0, R0)
+    return method
 
-    n_blocks, remainder = divmod(steps, save_every)
-    k_saved = np.concatenate([np.arange(n_blocks + 1) * save_every, [steps] if remainder else []]).astype(np.int64)
-    times = t0 + h * k_saved
-    meta = dict(system=system.name, method=method.name, h=h, coordinates=system.coordinates,
-                velocities=system.velocities, params=system.params,
-                orientation=describe_orientations(systems or [system]))
 
-    batched = systems is not None or _is_batch(system, q0, v0, R0)
-    if batched:
-        if isinstance(method, ContinuousReference):
-            raise MethodError("method: the continuous reference runs one trajectory at a time; pass one system and one initial condition")
-        return _simulate_batch(systems or [system], method, q0, v0, R0, h, steps, save_every, n_blocks, remainder,
-                               k_saved, times, t0, project_v0, throw, meta)
+class _Progress:
+    """The `progress=` of a call: a rich bar, a callable, or nothing; a context manager around the run."""
 
-    b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
-    if isinstance(method, ContinuousReference):
-        return method.solve(system, b0, jnp.asarray(v0), times, h=h)
+    def __init__(self, progress, total: int):
+        self.total = max(1, int(total))
+        self.active = bool(progress)
+        self.stride = max(1, self.total // 200)
+        self.fn = progress if callable(progress) else None
+        self.bar = None
 
+    def __enter__(self):
+        if not self.active:
+            return self
+        if self.fn is None:
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
+
+            self.bar = Progress("simulate", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                                TimeRemainingColumn(), transient=False)
+            task = self.bar.add_task("steps", total=self.total)
+            self.bar.start()
+            self.fn = lambda done, total: self.bar.update(task, completed=done)
+        self._ctx = progress_reporter(lambda done: self.fn(min(done, self.total), self.total))
+        self._ctx.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        if not self.active:
+            return False
+        if exc[0] is None:
+            self.fn(self.total, self.total)
+        self._ctx.__exit__(*exc)
+        if self.bar is not None:
+            self.bar.stop()
+        return False
+
+
+class _Prepared:
+    """What a run needs from its system, method and initial condition, computed once per call
+    signature: the checked start `(b0, v0)`, the prepared method, the system without metadata,
+    and the diagnostics' host-side answers (`cache`)."""
+
+    __slots__ = ("b0", "v0", "method", "core", "cache", "refs")
+
+    def __init__(self, b0, v0, method, core, refs):
+        self.b0, self.v0, self.method, self.core, self.refs = b0, v0, method, core, refs
+        self.cache = {}
+
+
+_PREPARED: dict = {}
+_PREPARED_MAX = 64
+
+
+def _key_part(x):
+    if x is None:
+        return None
+    a = np.asarray(x)
+    if a.dtype == object:
+        raise TypeError
+    return a.dtype.str, a.shape, a.tobytes()
+
+
+def _prepare(system, method, q0, v0, R0, project_v0, state0) -> _Prepared:
+    """The checked start and prepared method (:meth:`System.check`, `method.check`,
+    `method.prepare`), from a cache keyed by the system and method objects (held, so their ids stay
+    theirs) and the bytes of the initial condition: a repeated call checks nothing again."""
+    key = None
+    if state0 is None:
+        try:
+            key = (id(system), id(method), _key_part(q0), _key_part(v0), _key_part(R0), bool(project_v0))
+        except (TypeError, ValueError):
+            key = None
+        hit = _PREPARED.get(key) if key is not None else None
+        if hit is not None:
+            return hit
+        b0, v0c = system.check(q0, v0, R0=R0, project_v0=project_v0)
+        v0c = np.asarray(v0c, dtype=np.float64)
+    else:
+        b0, v0c = _state_point(system, method, state0)
     method.check(system, b0)
-    method = method.prepare(system, b0)
-    hj = np.float64(h)  # NumPy scalars: the compiled call converts them (cheaper than a jnp.asarray each)
+    prepared = _Prepared(b0, v0c, method.prepare(system, b0), system.without_metadata(), (system, method))
+    if key is not None:
+        if len(_PREPARED) >= _PREPARED_MAX:
+            _PREPARED.pop(next(iter(_PREPARED)))
+        _PREPARED[key] = prepared
+    return prepared
+
+
+def _state_point(system, method, state0):
+    """The base point of a given integrator state (checked against the state `method.init` builds)."""
+    b_ref = system.initial_point(np.zeros(system.n)) if system.defaults is None else system.initial_point(
+        system.defaults[0], system.defaults[2] if len(system.defaults) > 2 else None)
+    ref = jax.eval_shape(lambda: method.init(system.without_metadata(), b_ref, jnp.zeros(system.dim), 1.0))
+    leaves, treedef = jax.tree_util.tree_flatten(state0)
+    ref_leaves, ref_def = jax.tree_util.tree_flatten(ref)
+    if treedef != ref_def or any(np.shape(a) != r.shape for a, r in zip(leaves, ref_leaves)):
+        raise InputError(
+            f"state0: not a state of {method.name} for {system.name!r} (expected {ref_def} with shapes "
+            f"{[r.shape for r in ref_leaves]}); pass the final_state of a run of the same method and system"
+        )
+    if not all(np.all(np.isfinite(np.asarray(a))) for a in leaves if np.issubdtype(np.asarray(a).dtype, np.inexact)):
+        raise InputError("state0: contains NaN or infinite values")
+    b0 = method.observe(system.without_metadata(), state0, 1.0)[0]
+    return b0, None
+
+
+def _simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, saveat, t0, state0, project_v0, throw):
+    """`simulate` under a JAX transformation: the values are checked where they are known now
+    (`jax.grad`/`jax.jacfwd` outside `jit`), the run is differentiable (static trip counts in
+    checkpointed blocks, :func:`gnipy.stepping.run_nodes_checkpointed`)."""
+    from .reference import ContinuousReference
+    from .system import project_velocity
+
+    if systems is not None and len(systems) > 1:
+        raise InputError("system: under a JAX transformation, batch with jax.vmap over one system's parameters")
+    if isinstance(method, ContinuousReference):
+        raise MethodError("method: the continuous reference (scipy) cannot be differentiated or traced; use an integrator")
+    if not throw:
+        raise InputError("throw: under a JAX transformation a failed step is raised at run time (throw=True)")
+    h_c, t0_c = _concrete(h), _concrete(t0)
+    if h_c is None and steps is None:
+        raise InputError("steps: h is traced (jax.jit), so the number of steps cannot follow from t_final; give steps")
+    t0_num = 0.0 if t0_c is None else _number("t0", t0_c, positive=False)
+    if h_c is not None:
+        hv, n, partial = resolve_run(h_c, steps, t_final, t0_num)
+    else:
+        hv, n, partial = None, _whole_steps(steps), 0.0
+    if partial and not method.can_change_step:
+        raise InputError(f"t_final: not a whole number of steps of h, and {method.name} cannot shorten its last step")
+    plan = schedule(saveat, n, partial, h=hv, t0=t0_num)
+    if state0 is None:
+        q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
+    concrete = _concrete_tree((system, q0, v0, R0, state0))
     core = system.without_metadata()
-    state0 = _init_one(method, core, b0, np.asarray(v0, dtype=np.float64), hj)
-    b, v, p, energy, residual, fail_k, fail_res, its, _, hidden = _integrate(
-        method, core, state0, hj, n_blocks, np.int32(save_every), np.int32(remainder), bool(remainder),
+    if concrete is not None:  # the full checks on the values, as in an untransformed call
+        c_sys, c_q0, c_v0, c_R0, c_state0 = concrete
+        prep = _prepare(c_sys, method, c_q0, c_v0, c_R0, project_v0, c_state0)
+        prepared = prep.method
+    else:  # inside jit: shapes only; the implicit path (the explicit one is an optimization)
+        import dataclasses
+
+        from .integrators.gni import GNI
+
+        prepared = dataclasses.replace(method, explicit=False) if isinstance(method, GNI) and method.explicit is None else method
+    hj = jnp.asarray(h, jnp.float64)
+    if state0 is None:
+        b0 = _traced_point(system, q0, R0)
+        v0 = jnp.asarray(v0, jnp.float64)
+        if v0.shape != (system.dim,):
+            raise InputError(f"v0: expected {system.dim} components, got shape {v0.shape}")
+        if project_v0:
+            v0 = project_velocity(core, b0, v0)
+        state0 = prepared.init(core, b0, v0, hj)
+    h_last = hj * partial
+    out = run_nodes_checkpointed(prepared, core, state0, hj, plan.lengths, plan.tail, h_last, partial=bool(partial),
+                                 save_final=plan.save_final, save_states=saveat.states)
+    k = np.asarray(plan.nodes, dtype=np.float64)
+    if plan.save_final:
+        k[-1] = n + partial
+    times = jnp.asarray(t0, jnp.float64) + hj * k
+    q = eqx.error_if(system.space.coordinates(out["b"]), out["fail_k"] >= 0,
+                     f"{method.name}: a step failed (its solve did not converge or gave a non-finite value)")
+    return Solution(
+        times, q, out["v"], out["p"], out["energy"], out["residual"], iterations=out["iterations"],
+        R=system.space.orientation(out["b"]), final_state=out["final_state"], states=out["states"],
+        system=system.name, method=method.name, h=float(hv) if hv is not None else float("nan"),
+        coordinates=system.coordinates, velocities=system.velocities, params=system.params,
     )
-    meta |= _diagnostic_meta(system, core, b0, (b, v, p, hidden), h)
-    q, R = system.space.coordinates(b), system.space.orientation(b)
-    fail_k = int(fail_k)
-    if fail_k < 0:
-        return Solution(jnp.asarray(times), q, v, p, energy, residual, its, R=R, **meta)
-    good = int(np.searchsorted(k_saved, fail_k, side="right"))  # saved nodes with index <= fail_k
-    meta |= {k: meta[k][:good] for k in _DIAGNOSTIC_ARRAYS if meta.get(k) is not None}
-    partial = Solution(
-        jnp.asarray(times[:good]), q[:good], v[:good], p[:good], energy[:good], residual[:good], its,
-        R=None if R is None else R[:good], result=RESULT_SOLVER_FAILED, failed_step=fail_k,
-        failed_residual=float(fail_res), **meta,
-    )
-    msg = (
-        f"{method.name}: step {fail_k} (t = {t0 + h * fail_k:.6g} -> {t0 + h * (fail_k + 1):.6g}) failed: "
-        f"the solve did not converge or gave a non-finite value (residual {float(fail_res):.3e})"
-    )
-    if throw:
-        raise SolverFailure(msg, step=fail_k, time=t0 + h * fail_k, residual=float(fail_res), solution=partial)
-    return partial
+
+
+def _traced_point(system, q0, R0):
+    from .spaces import Point
+
+    x = jnp.asarray(q0, jnp.float64).reshape(-1) if system.n else jnp.zeros(0)
+    if x.shape != (system.n,):
+        raise InputError(f"q0: expected {system.n} coordinates, got shape {jnp.shape(q0)}")
+    if system.group is None:
+        return x
+    k = system.group.matrix_size
+    R = jnp.eye(k) if R0 is None else jnp.asarray(R0, jnp.float64).reshape(k, k)
+    return Point(x, R)
 
 
 _DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
 
 
-def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False, batch: bool = False) -> dict:
+def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False, batch: bool = False,
+                     cached: dict | None = None) -> dict:
     """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
-    the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved."""
+    the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved (kept in
+    `cached`, per system and start, when given)."""
     from .diagnostics import conserved_quantity, energy_is_invariant, saved_node_diagnostics
     from .models.registry import registered_invariants
 
-    diag = None
-    if nodes[3] is not None:
+    gni_family = nodes[3] is not None
+    key = ("conserved", gni_family)
+    if cached is not None and key in cached:
+        out = dict(cached[key])
+    else:
+        out = {"conserved": conserved_quantity(system, b0, gni_family=gni_family,
+                                               invariants=registered_invariants(system.name)),
+               "energy_invariant": energy_is_invariant(system, b0)}
+        if cached is not None:
+            cached[key] = dict(out)
+    if gni_family:
         diag = saved_node_diagnostics(core, *nodes, h, batched_system=batched_system, batch=batch)
-    out = {"conserved": conserved_quantity(system, b0, gni_family=diag is not None,
-                                           invariants=registered_invariants(system.name)),
-           "energy_invariant": energy_is_invariant(system, b0)}
-    if diag is not None:
         out |= dict(zip(_DIAGNOSTIC_ARRAYS, diag))
     return out
 
@@ -362,8 +629,7 @@ def _is_batch(system: System, q0, v0, R0) -> bool:
     return False
 
 
-def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks, remainder, k_saved, times, t0,
-                    project_v0, throw, meta):
+def _simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0, throw, meta, reporter):
     from .ensembles import broadcast_initial_conditions, check_batch, member_params, stack_systems
 
     system = systems[0]
@@ -380,17 +646,21 @@ def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks,
     method = method.prepare(system, first_b0)
     hj = np.float64(h)
     state0 = _init_batch(method, core, sys_batched, b0, v0, hj)
-    b, v, p, energy, residual, fail_k, fail_res, its, _, hidden = _integrate_batch(
-        method, core, sys_batched, state0, hj, n_blocks, np.int32(save_every), np.int32(remainder), bool(remainder),
-    )
-    batch_diag = _diagnostic_meta(system, core, first_b0, (b, v, p, hidden), h, batched_system=sys_batched,
-                                  batch=True)
+    out = _run_batch(method, core, sys_batched, state0, hj, np.asarray(plan.lengths, np.int32), np.int32(plan.tail),
+                     np.float64(partial * h), bool(partial), plan.save_final, False, reporter.active,
+                     np.int32(reporter.stride))
+    if reporter.active:
+        jax.block_until_ready(out)
+    batch_diag = _diagnostic_meta(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
+                                  batched_system=sys_batched, batch=True)
     space = system.space
-    q, R = space.coordinates(b), space.orientation(b)
-    fail_k = np.asarray(fail_k)
+    q, R = space.coordinates(out["b"]), space.orientation(out["b"])
+    v, p, energy, residual = out["v"], out["p"], out["energy"], out["residual"]
+    fail_k = np.asarray(out["fail_k"])
     failed = fail_k >= 0
-    fail_res = np.where(failed, np.asarray(fail_res, dtype=np.float64), np.nan)
-    results = np.where(failed, RESULT_SOLVER_FAILED, 0).astype(np.int32)
+    fail_res = np.where(failed, np.asarray(out["fail_res"], dtype=np.float64), np.nan)
+    results = np.where(failed, int(RESULTS.solve_failed), int(RESULTS.successful)).astype(np.int32)
+    k_saved = np.asarray(plan.nodes)
     if failed.any():  # a failed member is NaN after its failed step, never its last state repeated
         valid = ~failed[:, None] | (k_saved[None, :] <= fail_k[:, None])
 
@@ -403,24 +673,24 @@ def _simulate_batch(systems, method, q0, v0, R0, h, steps, save_every, n_blocks,
 
         q, v, p, energy, residual, R = (blank(a) for a in (q, v, p, energy, residual, R))
         batch_diag |= {k: blank(batch_diag[k]) for k in _DIAGNOSTIC_ARRAYS if batch_diag.get(k) is not None}
-    its = np.asarray(its)
+    its = np.asarray(out["iterations"])
     batch_meta = dict(meta)
     if sys_batched:
         batch_meta["params"] = ()
     sol = Solution(
         jnp.asarray(times), q, v, p, energy, residual, jnp.asarray([its[:, 0].sum(), its[:, 1].max()]), R=R,
-        result=RESULT_SOLVER_FAILED if failed.any() else 0, failed_step=int(fail_k[failed].min()) if failed.any() else -1,
+        result=RESULTS.solve_failed if failed.any() else RESULTS.successful,
+        failed_step=int(fail_k[failed].min()) if failed.any() else -1,
         results=jnp.asarray(results), failed_steps=jnp.asarray(fail_k), failed_residuals=jnp.asarray(fail_res),
-        member_params=member_params(systems) if sys_batched else None,
-        **batch_meta, **batch_diag,
+        member_iterations=jnp.asarray(its), member_params=member_params(systems) if sys_batched else None,
+        final_state=out["final_state"], **batch_meta, **batch_diag,
     )
     if failed.any() and throw:
         i = int(np.argmax(failed))
         k = int(fail_k[i])
         msg = (
             f"{method.name}: member {i} of {B}: step {k} (t = {t0 + h * k:.6g} -> {t0 + h * (k + 1):.6g}) failed: "
-            f"the solve did not converge or gave a non-finite value (residual {float(fail_res[i]):.3e}); "
-            f"{int(failed.sum())} member(s) failed"
+            f"{RESULTS.solve_failed.message} (residual {float(fail_res[i]):.3e}); {int(failed.sum())} member(s) failed"
         )
         raise SolverFailure(msg, step=k, time=t0 + h * k, residual=float(fail_res[i]), solution=sol)
     return sol

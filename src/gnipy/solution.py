@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import datetime as _dt
+import enum
+import html as _html
 from typing import Any
 
 import equinox as eqx
@@ -11,10 +13,34 @@ import numpy as np
 
 from .errors import SolverFailure
 
-__all__ = ["Solution", "SolverFailure", "RESULT_SUCCESS", "RESULT_SOLVER_FAILED", "set_variable_attrs"]
+__all__ = ["Solution", "SolverFailure", "RESULTS", "RESULT_SUCCESS", "RESULT_SOLVER_FAILED", "set_variable_attrs"]
 
-RESULT_SUCCESS = 0
-RESULT_SOLVER_FAILED = 1
+
+class RESULTS(enum.IntEnum):
+    """How a run ended (diffrax's `RESULTS`, scipy's `status`): the integer stored as
+    `Solution.result` and in files, with a readable :attr:`message`.
+
+    - `successful` (0): every step converged.
+    - `solve_failed` (1): a step's implicit solve did not converge or gave a non-finite value;
+      the solution stops at the last good saved node.
+    """
+
+    successful = 0
+    solve_failed = 1
+
+    @property
+    def message(self) -> str:
+        """What the code means, in words."""
+        return _MESSAGES[self]
+
+
+_MESSAGES = {
+    RESULTS.successful: "every step converged",
+    RESULTS.solve_failed: "the solve did not converge or gave a non-finite value",
+}
+
+RESULT_SUCCESS = int(RESULTS.successful)
+RESULT_SOLVER_FAILED = int(RESULTS.solve_failed)
 
 
 
@@ -47,14 +73,19 @@ class Solution(eqx.Module):
         R: orientations $R_k$ on $\\mathbb{R}^n \\times G$, (T, k, k) (reconstructed
             $R_{k+1} = R_k\\tau(h\\xi_k)$, paper §7.2 Remark, or $\\tau(h\\xi_k)R_k$ for a system with
             `reconstruction="right"`; :attr:`orientation` says which), else None.
-        result: 0 on success, 1 if a step failed (then the arrays stop at the last good node;
-            in a batch: 1 if any member failed).
+        result: how the run ended, a :class:`RESULTS` code (an int: 0 on success, 1 if a step failed;
+            then the arrays stop at the last good node; in a batch: 1 if any member failed).
+            :attr:`success` and :attr:`message` say it in words.
         failed_step: index of the first failed step, or -1 (in a batch: the earliest).
         failed_residual: the residual of the failed step's solve (NaN when no step failed).
         results, failed_steps, failed_residuals: in a batch, each member's result code, failed
             step (-1 if none) and the residual of its failed solve (NaN if none), (B,); None for
             a single trajectory.
         member_params: in a parameter batch, each member's parameter values, name -> (B,).
+        member_iterations: in a batch, each member's total and maximum Newton iterations, (B, 2).
+        final_state: the integrator's state after the last step (continue the run with
+            `simulate(..., state0=sol.final_state, t0=float(sol.t[-1]))`); None for the reference.
+        states: the integrator's states at the saved nodes when asked (`SaveAt(states=True)`).
         hidden_momentum: the GNI family's hidden momentum $\\|p^+ - \\bar p\\|/\\|\\bar p\\|$ (norms in
             $\\mathbb{G}^{-1}$) at each saved node, (T,); None for other methods
             (:mod:`gnipy.diagnostics`; its verdict is :attr:`hidden_verdict`).
@@ -97,6 +128,9 @@ class Solution(eqx.Module):
     failed_steps: jax.Array | None = None
     failed_residuals: jax.Array | None = None
     member_params: dict | None = None
+    member_iterations: jax.Array | None = None
+    final_state: Any = None
+    states: Any = None
     hidden_momentum: jax.Array | None = None
     hidden_expected: jax.Array | None = None
     energy_plus: jax.Array | None = None
@@ -126,6 +160,25 @@ class Solution(eqx.Module):
         return hidden_momentum_verdict(self.t, self.hidden_momentum, self.hidden_expected, self.h)
 
     @property
+    def success(self) -> bool:
+        """Whether every step converged (in a batch: of every member)."""
+        return int(self.result) == RESULT_SUCCESS
+
+    @property
+    def message(self) -> str:
+        """How the run ended, in words (with the failed step and time when one failed)."""
+        code = RESULTS(int(self.result))
+        if code == RESULTS.successful:
+            return code.message
+        fails = self.failures()
+        if not fails:
+            return code.message
+        f = fails[0]
+        who = "" if f["member"] is None else f"member {f['member']}: "
+        more = f" ({len(fails)} members failed)" if len(fails) > 1 else ""
+        return f"{who}step {f['step']} (t = {f['time']:.6g}) failed: {code.message} (residual {f['residual']:.3e}){more}"
+
+    @property
     def batch_size(self) -> int | None:
         """The number of members of a batch, or None for a single trajectory."""
         return None if self.results is None else int(np.shape(self.results)[0])
@@ -152,6 +205,7 @@ class Solution(eqx.Module):
         if self.member_params is not None:
             params = tuple((k, float(np.asarray(v)[i])) for k, v in self.member_params.items())
         fs = int(np.asarray(self.failed_steps)[i])
+        its = self.iterations if self.member_iterations is None else self.member_iterations[i]
         fr = float("nan") if self.failed_residuals is None else float(np.asarray(self.failed_residuals)[i])
 
         def row(a):
@@ -159,7 +213,7 @@ class Solution(eqx.Module):
 
         return Solution(
             self.t[:good], self.q[i, :good], self.v[i, :good], self.p[i, :good], self.energy[i, :good],
-            self.constraint_residual[i, :good], self.iterations,
+            self.constraint_residual[i, :good], its,
             R=row(self.R),
             result=int(np.asarray(self.results)[i]), failed_step=fs, failed_residual=fr, system=self.system,
             method=self.method,
@@ -391,4 +445,31 @@ class Solution(eqx.Module):
             f"  Newton iterations: total {int(np.asarray(self.iterations)[0])}, max per step {int(np.asarray(self.iterations)[1])}",
             *self._diagnostic_lines(),
         ]
+        if not self.success:
+            lines.insert(1, f"  result: {self.message}")
         return "\n".join(lines)
+
+    def _repr_html_(self) -> str:
+        """The solution as an HTML table (Jupyter): what ran, how it ended, the diagnostics."""
+        esc = _html.escape
+        batch = self.batch_size
+        rows = [("system", self.system), ("method", self.method), ("h", f"{self.h:g}"),
+                ("steps", f"{self.steps}"),
+                ("t", f"{float(self.t[0]):g} .. {float(self.t[-1]):g} ({len(self.t)} saved nodes)" if len(self.t) else "none"),
+                ("members", str(batch)) if batch is not None else None,
+                ("result", f"{'success' if self.success else 'FAILED'}: {self.message}")]
+        e = np.asarray(self.energy)
+        r = np.abs(np.asarray(self.constraint_residual))
+        if e.size and batch is None:
+            rows.append(("energy", f"initial {e[0]:.12g}, max |E − E0| = {np.max(np.abs(e - e[0])):.3e}"))
+        if r.size:
+            rows.append(("constraint residual", f"max {np.nanmax(r):.3e}"))
+        rows.append(("Newton iterations", f"total {int(np.asarray(self.iterations)[0])}, "
+                                          f"max per step {int(np.asarray(self.iterations)[1])}"))
+        if self.conserved:
+            rows.append(("conserved", self.conserved))
+        body = "".join(f"<tr><th style='text-align:left'>{esc(k)}</th><td style='text-align:left'>{esc(v)}</td></tr>"
+                       for k, v in (row for row in rows if row is not None))
+        warn = "".join(f"<li>{esc(w)}</li>" for w in self.warnings())
+        warn = f"<p><b>Warnings</b></p><ul>{warn}</ul>" if warn else ""
+        return f"<div><p><b>gnipy.Solution</b></p><table>{body}</table>{warn}</div>"

@@ -86,7 +86,7 @@ import numpy as np
 
 from .files import format_bytes
 
-from .diagnostics import StreamedVerdicts, conserved_quantity, energy_is_invariant, saved_node_diagnostics
+from .diagnostics import StreamedVerdicts, conserved_quantity, energy_is_invariant
 from .files import (
     MARKER,
     DataChecksum,
@@ -102,7 +102,8 @@ from .files import (
 )
 from .integrators.base import Integrator, MethodError
 from .models.registry import registered_invariants
-from .simulate import MAX_STEPS, _init_one, _integrate, default_initial_condition, resolve_steps
+from .saveat import SaveAt
+from .simulate import MAX_STEPS, _init_one, default_initial_condition, resolve_steps, simulate
 from .solution import RESULT_SOLVER_FAILED, SolverFailure
 from .errors import InputError
 from .system import System
@@ -652,28 +653,30 @@ def simulate_to_file(
         if stop_after_chunks is not None and computed >= stop_after_chunks:
             return _partial_result(path, parts, c, steps, n_chunks, resumed, notes)
         k_start, length, n_blocks, remainder, k_local, keep = plan.chunk(c)
-        b, v, p, energy, residual, fail_k, fail_res, its, state, diag = _integrate(
-            method, core, state, hj, n_blocks, np.int32(save_every), np.int32(remainder), bool(remainder),
-        )
-        fail_k = int(fail_k)
+        # the chunk is one call of the driver, continuing from the previous chunk's state
+        sol = simulate(system, method, h=h, steps=length, saveat=SaveAt(every=save_every), state0=state,
+                       t0=plan.times(k_start, np.zeros(1))[0], throw=False)
+        state = sol.final_state
+        fail_k, fail_res, its = sol.failed_step, sol.failed_residual, sol.iterations
+        keep = keep[: len(sol.t)]  # a failed chunk stops at its last good node
         if fail_k >= 0:
-            keep &= k_local <= fail_k  # may keep no node: the step after the previous part's last failed
+            keep &= k_local[: len(sol.t)] <= fail_k  # may keep no node: the step after the previous part's last failed
             failed_step = k_start + fail_k
-        q, R = system.space.coordinates(b), system.space.orientation(b)
+        k_local = k_local[: len(sol.t)]
         variables = {
             "time": (("time",), plan.times(k_start, k_local)[keep]),
             "step": (("time",), (k_start + k_local)[keep]),
-            "q": (("time", "coordinate"), np.asarray(q)[keep]),
-            "v": (("time", "velocity"), np.asarray(v)[keep]),
-            "p": (("time", "velocity"), np.asarray(p)[keep]),
-            "energy": (("time",), np.asarray(energy)[keep]),
-            "constraint_residual": (("time", "constraint"), np.asarray(residual)[keep]),
+            "q": (("time", "coordinate"), np.asarray(sol.q)[keep]),
+            "v": (("time", "velocity"), np.asarray(sol.v)[keep]),
+            "p": (("time", "velocity"), np.asarray(sol.p)[keep]),
+            "energy": (("time",), np.asarray(sol.energy)[keep]),
+            "constraint_residual": (("time", "constraint"), np.asarray(sol.constraint_residual)[keep]),
         }
-        if R is not None:
-            variables["R"] = (("time", "i", "j"), np.asarray(R)[keep])
-        if diag is not None:  # the GNI family's diagnostics at the nodes (as Solution.to_xarray writes them)
-            diag = saved_node_diagnostics(core, b, v, p, diag, h)
-            for name, a in zip(("hidden_momentum", "hidden_momentum_expected", "energy_plus"), diag):
+        if sol.R is not None:
+            variables["R"] = (("time", "i", "j"), np.asarray(sol.R)[keep])
+        if sol.hidden_momentum is not None:  # the GNI family's diagnostics at the nodes (as Solution.to_xarray writes them)
+            for name, a in zip(("hidden_momentum", "hidden_momentum_expected", "energy_plus"),
+                               (sol.hidden_momentum, sol.hidden_expected, sol.energy_plus)):
                 variables[name] = (("time",), np.asarray(a)[keep])
         for i, leaf in enumerate(jax.tree_util.tree_leaves(state)):
             a = _storage(leaf)

@@ -33,6 +33,20 @@ from .errors import InputError
 __all__ = ["System"]
 
 
+def _number(x) -> float:
+    """A provenance number: `float(x)`, or for a value traced by JAX (a parameter being
+    differentiated) its value where known now, else NaN (the arrays of the functions carry it)."""
+    if isinstance(x, jax.core.Tracer):
+        try:
+            from jax._src.core import to_concrete_value
+
+            c = to_concrete_value(x)
+        except Exception:  # pragma: no cover
+            c = None
+        return float("nan") if c is None else float(c)
+    return float(x)
+
+
 def _fmt(x: float) -> str:
     return f"{float(x):.3e}"
 
@@ -165,9 +179,11 @@ class System(eqx.Module):
         self.coordinates = coordinates
         self.velocities = velocities
         self.name = str(name)
-        self.params = tuple((str(k), float(v)) for k, v in (params or {}).items())
+        self.params = tuple((str(k), _number(v)) for k, v in (params or {}).items())
         if defaults is not None:
-            defaults = tuple(None if d is None else tuple(float(x) for x in np.ravel(d)) for d in defaults)
+            defaults = tuple(None if d is None else tuple(_number(x) for x in jnp.ravel(jnp.asarray(d)))
+                             if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(d))
+                             else tuple(float(x) for x in np.ravel(d)) for d in defaults)
         self.defaults = defaults
         self.orientation_note = "" if orientation_note is None else str(orientation_note)
 

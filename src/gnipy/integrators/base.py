@@ -8,19 +8,21 @@ the node held by `state`.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from typing import ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optimistix as optx
 
 from ..linalg import solve as small_solve
 from ..linalg import solve_spd
 from ..errors import MethodError
 
-__all__ = ["Integrator", "StepInfo", "MethodError", "solve_step", "newton", "default_root_finder"]
+__all__ = ["Integrator", "StepInfo", "MethodError", "solve_step", "implicit_solve", "newton", "default_root_finder"]
 
 
 class StepInfo(NamedTuple):
@@ -174,6 +176,49 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
     return z, StepInfo(ok, k, residual)
 
 
+def implicit_solve(F: Callable, guess, solve: Callable, *args):
+    r"""`solve(F, guess, *args) -> (z, info)` with the derivative of the root from the implicit function
+    theorem: $dz = -(\partial F/\partial z)^{-1}\,\partial F/\partial\theta\;d\theta$ for whatever
+    `F` closes over (the state, the parameters of the system, h).
+
+    The iterations themselves are never differentiated, so forward and reverse mode (`jax.jvp`,
+    `jax.grad`) cost one small linear solve per step instead of the iterations' derivatives, and
+    reverse mode works through the `while_loop` of :func:`newton`. (Written here rather than with
+    `jax.lax.custom_root`, which cannot carry the integer and boolean fields of :class:`StepInfo`
+    as auxiliary output.) `solve` must not close over traced values: pass them in `args` (they
+    are not differentiated: tolerances, scales).
+    """
+    F_closed, consts = jax.closure_convert(F, guess)
+    return _root(F_closed, solve, len(args), guess, *args, *consts)
+
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0, 1, 2))
+def _root(F_closed, solve, n_args, guess, *rest):
+    args, consts = rest[:n_args], rest[n_args:]
+    args = jax.lax.stop_gradient(args)
+    return solve(lambda z: F_closed(z, *consts), jax.lax.stop_gradient(guess), *args)
+
+
+@_root.defjvp
+def _root_jvp(F_closed, solve, n_args, primals, tangents):
+    guess, *rest = primals
+    consts, dconsts = rest[n_args:], tangents[1 + n_args:]
+    z, info = _root(F_closed, solve, n_args, guess, *rest)
+    # ∂F/∂θ·dθ at the root, then dz = −J⁻¹ (∂F/∂θ·dθ): linear in the tangents, so reverse mode
+    # transposes it (jnp.linalg.solve is a custom_linear_solve)
+    _, rhs = jax.jvp(lambda *c: F_closed(z, *c), tuple(consts), tuple(dconsts))
+    J = jax.jacfwd(lambda zz: F_closed(zz, *consts))(z)
+    dz = -jnp.linalg.solve(J, rhs)
+
+    def zero(x):
+        x = jnp.asarray(x)
+        if jnp.issubdtype(x.dtype, jnp.inexact):
+            return jnp.zeros_like(x)
+        return np.zeros(x.shape, dtype=jax.dtypes.float0)
+
+    return (z, info), (dz, jax.tree_util.tree_map(zero, info))
+
+
 def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: int = 50, floor_scale=None):
     """Solve `F(z) = 0` for the step unknowns.
 
@@ -196,7 +241,11 @@ def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: in
         ok = jnp.all(jnp.isfinite(z))
         return z, StepInfo(ok, jnp.asarray(1, dtype=jnp.int32), jnp.asarray(0.0, dtype=z.dtype))
     if solver is None:
-        return newton(F, guess, max_steps=max_steps, floor_scale=floor_scale)
+        if floor_scale is None:
+            return implicit_solve(F, guess, lambda f, z0: newton(f, z0, max_steps=max_steps))
+        return implicit_solve(
+            F, guess, lambda f, z0, scale: newton(f, z0, max_steps=max_steps, floor_scale=scale), floor_scale
+        )
     # The Cauchy test of optx.Newton asks |F| < atol absolutely, but F has a round-off floor of
     # about eps·|dF/dz|·|z| (e.g. G(z - q)/h), which passes atol once |z|/h is large, and the solve
     # then never terminates. Dividing F by that scale leaves the Newton iterates unchanged and
@@ -238,6 +287,17 @@ class Integrator(eqx.Module):
     def observe(self, system, state, h):
         """The `(b, v, p)` reported at the node that `state` holds (b: the base point)."""
         raise NotImplementedError
+
+    #: Whether :meth:`change_step` can continue a run with another step size (then `simulate`
+    #: shortens the last step to end exactly at `t_final`).
+    can_change_step: ClassVar[bool] = False
+
+    def change_step(self, system, state, h_old, h_new):
+        """The state from which steps of size `h_new` continue a run made with steps of `h_old`
+        (:attr:`can_change_step`; by default the state unchanged, for states that do not depend on h)."""
+        if not self.can_change_step:
+            raise NotImplementedError(f"{self.name}: the step size cannot change during a run")
+        return state
 
     def hidden_momentum(self, system, state, h):
         """The GNI family's hidden momentum $p^+_k - \\bar p_k = Q^*(p^+_k - \\Pi)$ at the node that

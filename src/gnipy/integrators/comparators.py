@@ -168,6 +168,7 @@ class McLachlanPerlmutter(Integrator):
     root_finder: Any = None
     max_steps: int = eqx.field(static=True, default=50)
     name: ClassVar[str] = "mp"
+    can_change_step: ClassVar[bool] = True  # the state (q, v) does not depend on h
     order: ClassVar[int | None] = 2
 
     def check(self, system, q0) -> None:

@@ -117,6 +117,16 @@ class GNI(Integrator):
         p1 = p_minus + space.legendre_jump(ld, b, z)
         return GNIState(b1, p1, x_err), info
 
+    can_change_step: ClassVar[bool] = True
+
+    def change_step(self, system, state, h_old, h_new):
+        """Rescale the hidden impulse to the new step: $p^+ \\leftarrow \\bar p + (h_{new}/h_{old})(p^+ - \\bar p)$
+        ($p^+ - \\bar p \\approx -\\tfrac h2\\mu^T\\lambda$ is proportional to the step)."""
+        b, p_plus, x_err = state
+        G, mu, Pi = self._node(system, b)
+        _, p_bar, _ = reflect_and_report(G, mu, Pi, p_plus)
+        return GNIState(b, p_bar + (h_new / h_old) * (p_plus - p_bar), x_err)
+
     def observe(self, system, state, h):
         b, p_plus, _ = state
         G, mu, Pi = self._node(system, b)

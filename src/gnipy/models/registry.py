@@ -7,6 +7,8 @@ import dataclasses
 from collections.abc import Callable, Mapping
 from typing import Any
 
+import jax
+
 from ..errors import InputError
 from ..system import System
 
@@ -58,6 +60,9 @@ class ModelSpec:
             if k not in params:
                 known = ", ".join(params) or "none"
                 raise InputError(f"--set/params: unknown parameter {k!r} of model {self.name!r} (known: {known})")
+            if isinstance(v, jax.core.Tracer):  # differentiated with respect to it (jax.grad): kept traced
+                params[k] = v
+                continue
             try:
                 v = float(v)
             except (TypeError, ValueError) as e:

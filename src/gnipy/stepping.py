@@ -1,0 +1,217 @@
+"""The one stepping loop of gnipy: every simulation, streamed run, sweep and experiment steps here
+(through :func:`gnipy.simulate`).
+
+Two compiled forms of the same loop over one method's `step`:
+
+- :func:`run_nodes` (the default): between saved nodes a `fori_loop` whose trip count is traced,
+  so runs that save as many nodes share one compilation whatever their step counts and h;
+- :func:`run_nodes_checkpointed` (under a JAX transformation: `jax.grad`, `jax.jacrev`,
+  `jax.jacfwd`, `jax.jit` of a simulation): static trip counts (reverse mode cannot differentiate
+  a loop of unknown length) in blocks of at most L steps, each block rematerialized on the
+  backward pass (`jax.checkpoint`), so reverse mode keeps about (steps/L + L) states instead of
+  one per step. The implicit steps' solves are differentiated by the implicit function theorem
+  (:func:`gnipy.integrators.base.implicit_solve`), not through their iterations.
+
+Both keep the same bookkeeping: the first failed step (a solve that did not converge or a
+non-finite state) is recorded with its residual, and the state stays at the last good node.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+__all__ = ["run_nodes", "run_nodes_checkpointed", "checkpoint_blocks", "progress_reporter"]
+
+_INT = jnp.int32
+
+
+def _tree_finite(tree) -> jax.Array:
+    leaves = [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(tree) if eqx.is_inexact_array(x)]
+    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
+
+
+# The progress callback: compiled code calls `_report(steps_done)` through `jax.debug.callback`;
+# it forwards to the reporter of the `simulate` call in progress (one Python function, so that the
+# compiled program does not depend on which reporter it is).
+_REPORTER: list[Callable[[int], None]] = []
+
+
+def _report(k) -> None:
+    if _REPORTER:
+        _REPORTER[-1](int(np.max(np.asarray(k))))
+
+
+class progress_reporter:
+    """Context manager: while active, compiled runs with progress call `fn(steps_done)`."""
+
+    def __init__(self, fn: Callable[[int], None]):
+        self.fn = fn
+
+    def __enter__(self):
+        _REPORTER.append(self.fn)
+        return self
+
+    def __exit__(self, *exc):
+        _REPORTER.pop()
+        return False
+
+
+def _stepper(method, system):
+    def one_step(carry, h):
+        state, k, fail_k, fail_res, it_tot, it_max = carry
+        new, info = method.step(system, state, h)
+        ok = info.ok & _tree_finite(new) & (fail_k < 0)
+        newly_failed = (~ok) & (fail_k < 0)
+        state = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, state)
+        res = jnp.where(jnp.isfinite(info.residual), info.residual, jnp.inf)
+        fail_k = jnp.where(newly_failed, k, fail_k)
+        fail_res = jnp.where(newly_failed, res, fail_res)
+        it = jnp.where(ok, info.iterations, 0).astype(_INT)
+        return state, k + 1, fail_k, fail_res, it_tot + it, jnp.maximum(it_max, it)
+
+    return one_step
+
+
+def _observer(method, system, save_states: bool):
+    def observe(state, h):
+        b, v, p = method.observe(system, state, h)
+        return b, v, p, method.hidden_momentum(system, state, h), (state if save_states else None)
+
+    return observe
+
+
+def _carry0(state0):
+    return (state0, jnp.asarray(0, _INT), jnp.asarray(-1, _INT), jnp.asarray(0.0), jnp.asarray(0, _INT),
+            jnp.asarray(0, _INT))
+
+
+def _final_step(method, system, carry, h, h_last):
+    """The shortened last step: the state rescaled to the new step size, then one step of it."""
+    state = method.change_step(system, carry[0], h, h_last)
+    return _stepper(method, system)((state,) + carry[1:], h_last)
+
+
+def _finish(method, system, carry, obs):
+    b, v, p, hidden, states = obs
+    energy = jax.vmap(system.energy)(b, v)
+    residual = jax.vmap(system.constraint_residual)(b, v)
+    _, _, fail_k, fail_res, it_tot, it_max = carry
+    return dict(b=b, v=v, p=p, hidden=hidden, states=states, energy=energy, residual=residual, fail_k=fail_k,
+                fail_res=fail_res, iterations=jnp.stack([it_tot, it_max]), final_state=carry[0])
+
+
+def _concat(obs, last):
+    return jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a, b[None]]), obs, last)
+
+
+def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool, save_final: bool,
+              save_states: bool = False, progress: bool = False, progress_stride=1):
+    """Run from `state0`, observing after each `lengths[i]` steps, then `tail` steps more and (with
+    `partial`) one shortened step of `h_last`, observed if `save_final`.
+
+    `lengths`, `tail`, `h` and `h_last` are traced: only the number of saved nodes fixes the
+    compiled program. With `progress` (static: one more program), every `progress_stride` steps
+    (traced) the steps done are reported to the active :class:`progress_reporter`.
+
+    Returns:
+        A dict: `b, v, p` (saved nodes), `hidden` (the GNI family's p⁺ − p̄, else None), `states`
+        (if `save_states`), `energy`, `residual`, `fail_k` (first failed step, -1 if none),
+        `fail_res`, `iterations` (total, max), `final_state`.
+    """
+    step = _stepper(method, system)
+    observe = _observer(method, system, save_states)
+
+    def one_step(c, h):
+        c = step(c, h)
+        if progress:
+            jax.lax.cond(c[1] % progress_stride == 0, lambda k: jax.debug.callback(_report, k), lambda k: None, c[1])
+        return c
+
+    def steps(carry, n):
+        return jax.lax.fori_loop(0, n, lambda _, c: one_step(c, h), carry)
+
+    def block(carry, n):
+        carry = steps(carry, n)
+        return carry, observe(carry[0], h)
+
+    carry = _carry0(state0)
+    carry, obs = jax.lax.scan(block, carry, lengths)
+    carry = steps(carry, tail)
+    if partial:
+        carry = _final_step(method, system, carry, h, h_last)
+        if save_final:
+            obs = _concat(obs, observe(carry[0], h_last))
+    return _finish(method, system, carry, obs)
+
+
+def checkpoint_blocks(lengths, tail: int, block: int | None = None):
+    """Split the segments between saved nodes (`lengths`, then the unsaved `tail`) into blocks of at
+    most `block` steps (default about the square root of the steps, balanced over each segment).
+
+    Returns `(L, block_lengths, saved)`: the block size, each block's steps, and the indices of the
+    blocks after which a node is saved (in order).
+    """
+    segs = [int(n) for n in lengths] + ([int(tail)] if tail else [])
+    total = sum(segs)
+    if block is None:
+        block = max(1, math.isqrt(max(total, 1)))
+        longest = max(segs, default=1)
+        if longest and longest <= block:
+            block = longest
+    block = max(1, int(block))
+    out, saved = [], []
+    for i, n in enumerate(segs):
+        pieces = max(1, -(-n // block))
+        base, extra = divmod(n, pieces)
+        out.extend(base + (1 if j < extra else 0) for j in range(pieces))
+        if i < len(lengths):
+            saved.append(len(out) - 1)
+    L = max(out, default=1) or 1
+    return L, tuple(out), tuple(saved)
+
+
+def run_nodes_checkpointed(method, system, state0, h, lengths: tuple, tail: int, h_last, *, partial: bool,
+                           save_final: bool, save_states: bool = False, block: int | None = None):
+    """The loop of :func:`run_nodes` with static trip counts, for JAX transformations (reverse mode
+    included): blocks of at most L steps (:func:`checkpoint_blocks`), each a `lax.scan` of L steps
+    of which those past the block's length are masked, rematerialized on the backward pass
+    (`jax.checkpoint`). Same arguments and result as :func:`run_nodes` (`lengths`, `tail` static)."""
+    one_step = _stepper(method, system)
+    observe = _observer(method, system, save_states)
+    first_saved = len(lengths) > 0 and lengths[0] == 0
+    seg = lengths[1:] if first_saved else lengths
+    L, blocks, saved = checkpoint_blocks(seg, tail, block)
+
+    @jax.checkpoint
+    def run_block(carry, n):
+        def masked(c, i):
+            new = one_step(c, h)
+            return jax.tree_util.tree_map(lambda a, b: jnp.where(i < n, a, b), new, c), None
+
+        return jax.lax.scan(masked, carry, jnp.arange(L, dtype=_INT))[0]
+
+    def body(carry, n):
+        carry = run_block(carry, n)
+        return carry, observe(carry[0], h)
+
+    carry = _carry0(state0)
+    obs0 = observe(state0, h)
+    if any(blocks):
+        carry, obs = jax.lax.scan(body, carry, jnp.asarray(blocks, dtype=_INT))
+        idx = np.asarray(saved, dtype=np.int64)
+        obs = jax.tree_util.tree_map(lambda a: a[idx], obs)
+    else:
+        obs = jax.tree_util.tree_map(lambda a: jnp.zeros((0,) + a.shape, a.dtype), obs0)
+    if first_saved:
+        obs = jax.tree_util.tree_map(lambda a, b: jnp.concatenate([a[None], b]), obs0, obs)
+    if partial:
+        carry = _final_step(method, system, carry, h, h_last)
+        if save_final:
+            obs = _concat(obs, observe(carry[0], h_last))
+    return _finish(method, system, carry, obs)
