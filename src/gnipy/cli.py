@@ -696,11 +696,11 @@ def _guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--
         return fn()
     except _UsageError as e:
         usage(str(e))
-    except gnipy.InputError as e:
-        usage(_rename(str(e)))
-    except gnipy.MethodError as e:
+    except gnipy.MethodError as e:  # before InputError, of which it is a subclass
         msg = _rename(str(e))
         usage(msg if msg.startswith(method_option) else f"{method_option}: {msg}")
+    except gnipy.InputError as e:
+        usage(_rename(str(e)))
     except gnipy.SolverFailure as e:
         _fail(f"solver failure: {e}", EXIT_FAILURE)
     except _WriteFailure as e:
