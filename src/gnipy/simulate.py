@@ -24,7 +24,7 @@ from .integrators.base import Integrator
 from .saveat import GRID_RTOL, SaveAt, schedule
 from .solution import RESULTS, Solution
 from .stepping import progress_reporter, run_nodes, run_nodes_checkpointed
-from .system import System, describe_orientations
+from .system import System, concrete_value as _concrete, describe_orientations
 
 __all__ = ["simulate", "resolve_steps", "resolve_run", "SaveAt", "MAX_STEPS", "MAX_TOTAL_STEPS", "MIN_STEP_SIZE"]
 
@@ -36,21 +36,6 @@ MAX_TOTAL_STEPS = 2**53
 
 #: The smallest step size accepted: the smallest normal float64 (below it, precision is lost).
 MIN_STEP_SIZE = float(np.finfo(np.float64).tiny)
-
-
-def _concrete(x):
-    """The value of `x` when it is known now (a Python/NumPy value, or a tracer of `jax.grad` or
-    `jax.jacfwd` called outside `jit`), else None (an abstract tracer of `jax.jit`)."""
-    if not isinstance(x, jax.core.Tracer):
-        return x
-    try:
-        from jax._src.core import to_concrete_value  # private: absent in some versions, then None
-    except ImportError:  # pragma: no cover
-        return None
-    try:
-        return to_concrete_value(x)
-    except Exception:  # pragma: no cover
-        return None
 
 
 def _traced(*trees) -> bool:
@@ -164,9 +149,6 @@ def default_initial_condition(system: System, q0, v0, R0):
             R0 = system.defaults[2]
     return q0, v0, R0
 
-
-
-_PROGRAMS = {}
 
 
 @jit

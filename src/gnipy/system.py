@@ -33,18 +33,24 @@ from .errors import InputError
 __all__ = ["System"]
 
 
+def concrete_value(x):
+    """The value of `x` when it is known now (a Python/NumPy value, or a tracer of `jax.grad` or
+    `jax.jacfwd` called outside `jit`), else None (an abstract tracer of `jax.jit`)."""
+    if not isinstance(x, jax.core.Tracer):
+        return x
+    try:
+        from jax._src.core import to_concrete_value  # private: absent in some versions, then None
+
+        return to_concrete_value(x)
+    except Exception:  # pragma: no cover
+        return None
+
+
 def _number(x) -> float:
     """A provenance number: `float(x)`, or for a value traced by JAX (a parameter being
     differentiated) its value where known now, else NaN (the arrays of the functions carry it)."""
-    if isinstance(x, jax.core.Tracer):
-        try:
-            from jax._src.core import to_concrete_value
-
-            c = to_concrete_value(x)
-        except Exception:  # pragma: no cover
-            c = None
-        return float("nan") if c is None else float(c)
-    return float(x)
+    c = concrete_value(x)
+    return float("nan") if c is None else float(c)
 
 
 def _fmt(x: float) -> str:
