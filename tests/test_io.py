@@ -95,6 +95,55 @@ def test_batch_dataset_has_the_same_time_coordinate():
     assert ds["valid"].attrs["long_name"] and ds.attrs["Conventions"] == "CF-1.8"
 
 
+def test_the_schema_states_what_the_files_hold(tmp_path):
+    """Every variable of a result file and of a batch's dataset is one gnipy.schema states, with
+    its dimensions (`member` in front in a batch) and its attributes."""
+    from gnipy import schema
+
+    sol = gnipy.simulate(gnipy.make_system("rolling-ball"), "gni-midpoint", h=0.1, steps=4)  # R, diagnostics
+    write_netcdf(sol, tmp_path / "run.nc")
+    ds = read_netcdf(tmp_path / "run.nc")
+    assert {"q", "v", "p", "energy", "constraint_residual", "R", "energy_plus", "hidden_momentum",
+            "hidden_momentum_expected", "time", "node", "step", "coordinate", "velocity"} <= set(ds.variables)
+    for name in ds.variables:
+        assert ds[name].dims == schema.dims(name), name
+        assert schema.variable_attrs(name).items() <= ds[name].attrs.items(), name
+    assert ds["q"].attrs["long_name"] == "configuration" and ds["R"].attrs["long_name"] == "orientation R (group matrix)"
+    assert ds["energy"].attrs["long_name"] == "energy ½vᵀGv + V" and "units" not in ds["energy"].attrs
+
+    spec = gnipy.get_model("vertical-disk")
+    q0, v0 = spec.initial_condition(spec.params)
+    systems = gnipy.model_systems("vertical-disk", m=np.array([1.0, 2.0]))
+    batch = gnipy.simulate(systems, "gni-trapezoid", np.stack([q0, q0]), np.stack([v0, v0]), h=0.5,
+                           steps=4).to_xarray()
+    assert {"result", "failed_step", "failed_residual", "valid", "param_m", "member"} <= set(batch.variables)
+    for name in batch.variables:
+        lead = ("member",) if name != "member" and "member" in batch[name].dims else ()
+        assert batch[name].dims == schema.dims(name, lead), name
+        assert schema.variable_attrs(name).items() <= batch[name].attrs.items(), name
+    assert batch["param_m"].attrs["long_name"] == "parameter m"
+    assert batch["valid"].attrs["long_name"] == "saved node computed (False after a failed step)"
+
+
+def test_schema_apply_and_the_names_gnipy_io_shares():
+    from gnipy import schema
+
+    ds = xr.Dataset({"q": (("time", "coordinate"), np.zeros((2, 2))), "mine": (("time",), [1.0, 2.0])},
+                    coords={"coordinate": ["x", "y"], **schema.time_coordinates([0.0, 0.5], 0.5)})
+    ds["q"].attrs["long_name"] = "kept"
+    assert schema.apply(ds) is ds
+    assert ds["q"].attrs == {"long_name": "kept", "components": "x, y"}  # set attributes are kept
+    assert ds["mine"].attrs == {}  # not gnipy's: nothing invented
+    assert ds["time"].attrs == {"standard_name": "time", "long_name": "time", "units": "s", "axis": "T"}
+    np.testing.assert_array_equal(ds["step"].values, [0, 1])
+    assert schema.variable_attrs("valid", sweep=True)["long_name"].endswith("or chunk not done)")
+    with pytest.raises(KeyError):
+        schema.dims("nope")
+    for name in ("VARIABLE_ATTRS", "VARIABLE_UNITS", "TIME_UNITS", "CONVENTIONS", "UNITS_CONVENTION",
+                 "time_coordinates"):
+        assert getattr(gnipy.io, name) is getattr(schema, name), name
+
+
 def test_files_of_the_earlier_layout_still_read(tmp_path):
     """A file written when `time` was the node index and the times were a variable `t`: read_netcdf
     and the plots give it the present layout."""

@@ -91,7 +91,7 @@ def test_resume_refuses_a_different_run(ball, tmp_path):
     path = tmp_path / "ball.nc"
     _run(ball, path, stop_after_chunks=1)
     system, q0, v0 = ball
-    with pytest.raises(OutputError, match=r"--resume: the interrupted run .* has a different h"):
+    with pytest.raises(OutputError, match=r"resume: the interrupted run .* has a different h"):
         simulate_to_file(system, "gni-trapezoid", q0, v0, path=path, h=0.02, steps=STEPS, save_every=STRIDE,
                          chunk_steps=CHUNK, resume=True)
 

@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+import warnings
 
 import numpy as np
 import pytest
@@ -21,12 +22,12 @@ from typer.testing import CliRunner
 
 import gnipy
 from gnipy.cli import app
-from gnipy.sweep import GridAxis, SweepError, open_sweep, parse_grid, run_sweep
+from gnipy.sweep import ChunkLayout, GridAxis, SweepError, open_sweep, parse_grid, run_sweep
 
 runner = CliRunner()
 
-# The rolling ball (R² × SO(3)): q, v and R per member; 6 members in chunks of 4, so
-# that the last chunk (2 members) is padded on input.
+# The rolling ball (R² × SO(3)): q, v and R per member; a 2 x 3 grid in chunks (blocks) of
+# 1 x 2, so that the last chunk of each row (1 member) is padded on input.
 BALL = dict(
     model="rolling-ball",
     grid=["Omega=0.5:1:2", "q0.x=-1:1:3"],
@@ -34,7 +35,7 @@ BALL = dict(
     h=0.05,
     steps=20,
     save_every=10,
-    chunk_size=4,
+    chunk_size=2,
 )
 
 # The contact oscillator with members that fail (large initial velocity at a large
@@ -70,6 +71,21 @@ def _assert_same_data(a: xr.Dataset, b: xr.Dataset):
     assert json.loads(a.attrs["sweep_spec"]) == json.loads(b.attrs["sweep_spec"])
 
 
+def _assert_same_bits(a, b):
+    """Every array of the two stores, as stored (zarr, no decoding): the same bytes, NaN included."""
+    a, b = (
+        {name: np.asarray(x[...]) for name, x in zarr.open_group(str(p), mode="r").arrays()}
+        for p in (a, b)
+    )
+    assert sorted(a) == sorted(b)
+    for name in a:
+        assert a[name].dtype == b[name].dtype and a[name].shape == b[name].shape, name
+        if a[name].dtype.kind in "fiub":
+            assert a[name].tobytes() == b[name].tobytes(), name
+        else:  # the names of the coordinates and velocities
+            np.testing.assert_array_equal(a[name], b[name], err_msg=name)
+
+
 @pytest.fixture(scope="module")
 def client():
     from distributed import Client, LocalCluster
@@ -103,13 +119,12 @@ def osc_reference(client, tmp_path_factory):
 # --------------------------------------------------------------------------------------
 def test_every_member_equals_its_own_simulation(ball_store):
     out, report = ball_store
-    assert report.members == 6 and report.chunks == 2 and report.complete
-    assert report.chunks_computed == 2
+    assert report.members == 6 and report.chunks == 4 and report.complete
+    assert report.chunks_computed == 4 and report.chunk_size == 2
     assert report.failed_members == 0
-    ds = xr.open_zarr(out, consolidated=False)
-    assert ds.sizes["member"] == 6  # no padding in the store
+    ds = xr.open_zarr(out)
+    assert (ds.sizes["Omega"], ds.sizes["q0.x"]) == (2, 3)  # no padding in the store
     spec = gnipy.get_model("rolling-ball")
-    i = 0
     for Omega in (0.5, 1.0):
         for x in (-1.0, 0.0, 1.0):
             params = {**spec.params, "Omega": Omega}
@@ -127,17 +142,15 @@ def test_every_member_equals_its_own_simulation(ball_store):
                 save_every=10,
                 project_v0=True,
             )
-            assert ds["grid_Omega"].values[i] == Omega
-            assert ds["grid_q0.x"].values[i] == x
+            member = ds.sel({"Omega": Omega, "q0.x": x})
             for name in ("q", "v", "p", "R", "energy", "constraint_residual"):
                 np.testing.assert_allclose(
-                    ds[name].values[i],
+                    member[name].values,
                     np.asarray(getattr(one, name)),
                     rtol=0,
                     atol=1e-13,
-                    err_msg=f"{name}, member {i}",
+                    err_msg=f"{name}, member Omega={Omega}, q0.x={x}",
                 )
-            i += 1
     np.testing.assert_allclose(ds["time"].values, [0.0, 0.5, 1.0])
     assert (ds["result"].values == 0).all() and ds["valid"].values.all()
     assert ds["chunk_done"].values.all()
@@ -152,10 +165,9 @@ def test_open_sweep_gives_the_grid_as_dimensions(ball_store):
     np.testing.assert_array_equal(ds["Omega"].values, [0.5, 1.0])
     np.testing.assert_array_equal(ds["q0.x"].values, [-1.0, 0.0, 1.0])
     assert list(ds["velocity"].values) == ["dx", "dy", "omega1", "omega2", "omega3"]
-    flat = xr.open_zarr(out, consolidated=False)
-    # C order: member 4 is (Omega[1], q0.x[1])
+    raw = zarr.open_group(str(out), mode="r")  # the arrays as stored, the grid as their first axes
     np.testing.assert_array_equal(
-        ds["q"].sel({"Omega": 1.0, "q0.x": 0.0}).values, flat["q"].values[4]
+        ds["q"].sel({"Omega": 1.0, "q0.x": 0.0}).values, raw["q"][1, 1]
     )
     np.testing.assert_array_equal(
         ds["q"].isel(time=0).values[..., 0], [[-1.0, 0.0, 1.0]] * 2
@@ -165,24 +177,74 @@ def test_open_sweep_gives_the_grid_as_dimensions(ball_store):
     assert ds["time"].attrs["standard_name"] == "time" and "t" not in ds.variables
     np.testing.assert_array_equal(ds["node"].values, [0, 1, 2])
     np.testing.assert_array_equal(ds["step"].values, [0, 10, 20])
-    np.testing.assert_array_equal(
-        ds["q"].sel(time=1.0).values, flat["q"].values[:, 2].reshape(2, 3, 2)
-    )
+    np.testing.assert_array_equal(ds["q"].sel(time=1.0).values, raw["q"][:, :, 2])
     assert ds.attrs["Conventions"] == "CF-1.8" and ds.attrs["source"] == f"gnipy {gnipy.__version__}"
     assert "rolling-ball" in ds.attrs["title"] and ds.attrs["history"]
     assert "dR/dt = hat(xi) R" in ds.attrs["orientation"]
     assert all(ds[name].attrs["long_name"] for name in ds.data_vars)
-    # the zarr chunks are the sweep's chunks along member
-    assert flat["q"].encoding["chunks"][0] == 4
+    # the zarr chunks are the sweep's chunks (blocks of 1 x 2) along the grid axes
+    assert ds["q"].encoding["chunks"][:2] == (1, 2) and raw["q"].chunks[:2] == (1, 2)
     spec = json.loads(ds.attrs["sweep_spec"])
     assert spec["model"] == "rolling-ball" and spec["method"] == "gni-midpoint"
     assert spec["h"] == 0.05
-    assert spec["steps"] == 20 and spec["save_every"] == 10 and spec["chunk_size"] == 4
+    assert spec["steps"] == 20 and spec["save_every"] == 10 and spec["chunk_size"] == 2
     assert spec["grid"] == [
         GridAxis("Omega", 0.5, 1.0, 2).to_dict(),
         GridAxis("q0.x", -1.0, 1.0, 3).to_dict(),
     ]
     assert spec["gnipy_version"] == gnipy.__version__ and "Omega" not in spec["params"]
+
+
+def test_plain_xarray_open_zarr_gives_the_grid_without_warnings(ball_store):
+    """The store is an ordinary zarr store with consolidated metadata: `xr.open_zarr(path)`
+    opens it with the grid axes as dimensions, warns of nothing, and gives what open_sweep
+    gives."""
+    out, _ = ball_store
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        ds = xr.open_zarr(out).load()
+        # every entry of the store is a zarr node (no stray file to warn about when listed)
+        listed = sorted(zarr.open_group(str(out), mode="r", use_consolidated=False).array_keys())
+    assert zarr.open_group(str(out), mode="r").metadata.consolidated_metadata is not None
+    assert listed == sorted(json.loads(ds.attrs["store_arrays"]))
+    assert sorted(p.name for p in out.iterdir()) == sorted([*listed, "zarr.json"])
+    for name, dims in {"q": ("time", "coordinate"), "R": ("time", "i", "j"), "valid": ("time",),
+                       "result": (), "failed_time": ()}.items():
+        assert ds[name].dims == ("Omega", "q0.x", *dims), name
+    np.testing.assert_array_equal(ds["Omega"].values, np.linspace(0.5, 1.0, 2))
+    np.testing.assert_array_equal(ds["q0.x"].values, np.linspace(-1.0, 1.0, 3))
+    assert ds["Omega"].attrs["long_name"] == "grid axis Omega"
+    assert ds["failed_time"].attrs["units"] == "s" and ds["time"].attrs["units"] == "s"
+    assert "member" not in ds.dims and not any(str(k).startswith("grid_") for k in ds.variables)
+    assert ds.attrs["gnipy_owned"] == "gnipy sweep store"
+    opened = open_sweep(out)
+    assert set(opened.variables) == set(ds.variables) and opened.attrs == ds.attrs
+    for name in ds.variables:
+        assert opened[name].dims == ds[name].dims and opened[name].attrs == ds[name].attrs, name
+        np.testing.assert_array_equal(opened[name].values, ds[name].values, err_msg=name)
+
+
+@pytest.mark.parametrize("shape, chunk_size", [((2, 3), 2), ((2, 3), 4), ((6, 8), 20), ((6, 8), 3),
+                                               ((4, 5, 6), 12), ((4, 5, 6), 1), ((3,), 7), ((4, 5, 6), 500)])
+def test_chunks_are_blocks_of_consecutive_members(shape, chunk_size):
+    layout = ChunkLayout.of(shape, chunk_size)
+    assert layout.size <= chunk_size
+    index = np.arange(np.prod(shape)).reshape(shape)  # each member's number, C order
+    seen = np.zeros(shape, dtype=int)
+    previous_end = 0
+    for i in range(layout.chunks):
+        a, b = layout.member_range(i)
+        assert a == previous_end and 0 < b - a <= layout.size  # consecutive, in order
+        block = layout.slices(i)
+        np.testing.assert_array_equal(index[block].ravel(), np.arange(a, b))
+        seen[block] += 1
+        previous_end = b
+    assert previous_end == index.size and (seen == 1).all()  # every member in one chunk
+    done = np.arange(layout.chunks) % 3 == 1
+    expected = np.zeros(shape, dtype=bool)
+    for i in np.flatnonzero(done):
+        expected[layout.slices(i)] = True
+    np.testing.assert_array_equal(layout.member_mask(done), expected)
 
 
 def test_failed_members_are_recorded_not_raised(osc_reference):
@@ -259,15 +321,19 @@ def test_interrupted_cli_sweep_resumes_without_recomputing(
     n = int(done.sum())
     assert f"chunks: {24 - n} computed, {n} skipped" in res.output, res.output
     _assert_same_data(open_sweep(out), open_sweep(osc_reference[0]))
+    _assert_same_bits(out, osc_reference[0])  # the interrupted-then-resumed store, bit for bit
 
 
 def test_resume_after_max_chunks_and_after_an_unflagged_chunk(
     osc_reference, client, tmp_path
 ):
     out = tmp_path / "partial.zarr"
-    first = run_sweep(**OSC, out=out, client=client, progress=False, max_chunks=5)
+    calls = []
+    first = run_sweep(**OSC, out=out, client=client, progress=lambda *a: calls.append(a[:2]), max_chunks=5)
     counts = (first.chunks_computed, first.chunks_skipped, first.chunks_remaining)
     assert counts == (5, 0, 19)
+    assert calls[0] == (0, 24) and calls[-1] == (5, 24)  # progress(chunks done, chunks)
+    assert [c for c in calls if c[0] > 0] == [(k, 24) for k in range(1, 6)]
     assert not first.complete
     part = open_sweep(out, allow_incomplete=True)  # the chunks not done are marked
     not_done = part["result"].values == -1
@@ -279,11 +345,12 @@ def test_resume_after_max_chunks_and_after_an_unflagged_chunk(
 
     # a chunk whose data were (partly) written but whose flag was not: recomputed
     group = zarr.open_group(str(out), mode="r+")
-    group["q"][6:8] = -7.0
+    group["q"][0, 6:8] = -7.0  # chunk 3: members 6, 7 = (epsilon 0.1, v0.dx[6:8])
     group["chunk_done"][3] = False
     third = run_sweep(**OSC, out=out, client=client, progress=False)
     assert (third.chunks_computed, third.chunks_skipped) == (1, 23)
     _assert_same_data(open_sweep(out), open_sweep(osc_reference[0]))
+    _assert_same_bits(out, osc_reference[0])
     # done: nothing to compute (and no cluster is needed)
     again = run_sweep(**OSC, out=out, progress=False)
     assert (again.chunks_computed, again.chunks_skipped) == (0, 24)
@@ -325,7 +392,7 @@ def test_a_different_sweep_on_the_store_is_refused(osc_reference, client, tmp_pa
     assert "3 of 48 members failed" in _error_lines(res.output)[0], res.output
     assert "chunks: 2 computed, 0 skipped" in res.output
     assert "22 remaining" in res.output
-    attrs = xr.open_zarr(copy, consolidated=False).attrs
+    attrs = xr.open_zarr(copy).attrs
     assert json.loads(attrs["sweep_spec"])["h"] == 0.5
     # no temporary directories left
     assert [p.name for p in tmp_path.iterdir()] == ["copy.zarr"]
@@ -347,9 +414,10 @@ def test_parse_grid():
 
 def test_a_bad_member_in_a_chunk_is_named():
     """A worker names a member that the driver's check of the grid corners missed."""
-    from gnipy.sweep import _plan, run_chunk
+    from gnipy.sweep import run_chunk
+    from gnipy.sweep.plan import make_plan
 
-    plan = _plan("vertical-disk", ["q0.phi=0:0:2"], method="gni-trapezoid", h=0.1,
+    plan = make_plan("vertical-disk", ["q0.phi=0:0:2"], method="gni-trapezoid", h=0.1,
                  steps=10, t_final=None, save_every=None, set_params={},
                  project_v0=False, chunk_size=2)
     columns = {"q0.phi": np.array([0.0, 1.5])}  # v0 is off the constraints at phi = 1.5

@@ -1,5 +1,5 @@
-"""Sweep stores gnipy can trust and own: ownership of the store (marker, --overwrite, stale
-temporaries), chunk checksums (damaged chunks recomputed on resume, damaged metadata a clear
+"""Sweep stores gnipy can trust and own: ownership of the store (its attribute gnipy_owned,
+--overwrite, stale temporaries, stores of earlier formats), chunk checksums (damaged chunks recomputed on resume, damaged metadata a clear
 error, gnipy.sweep.verify_sweep), size bounds checked before anything is allocated, the
 scheduler checked and connected before the store is created, and failed members visible
 (NaN after their failure, failed_step/failed_time/failed_residual, exit code 1).
@@ -12,6 +12,7 @@ resume recomputes only the damaged chunk (the program is compiled once).
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -28,8 +29,9 @@ import zarr
 from typer.testing import CliRunner
 
 import gnipy.sweep as sweep_module
+import gnipy.sweep.plan as sweep_plan
 from gnipy.cli import app
-from gnipy.files import MARKER, is_owned_dir, make_owned_dir
+from gnipy.files import MARKER, make_owned_dir
 from gnipy.solution import Solution
 from gnipy.sweep import SweepError, SweepWarning, open_sweep, run_sweep, verify_sweep
 
@@ -61,9 +63,21 @@ def _error_lines(output):
 def _arrays(path) -> dict:
     """Every array of the store, as stored (zarr, no decoding)."""
     group = zarr.open_group(str(path), mode="r")
-    with warnings.catch_warnings():  # zarr: the marker is "not a component of a Zarr hierarchy"
-        warnings.filterwarnings("ignore", message=".*gnipy-owned")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nothing in the store that zarr does not know
         return {name: np.asarray(a[...]) for name, a in group.arrays()}
+
+
+def _owned(path) -> bool:
+    """Whether `path` is a store that records gnipy created it (and holds no marker file)."""
+    attrs = zarr.open_group(str(path), mode="r").attrs
+    return attrs.get("gnipy_owned") == "gnipy sweep store" and not (path / MARKER).exists()
+
+
+def _flat(group, name):
+    """A per-member array of the 3 x 2 store, its members along one axis (C order)."""
+    a = np.asarray(group[name][...])
+    return a.reshape(6, *a.shape[2:])
 
 
 def _assert_same_arrays(a, b):
@@ -123,18 +137,18 @@ def test_failed_members_are_nan_after_their_failure_and_recorded(reference):
     g = zarr.open_group(str(out), mode="r")
     failed = np.zeros(6, dtype=bool)
     failed[FAILED] = True
-    np.testing.assert_array_equal(g["result"][:], failed.astype(np.int32))
-    np.testing.assert_array_equal(g["failed_step"][:], np.where(failed, 4, -1))
-    np.testing.assert_array_equal(g["failed_time"][:][failed], 2.0)
-    assert np.isnan(g["failed_time"][:][~failed]).all()
-    assert np.isnan(g["failed_residual"][:][~failed]).all()
+    np.testing.assert_array_equal(_flat(g, "result"), failed.astype(np.int32))
+    np.testing.assert_array_equal(_flat(g, "failed_step"), np.where(failed, 4, -1))
+    np.testing.assert_array_equal(_flat(g, "failed_time")[failed], 2.0)
+    assert np.isnan(_flat(g, "failed_time")[~failed]).all()
+    assert np.isnan(_flat(g, "failed_residual")[~failed]).all()
     if "failed_residuals" in Solution.__dataclass_fields__:  # gnipy.simulate reports it
-        assert np.isfinite(g["failed_residual"][:][failed]).all()
-    valid = g["valid"][:]
+        assert np.isfinite(_flat(g, "failed_residual")[failed]).all()
+    valid = _flat(g, "valid")
     steps = g["step"][:]
     np.testing.assert_array_equal(valid, ~failed[:, None] | (steps[None, :] <= 4))
     for name in ("q", "v", "p", "energy", "constraint_residual"):
-        x = g[name][:]
+        x = _flat(g, name)
         mask = np.broadcast_to(valid.reshape(valid.shape + (1,) * (x.ndim - 2)), x.shape)
         assert np.isnan(x[~mask]).all(), name  # not held at the last good state
         assert np.isfinite(x[~failed]).all(), name
@@ -170,15 +184,15 @@ def _replace_by_chunk_0(f):
     shutil.copyfile(f.parent / "0", f)  # readable, and wrong
 
 
+# the chunks are blocks of 1 x 2 of the 3 x 2 grid (epsilon, v0.dx): zarr chunk (k, 0, ...) is chunk k
 DAMAGE = {
     # name: (file of the chunk, what to do, the chunk)
-    "truncated q": ("q/c/1/0/0", _truncate, 1),
-    "deleted energy": ("energy/c/2/0", os.unlink, 2),
-    "flipped v": ("v/c/0/0/0", _flip, 0),
-    "q of another chunk": ("q/c/2/0/0", lambda f: shutil.copyfile(f.parents[2] / "0/0/0", f), 2),
-    "wrong grid value": ("grid_epsilon/c/1", _replace_by_chunk_0, 1),
+    "truncated q": ("q/c/1/0/0/0", _truncate, 1),
+    "deleted energy": ("energy/c/2/0/0", os.unlink, 2),
+    "flipped v": ("v/c/0/0/0/0", _flip, 0),
+    "q of another chunk": ("q/c/2/0/0/0", lambda f: shutil.copyfile(f.parents[3] / "0/0/0/0", f), 2),
     "deleted checksum": ("chunk_checksum/c/1/0", os.unlink, 1),
-    "truncated failed_step": ("failed_step/c/2", _truncate, 2),
+    "truncated failed_step": ("failed_step/c/2/0", _truncate, 2),
 }
 
 
@@ -202,7 +216,7 @@ def test_a_damaged_chunk_is_recomputed_on_resume(damage, reference, copy, client
 
 
 def test_the_cli_warns_of_a_damaged_chunk_and_recomputes_it(reference, copy, client):
-    _truncate(copy / "p/c/1/0/0")
+    _truncate(copy / "p/c/1/0/0/0")
     res = invoke(*SMALL_ARGS, "--scheduler", client.scheduler.address, "--out", copy)
     assert res.exit_code == 1, res.output  # the failed members
     assert "Traceback" not in res.output
@@ -218,40 +232,54 @@ def _garbage(f):
     f.write_text("{ this is not JSON")
 
 
+def _wrong_grid_value(p):
+    zarr.open_array(str(p / "epsilon"), mode="r+")[1] = 0.25
+
+
+# the store's own metadata (zarr.json) damaged: it no longer shows that gnipy created it, so gnipy
+# does not replace it (remove it); the rest damaged: --overwrite starts afresh
+REMOVE, AFRESH = "remove it yourself", "start afresh with overwrite=True"
 STRUCTURE = {
-    # name: (damage, what the message says)
-    "garbage root zarr.json": (lambda p: _garbage(p / "zarr.json"), r"its metadata \(zarr\.json\) cannot be read"),
-    "deleted root zarr.json": (lambda p: os.unlink(p / "zarr.json"), "its metadata file zarr.json is missing"),
+    # name: (damage, what the message says, what to do)
+    "garbage root zarr.json": (lambda p: _garbage(p / "zarr.json"), r"its metadata \(zarr\.json\) cannot be read",
+                               REMOVE),
+    "deleted root zarr.json": (lambda p: os.unlink(p / "zarr.json"), "its metadata file zarr.json is missing",
+                               REMOVE),
     "garbage q/zarr.json": (
-        lambda p: _garbage(p / "q" / "zarr.json"), r"the metadata of its array 'q' \(q/zarr\.json\)"
+        lambda p: _garbage(p / "q" / "zarr.json"), r"the metadata of its array 'q' \(q/zarr\.json\)", AFRESH
     ),
-    "deleted energy array": (lambda p: shutil.rmtree(p / "energy"), "its array 'energy' is missing"),
+    "deleted energy array": (lambda p: shutil.rmtree(p / "energy"), "its array 'energy' is missing", AFRESH),
     "wrong time coordinate": (
         lambda p: shutil.copyfile(p / "node" / "c" / "0", p / "time" / "c" / "0"),
-        "its coordinate 'time' does not hold the sweep's values",
+        "its coordinate 'time' does not hold the sweep's values", AFRESH,
     ),
+    "wrong grid value": (_wrong_grid_value, "its coordinate 'epsilon' does not hold the sweep's values", AFRESH),
 }
 
 
 def test_damaged_metadata_is_a_clear_error(reference, tmp_path, client):
-    for i, (case, (do, what)) in enumerate(STRUCTURE.items()):
+    for i, (case, (do, what, hint)) in enumerate(STRUCTURE.items()):
         out = tmp_path / f"s{i}.zarr"
         shutil.copytree(reference[0], out)
         do(out)
-        pattern = rf"^out: the sweep store '{out}' is damaged: {what}.*overwrite=True"
+        pattern = rf"^out: the sweep store '{out}' is damaged: {what}.*{hint}"
         with pytest.raises(SweepError, match=pattern):
             run_sweep(**SMALL, out=out, client=client, progress=False)
         res = invoke(*SMALL_ARGS, "--out", out)
         assert res.exit_code == 2 and "Traceback" not in res.output, (case, res.output)
         errors = _error_lines(res.output)
         assert len(errors) == 1 and errors[0].startswith("Error: --out: the sweep store"), (case, res.output)
-        assert "--overwrite" in errors[0] and str(out) in errors[0], (case, res.output)
+        assert str(out) in errors[0] and (hint == REMOVE or "--overwrite" in errors[0]), (case, res.output)
         ok, message, bad = verify_sweep(out)
         assert not ok and bad == [] and "is damaged" in message, (case, message)
         with pytest.raises(SweepError, match="^path: .*is damaged"):
             open_sweep(out)
-    # --overwrite replaces a damaged store that gnipy created (its marker says so)
-    out = tmp_path / "s0.zarr"
+    # --overwrite replaces a damaged store that shows gnipy created it, and only that
+    before = sorted(p.relative_to(tmp_path / "s0.zarr") for p in (tmp_path / "s0.zarr").rglob("*"))
+    with pytest.raises(SweepError, match=f"^out: .*is damaged: .*{REMOVE}"):
+        run_sweep(**SMALL, out=tmp_path / "s0.zarr", client=client, progress=False, overwrite=True)
+    assert sorted(p.relative_to(tmp_path / "s0.zarr") for p in (tmp_path / "s0.zarr").rglob("*")) == before
+    out = tmp_path / "s2.zarr"
     report = run_sweep(**SMALL, out=out, client=client, progress=False, overwrite=True)
     assert report.chunks_computed == 3
     _assert_same_arrays(out, reference[0])
@@ -263,8 +291,7 @@ def test_damaged_metadata_is_a_clear_error(reference, tmp_path, client):
 # --------------------------------------------------------------------------------------
 def test_overwrite_replaces_only_a_store_gnipy_created(reference, tmp_path, client):
     ref = reference[0]
-    assert is_owned_dir(ref)
-    assert json.loads((ref / MARKER).read_text())["purpose"] == "gnipy sweep store"
+    assert _owned(ref)  # its attribute gnipy_owned, and no marker file
     before = _arrays(ref)
     foreign = tmp_path / "foreign.zarr"
     foreign.mkdir()
@@ -300,28 +327,52 @@ def test_overwrite_replaces_only_a_store_gnipy_created(reference, tmp_path, clie
     empty = tmp_path / "empty.zarr"
     empty.mkdir()
     report = run_sweep(**SMALL, out=empty, client=client, progress=False, max_chunks=1)
-    assert report.chunks_computed == 1 and is_owned_dir(empty)
+    assert report.chunks_computed == 1 and _owned(empty)
     assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temporaries left
 
 
-def test_a_store_of_the_previous_version_counts_as_gnipy_s(reference, copy, client, tmp_path):
-    # the previous version: no marker, format gnipy-sweep/1, no checksums
-    os.unlink(copy / MARKER)
-    shutil.rmtree(copy / "chunk_checksum")
-    group = zarr.open_group(str(copy), mode="r+")
-    spec = json.loads(group.attrs["sweep_spec"])
-    group.attrs["sweep_spec"] = json.dumps({**spec, "format": "gnipy-sweep/1"})
-    del group.attrs["store_arrays"]
-    with pytest.raises(SweepError, match="written by an earlier gnipy .* overwrite=True"):
-        run_sweep(**SMALL, out=copy, client=client, progress=False)
-    ok, message, _ = verify_sweep(copy)
-    assert not ok and "cannot be verified" in message
-    assert open_sweep(copy)["q"].shape == (3, 2, 11, 3)  # still readable
-    report = run_sweep(**SMALL, out=copy, client=client, progress=False, overwrite=True,
-                       max_chunks=1)
-    assert report.chunks_computed == 1 and is_owned_dir(copy)
-    assert json.loads(zarr.open_group(str(copy)).attrs["sweep_spec"])["format"] == "gnipy-sweep/2"
-    assert [p.name for p in tmp_path.iterdir()] == ["copy.zarr"]  # the old store is gone
+def _old_store(reference, path, fmt: str, marker: bool):
+    """A store in the layout of an earlier gnipy: members along a flat `member` axis, the grid
+    values in grid_NAME, the specification of format `fmt`; with gnipy's marker file (format 2)
+    or without (format 1)."""
+    import xarray as xr
+
+    ds = xr.open_zarr(reference).load()
+    grid = ["epsilon", "v0.dx"]
+    flat = ds.drop_vars(grid).stack(member=grid).reset_index("member", drop=True)
+    flat = flat.transpose("member", ...).assign_coords(member=np.arange(6))
+    for name in grid:
+        flat[f"grid_{name}"] = ("member", np.repeat(ds[name].values, 2) if name == "epsilon"
+                                else np.tile(ds[name].values, 3))
+    spec = json.loads(ds.attrs["sweep_spec"])
+    flat.attrs = {"sweep_spec": json.dumps({**spec, "format": fmt})}
+    flat.to_zarr(str(path), mode="w-", consolidated=False)
+    if marker:
+        (path / MARKER).write_text(json.dumps({"created_by": "gnipy", "purpose": "gnipy sweep store"}) + "\n")
+    return path
+
+
+@pytest.mark.parametrize("fmt, marker", [("gnipy-sweep/2", True), ("gnipy-sweep/1", False)])
+def test_a_store_of_an_earlier_format_is_a_clear_error_and_gnipy_s(reference, client, tmp_path, fmt, marker):
+    """A store of an earlier gnipy (a flat member axis) is not resumed, verified or read: the
+    error names it and what to do; it counts as gnipy's, so overwrite=True replaces it."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # zarr: consolidated metadata, and the marker file
+        old = _old_store(reference[0], tmp_path / "old.zarr", fmt, marker)
+    what = rf"'{old}' was written by an earlier gnipy \(format {fmt}, with a flat member axis"
+    with pytest.raises(SweepError, match=rf"^out: the sweep store {what}.* cannot be resumed .*overwrite=True"):
+        run_sweep(**SMALL, out=old, client=client, progress=False)
+    ok, message, bad = verify_sweep(old)
+    assert not ok and bad == [] and re.search(what, message) and "cannot be read" in message, message
+    with pytest.raises(SweepError, match=rf"^path: the sweep store {what}.*xarray.open_zarr"):
+        open_sweep(old)
+    res = invoke(*SMALL_ARGS, "--out", old)
+    assert res.exit_code == 2 and "Traceback" not in res.output, res.output
+    assert "earlier gnipy" in _error_lines(res.output)[0] and "--overwrite" in _error_lines(res.output)[0]
+    report = run_sweep(**SMALL, out=old, client=client, progress=False, overwrite=True, max_chunks=1)
+    assert report.chunks_computed == 1 and _owned(old)
+    assert json.loads(zarr.open_group(str(old)).attrs["sweep_spec"])["format"] == sweep_module.FORMAT
+    assert [p.name for p in tmp_path.iterdir()] == ["old.zarr"]  # the old store is gone
 
 
 def test_stale_temporaries_of_dead_processes_are_removed(client, tmp_path):
@@ -359,7 +410,7 @@ def test_a_huge_grid_is_refused_at_once(tmp_path):
                                              r"10,000,000,000 member.* TiB .*max_bytes"):
             run_sweep("rolling-ball", ["Omega=0:1:100000", "m=1:2:100000"], h=0.1, steps=10,
                       out=tmp_path / "huge.zarr", progress=False)
-        with pytest.raises(SweepError, match="^grid: .*members: their indices and grid values alone"):
+        with pytest.raises(SweepError, match="^grid: .*members: reading their results back alone"):
             run_sweep("rolling-ball", ["Omega=0:1:100000", "m=1:2:100000"], h=0.1, steps=10,
                       out=tmp_path / "huge.zarr", progress=False, max_bytes=None)
         peak = tracemalloc.get_traced_memory()[1]
@@ -368,7 +419,8 @@ def test_a_huge_grid_is_refused_at_once(tmp_path):
     assert time.perf_counter() - t < 10 and peak < 50 * 2**20
     huge = ["sweep", "rolling-ball", "--h", "0.1", "--steps", "10", "--out", tmp_path / "huge.zarr"]
     for grid, extra, words in [
-        (["Omega=0:1:100000", "m=1:2:100000"], [], ["4.38 TiB", "pass --yes"]),
+        # 10¹⁰ members x (2 saved nodes x 217 bytes (q, v, p, energy, residual, R, valid) + 24 bytes)
+        (["Omega=0:1:100000", "m=1:2:100000"], [], ["4.17 TiB", "pass --yes"]),
         (["Omega=0:1:100000", "m=1:2:100000"], ["--yes"], ["memory"]),
         (["Omega=0:1:99999999999999999999"], [], ["COUNT must be at most 1,000,000,000"]),
     ]:
@@ -385,11 +437,11 @@ def test_the_size_bound_the_free_space_and_the_chunk_memory(client, tmp_path, mo
     with pytest.raises(SweepError, match=r"^grid: .*6 member\(s\) x 11 saved node\(s\).*max_bytes = 1000 bytes"):
         run_sweep(**SMALL, out=out, client=client, progress=False, max_bytes=1000)
     with monkeypatch.context() as m:  # a full disk: refused whatever max_bytes
-        m.setattr(sweep_module.shutil, "disk_usage", lambda p: shutil._ntuple_diskusage(10**6, 10**6 - 10, 10))
+        m.setattr(shutil, "disk_usage", lambda p: shutil._ntuple_diskusage(10**6, 10**6 - 10, 10))
         with pytest.raises(SweepError, match=r"^out: .*only 10 bytes are free"):
             run_sweep(**SMALL, out=out, client=client, progress=False, max_bytes=None)
     with monkeypatch.context() as m:  # a chunk larger than a quarter of the memory
-        m.setattr(sweep_module, "_memory_total", lambda: 8_000)
+        m.setattr(sweep_plan, "_memory_total", lambda: 8_000)
         with pytest.raises(SweepError, match="^chunk_size: a chunk of 2 member"):
             run_sweep(**SMALL, out=out, client=client, progress=False)
     assert list(tmp_path.iterdir()) == []
@@ -401,7 +453,7 @@ def test_the_size_bound_the_free_space_and_the_chunk_memory(client, tmp_path, mo
     assert list(tmp_path.iterdir()) == []
     res = invoke(*args, "--yes")
     assert res.exit_code == 1 and "chunks: 1 computed" in res.output, res.output  # member 1 failed
-    assert is_owned_dir(out)
+    assert _owned(out)
 
 
 # --------------------------------------------------------------------------------------
@@ -438,9 +490,9 @@ def test_a_bad_scheduler_fails_fast_and_creates_nothing(tmp_path):
 
 
 def test_the_local_cluster_serves_no_dashboard():
-    from gnipy.sweep import _Cluster
+    from gnipy.sweep.cluster import Cluster
 
-    with _Cluster(None, None, 1, 10) as c:
+    with Cluster(None, None, 1, 10) as c:
         server = c.cluster.scheduler.http_server
         assert server.port != 8787 and server.address == "127.0.0.1"
         for page in ("/status", "/info/main/workers.html", "/health"):

@@ -65,6 +65,7 @@ __all__ = [
     "array_checksum",
     "as_output_error",
     "format_bytes",
+    "free_bytes",
 ]
 
 #: The marker file of a directory gnipy created (holds JSON: what the directory is for).
@@ -79,6 +80,16 @@ def format_bytes(n: float) -> str:
             return f"{n:.0f} bytes" if unit == "bytes" else f"{n:.3g} {unit}"
         n /= 1024
     return f"{n:.3g} PiB"
+
+
+def free_bytes(directory) -> int | None:
+    """The free space of the file system holding `directory` (None when it cannot be asked)."""
+    import shutil
+
+    try:
+        return shutil.disk_usage(directory).free
+    except OSError:
+        return None
 
 
 # ------------------------------------------------------------------------------------------
@@ -146,7 +157,7 @@ def check_destination(path, *, overwrite: bool = False, argument: str = "out") -
             raise OutputError(f"{argument}: {path} is {kind}; gnipy writes only regular files it may replace "
                               "(choose another path)")
         if not overwrite:
-            raise OutputError(f"{argument}: {path} exists; pass overwrite=True (--overwrite) to replace it, "
+            raise OutputError(f"{argument}: {path} exists; pass overwrite=True to replace it, "
                               "or choose another path")
     _check_parent(path, argument)
     return path
@@ -173,7 +184,7 @@ def check_directory_destination(path, *, overwrite: bool = False, argument: str 
                               "(choose another path)")
         if is_owned_dir(path):
             if not (reuse or overwrite):
-                raise OutputError(f"{argument}: {path} exists; pass overwrite=True (--overwrite) to replace it, "
+                raise OutputError(f"{argument}: {path} exists; pass overwrite=True to replace it, "
                                   "or choose another path")
         elif any(path.iterdir()):
             raise OutputError(f"{argument}: {path} is a directory gnipy did not create (it has no {MARKER} "

@@ -12,7 +12,9 @@ index k, t = t0 + kh. A result file holds the variables `q(time, coordinate)`,
 `model`, `params` (JSON) and one `param_NAME` per parameter, `method`, `h`, `steps`, `start`
 (how the first node was set up, e.g. `p+ = G v0`), `orientation` on Rⁿ × G (how R was
 reconstructed, and whether it is a physical attitude), and what the caller adds (`gni run` adds
-`q0`, `v0`, `save_every`, `command`, ...).
+`q0`, `v0`, `save_every`, `command`, ...). The variables, their dimensions, units and long
+names are stated once, in :mod:`gnipy.schema` (`VARIABLE_ATTRS`, `VARIABLE_UNITS`, `TIME_UNITS`,
+`CONVENTIONS`, `UNITS_CONVENTION` and :func:`time_coordinates` are that module's, named here too).
 
 Files written before the times moved into `time` (`time` the node index, the times in a
 variable `t`) still read: :func:`read_netcdf` gives them the present layout
@@ -48,6 +50,14 @@ from pathlib import Path
 from typing import Any
 
 from .files import OutputError, atomic_write, check_destination
+from .schema import (
+    CONVENTIONS,
+    TIME_UNITS,
+    UNITS_CONVENTION,
+    VARIABLE_ATTRS,
+    VARIABLE_UNITS,
+    time_coordinates,
+)
 
 __all__ = ["OutputError", "check_writable", "write_netcdf", "read_netcdf", "verify_netcdf", "provenance",
            "VARIABLE_UNITS", "UNITS_CONVENTION", "TIME_UNITS", "CONVENTIONS", "VARIABLE_ATTRS", "time_coordinates",
@@ -74,68 +84,6 @@ def _attr_value(v):
     if isinstance(v, Mapping):
         return json.dumps({str(k): (float(x) if isinstance(x, (int, float)) else str(x)) for k, x in v.items()})
     return str(v)
-
-
-#: The units of time of result files (the models state no other).
-TIME_UNITS = "s"
-
-#: The metadata conventions the result files follow.
-CONVENTIONS = "CF-1.8"
-
-#: Units of the variables that have one.
-VARIABLE_UNITS = {"time": TIME_UNITS, "hidden_momentum": "1", "hidden_momentum_expected": "1"}
-
-UNITS_CONVENTION = (
-    "time in s; the models' parameters are SI values or nondimensional unit scales unless the model "
-    "states otherwise; angles in radians; q, v, p and the constraint residual mix lengths and angles and "
-    "carry no single units attribute; no energy unit is stated"
-)
-
-#: The attributes (long name, units where meaningful) of the variables of result files and sweep
-#: stores, by name.
-VARIABLE_ATTRS = {
-    "q": {"long_name": "configuration"},
-    "v": {"long_name": "reported velocity"},
-    "p": {"long_name": "reported momentum"},
-    "energy": {"long_name": "energy ½vᵀGv + V"},
-    "constraint_residual": {"long_name": "constraint residual mu(q)(v - Y(q))"},
-    "R": {"long_name": "orientation R (group matrix)"},
-    "energy_plus": {"long_name": "energy of the post-momentum ½p⁺ᵀG⁻¹p⁺ + V (energy theorem)"},
-    "hidden_momentum": {"long_name": "hidden momentum |p⁺ - p̄|/|p̄| (norms in G⁻¹)", "units": "1"},
-    "hidden_momentum_expected": {"long_name": "its expected size (|h|/2)|μᵀλ|/|p̄|", "units": "1"},
-    "result": {"long_name": "0: success, 1: a step failed"},
-    "failed_step": {"long_name": "first failed step or -1"},
-    "valid": {"long_name": "saved node computed (False after a failed step)"},
-    "q_exact": {"long_name": "exact configuration"},
-    "v_exact": {"long_name": "exact velocity"},
-}
-
-_NODE_ATTRS = {"long_name": "saved node index"}
-_STEP_ATTRS = {"long_name": "step index k: t = t0 + k h"}
-
-
-def _time_attrs(units: str = TIME_UNITS) -> dict[str, str]:
-    return {"standard_name": "time", "long_name": "time", "units": units, "axis": "T"}
-
-
-def time_coordinates(times, h: float | None = None, steps=None, nodes=None) -> dict[str, tuple]:
-    """The coordinates along `time` of a result dataset, for `xarray.Dataset(coords=...)`:
-    `time` (the times, float64, CF attributes), `node` (the saved-node index, or `nodes`) and
-    `step` (the step index: `steps`, or round((t - t0)/h) when `h` is finite and non-zero;
-    left out otherwise, e.g. without a step size)."""
-    import numpy as np
-
-    t = np.asarray(times, dtype=np.float64)
-    coords = {
-        "time": (("time",), t, _time_attrs()),
-        "node": (("time",), np.arange(len(t), dtype=np.int64) if nodes is None else np.asarray(nodes, np.int64),
-                 dict(_NODE_ATTRS)),
-    }
-    if steps is None and h is not None and np.isfinite(h) and h != 0 and len(t):
-        steps = np.rint((t - t[0]) / h)
-    if steps is not None:
-        coords["step"] = (("time",), np.asarray(steps).astype(np.int64), dict(_STEP_ATTRS))
-    return coords
 
 
 def cf_attributes(model: str, method: str, *, title: str | None = None, created: str | None = None) -> dict[str, str]:

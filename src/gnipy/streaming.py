@@ -52,7 +52,7 @@ that does not verify is an error (rerun with `overwrite=True` to compute it agai
 lock), and Ctrl-C (SIGINT) never lands inside an HDF5 call: while a part is written, it takes
 effect once the part is committed; during the merge, between two parts: the merge stops within
 one part, removes its temporary file and raises `KeyboardInterrupt`; the parts stay, so
-`resume=True` (`--resume`) finishes the run. (The handler that defers SIGINT is installed only in
+`resume=True` finishes the run. (The handler that defers SIGINT is installed only in
 the main thread, and only where SIGINT has Python's default handler.)
 
 **Size.** Before computing anything, the size of the destination is estimated (saved nodes ×
@@ -71,7 +71,6 @@ import json
 import math
 import os
 import re
-import shutil
 import signal
 import stat
 import threading
@@ -84,9 +83,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .files import format_bytes
+from .files import format_bytes, free_bytes
 
-from .diagnostics import StreamedVerdicts, conserved_quantity, energy_is_invariant
+from .analysis.diagnostics import StreamedVerdicts, conserved_quantity, energy_is_invariant
 from .files import (
     MARKER,
     DataChecksum,
@@ -100,6 +99,7 @@ from .files import (
     make_owned_dir,
     remove_owned_dir,
 )
+from . import schema
 from .integrators.base import Integrator, MethodError
 from .models.registry import registered_invariants
 from .saveat import SaveAt
@@ -450,8 +450,8 @@ def _prepare_parts(parts: Path, path: Path, resume: bool, note) -> bool:
         return True
     old = _part_indices(parts)
     if old:
-        note(f"{parts}: the {len(old)} checkpoint part(s) of an earlier run are discarded (resume=True, "
-             "--resume, continues a run instead)")
+        note(f"{parts}: the {len(old)} checkpoint part(s) of an earlier run are discarded (resume=True "
+             "continues a run instead)")
     _remove([parts / "spec.json", *(f for _, f in old)], parts)
     return False
 
@@ -545,13 +545,13 @@ def simulate_to_file(
     if chunk_steps is None:
         chunk_steps = save_every * DEFAULT_CHUNK_NODES
     if isinstance(chunk_steps, bool) or int(chunk_steps) != chunk_steps or chunk_steps < 1:
-        raise InputError(f"chunk_steps/--checkpoint-every: must be a positive integer, got {chunk_steps!r}")
+        raise InputError(f"chunk_steps: must be a positive integer, got {chunk_steps!r}")
     chunk_steps = int(chunk_steps)
     if chunk_steps > MAX_STEPS:
-        raise InputError(f"chunk_steps/--checkpoint-every: at most {MAX_STEPS} steps per chunk, got {chunk_steps}")
+        raise InputError(f"chunk_steps: at most {MAX_STEPS} steps per chunk, got {chunk_steps}")
     if chunk_steps % save_every:
         raise InputError(
-            f"chunk_steps/--checkpoint-every: {chunk_steps} is not a multiple of the save stride {save_every}"
+            f"chunk_steps: {chunk_steps} is not a multiple of the save stride {save_every}"
         )
     chunk_steps = min(chunk_steps, steps + (-steps) % save_every)
     if max_bytes is not None and (isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, float, np.integer))
@@ -628,14 +628,14 @@ def simulate_to_file(
                 raise ValueError("not a JSON object")
         except (OSError, ValueError) as e:
             raise OutputError(
-                f"--resume: cannot read {parts / 'spec.json'} ({e}): the interrupted run's spec is damaged; "
-                "rerun without --resume (resume=False) to start afresh"
+                f"resume: cannot read {parts / 'spec.json'} ({e}): the interrupted run's spec is damaged; "
+                "rerun with resume=False to start afresh"
             ) from None
         for key, value in canonical.items():
             if stored.get(key) != value:
                 raise OutputError(
-                    f"--resume: the interrupted run in {parts} has a different {key} "
-                    f"({stored.get(key)!r}, requested {value!r}); rerun without --resume to start afresh"
+                    f"resume: the interrupted run in {parts} has a different {key} "
+                    f"({stored.get(key)!r}, requested {value!r}); rerun with resume=False to start afresh"
                 )
         done, last, n_chunks = _verify_parts(parts, plan, n_chunks, note)
         if last is not None:
@@ -743,11 +743,11 @@ def _estimate(system, b0, steps: int, save_every: int, n_chunks: int, gni_family
 
 def _check_size(system, b0, steps, save_every, n_chunks, gni_family, path: Path, parts: Path, max_bytes) -> None:
     nodes, per_node, size = _estimate(system, b0, steps, save_every, n_chunks, gni_family)
-    allow = "pass max_bytes=None (gni run --yes) to write it anyway"
+    allow = "pass max_bytes=None to write it anyway"
     if size > max_bytes:
         raise OutputError(
             f"path: {path} would hold {nodes:,} saved nodes of {per_node} bytes, about {format_bytes(size)}, more than "
-            f"max_bytes = {format_bytes(max_bytes)}; save fewer nodes (a larger save_every/--save-every, fewer steps), "
+            f"max_bytes = {format_bytes(max_bytes)}; save fewer nodes (a larger save_every, fewer steps), "
             f"or {allow}"
         )
     parts_size = size - 8 * nodes + n_chunks * _FILE_OVERHEAD  # the parts: no node index, a header each
@@ -760,11 +760,8 @@ def _check_size(system, b0, steps, save_every, n_chunks, gni_family, path: Path,
                 pass
     need = size + max(0, parts_size - existing)
     directory = path.parent if str(path.parent) else Path(".")
-    try:
-        free = shutil.disk_usage(directory).free
-    except OSError:
-        return
-    if need > free:
+    free = free_bytes(directory)
+    if free is not None and need > free:
         raise OutputError(
             f"path: the run needs about {format_bytes(need)} of disk space ({nodes:,} saved nodes: the checkpoint parts "
             f"and {path}, about {format_bytes(size)}, coexist while they are merged), and {directory} has "
@@ -775,18 +772,18 @@ def _check_size(system, b0, steps, save_every, n_chunks, gni_family, path: Path,
 # ------------------------------------------------------------------------------------------
 # The destination
 # ------------------------------------------------------------------------------------------
-_DATA_DIMS = {
-    "q": ("time", "coordinate"), "v": ("time", "velocity"), "p": ("time", "velocity"), "energy": ("time",),
-    "constraint_residual": ("time", "constraint"), "R": ("time", "i", "j"), "hidden_momentum": ("time",),
-    "hidden_momentum_expected": ("time",), "energy_plus": ("time",),
-}
+# the variables along `time` of a result file, with their dimensions (gnipy.schema)
+_DATA_DIMS = {name: schema.dims(name) for name in (
+    "q", "v", "p", "energy", "constraint_residual", "R", "hidden_momentum", "hidden_momentum_expected",
+    "energy_plus")}
 
 
 def _global_attrs(system, method, h, steps, result, it_tot, it_max, n_chunks, attrs) -> dict:
     """The destination's global attributes, as :func:`gnipy.io.write_netcdf` writes them."""
     import datetime as _dt
 
-    from .io import CHECKSUM_ATTR, CONVENTIONS, UNITS_CONVENTION, _attr_value, cf_attributes, provenance
+    from .io import CHECKSUM_ATTR, _attr_value, cf_attributes, provenance
+    from .schema import CONVENTIONS, UNITS_CONVENTION
     from .system import describe_orientations
 
     created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
@@ -817,8 +814,6 @@ def _write_destination(tmp: Path, files, counts, system, first: dict, load, inte
     of its data; the caller adds the global attributes and closes it."""
     import netCDF4
 
-    from .io import _NODE_ATTRS, _STEP_ATTRS, VARIABLE_ATTRS, VARIABLE_UNITS, _time_attrs
-
     data0 = first["data"]
     names = [v for v in _DATA_DIMS if v in data0]
     sizes = {"time": int(sum(counts))}
@@ -838,25 +833,28 @@ def _write_destination(tmp: Path, files, counts, system, first: dict, load, inte
             if d in sizes:
                 nc.createDimension(d, sizes[d])
         out = {}
-        for v in names:  # the attributes of set_variable_attrs, in write_netcdf's order
+        names_of = {"coordinate": coordinates, "velocity": velocities}
+        for v in names:  # the attributes of gnipy.schema.apply, in write_netcdf's order
             var = nc.createVariable(v, data0[v].dtype, _DATA_DIMS[v], fill_value=np.nan)
-            var.setncatts(dict(VARIABLE_ATTRS.get(v, {})))
-            if v in ("q", "v", "p"):
-                var.setncattr("components", ", ".join(coordinates if v == "q" else velocities))
-            if v in VARIABLE_UNITS and "units" not in var.ncattrs():
-                var.setncattr("units", VARIABLE_UNITS[v])
+            var.setncatts(schema.variable_attrs(v))
+            components = schema.VARIABLES[v].components
+            if components:
+                var.setncattr("components", ", ".join(names_of[components]))
             var.setncattr("coordinates", "node step")
             out[v] = var
-        for name, dtype, attrs in (("time", np.float64, _time_attrs()), ("step", np.int64, _STEP_ATTRS),
-                                   ("node", np.int64, _NODE_ATTRS)):
-            out[name] = nc.createVariable(name, dtype, ("time",))
-            out[name].setncatts(dict(attrs))
-        for name, values in (("coordinate", coordinates), ("velocity", velocities)):
+        for name in ("time", "step", "node"):
+            out[name] = nc.createVariable(name, schema.VARIABLES[name].dtype, schema.dims(name))
+            out[name].setncatts(schema.variable_attrs(name))
+        for name, values in names_of.items():
             a = np.array(values, dtype=object)
-            nc.createVariable(name, str, (name,))[:] = a
+            var = nc.createVariable(name, str, schema.dims(name))
+            var.setncatts(schema.variable_attrs(name))
+            var[:] = a
             checksum.update(name, a)
         constraint = np.arange(sizes["constraint"], dtype=np.int64)
-        nc.createVariable("constraint", np.int64, ("constraint",))[:] = constraint
+        var = nc.createVariable("constraint", np.int64, schema.dims("constraint"))
+        var.setncatts(schema.variable_attrs("constraint"))
+        var[:] = constraint
         checksum.update("constraint", constraint)
 
         offset = 0
@@ -864,12 +862,12 @@ def _write_destination(tmp: Path, files, counts, system, first: dict, load, inte
             part = first if i == 0 else load(i)
             n = part["n"]
             if n != counts[i]:
-                raise OutputError(f"{f} changed while it was merged; rerun with resume=True (--resume)")
+                raise OutputError(f"{f} changed while it was merged; rerun with resume=True")
             d = part["data"]
             if sorted(v for v in d if v in _DATA_DIMS) != sorted(names) or any(
                     d[v].shape[1:] != data0[v].shape[1:] for v in names):
                 raise OutputError(f"{f}: its variables differ from those of {files[0].name}; rerun with "
-                                  "resume=True (--resume) to compute it again")
+                                  "resume=True to compute it again")
             if n:
                 rows = slice(offset, offset + n)
                 for v in (*names, "time", "step"):
@@ -904,7 +902,7 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
     def load(c: int) -> dict:
         part, why = _check_part(files[c], c, plan)
         if part is None:
-            raise OutputError(f"{files[c]} does not verify ({why}); rerun with resume=True (--resume) to compute "
+            raise OutputError(f"{files[c]} does not verify ({why}); rerun with resume=True to compute "
                               "it again")
         d, a = part["data"], part["attrs"]
         e = d["energy"]
@@ -924,7 +922,7 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
             with netCDF4.Dataset(os.fspath(f), "r") as nc:
                 counts.append(len(nc.dimensions["time"]))
         except Exception as e:  # noqa: BLE001
-            raise OutputError(f"{f} does not verify (it cannot be read: {e}); rerun with resume=True (--resume) "
+            raise OutputError(f"{f} does not verify (it cannot be read: {e}); rerun with resume=True "
                               "to compute it again") from None
     first = load(0)
 
@@ -997,7 +995,7 @@ def _finished_result(path: Path, spec: dict, method, system, h, t0, throw, overw
         if overwrite:
             return None
         raise OutputError(f"path: {path} exists but cannot be read as netCDF ({type(e).__name__}: {e}); it is not a "
-                          "finished run to resume: pass overwrite=True (--overwrite) to replace it") from None
+                          "finished run to resume: pass overwrite=True to replace it") from None
     try:
         if stored is None or json.loads(str(stored)) != spec:
             return None
@@ -1012,7 +1010,7 @@ def _finished_result(path: Path, spec: dict, method, system, h, t0, throw, overw
             note(f"{path} was the finished result of this run but is damaged ({message}); computing it again")
             return None
         raise OutputError(f"path: {path} is the finished result of this run but it is DAMAGED: {message}; "
-                          "rerun with overwrite=True (--overwrite) to compute it again")
+                          "rerun with overwrite=True to compute it again")
     try:
         with netCDF4.Dataset(os.fspath(path), "r") as nc:
             nc.set_auto_maskandscale(False)
