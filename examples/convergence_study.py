@@ -52,7 +52,7 @@ print("      h  " + "  ".join(f"{name:>14}" for name in errors))
 for i, hi in enumerate(h):
     print(f"{hi:8.4f}  " + "  ".join(f"{errors[name][i]:14.3e}" for name in errors))
 for name, err in errors.items():
-    expected = gnipy.get_method(name).expected_order
+    expected = gnipy.get_method(name).order
     print(f"order {name}: {fitted_order(h, err):.3f} (expected {expected})")
 
 with open(out / "convergence.csv", "w", newline="") as f:

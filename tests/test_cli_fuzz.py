@@ -13,7 +13,7 @@ Every invocation (typer's CliRunner, in process) is checked for:
 line carries a *sentinel*: another option whose value is invalid and which `gni` checks
 after the fuzzed one and before any computation, so that a fuzzed value that happens to
 be valid ends in the sentinel's error. The order of the checks, read from
-`gnipy/cli.py`:
+the `gnipy/cli/` modules:
 
 - `gni run`: config file, MODEL, --method, --h, --steps/--t-final, --save-every, the step
   count (gnipy.simulate.resolve_steps: h below the normal floats, t_final / h beyond any run,
@@ -1066,10 +1066,10 @@ def test_info_and_verify_with_random_attributes(attrs, with_checksum):
     assert_no_raw_control(info.output)
     if info.exit_code == 0:
         for key, value in attrs.items():  # each string listed shown literally (markup not interpreted)
-            listed = key not in gnipy.cli._SHOWN_ATTRS and not key.startswith(
+            listed = key not in gnipy.cli.info.SHOWN_ATTRS and not key.startswith(
                 ("param_", "invariant_drift_", "max_error_"))
             if listed and isinstance(value, str) and value.strip() and " " not in value and len(value) < 12:
-                assert gnipy.cli._safe(value) in info.output.replace("\n", ""), (value, info.output)
+                assert gnipy.cli.output.safe(value) in info.output.replace("\n", ""), (value, info.output)
     named = assert_clean(verify)
     assert_no_raw_control(verify.output)
     if with_checksum:

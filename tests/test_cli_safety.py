@@ -32,8 +32,8 @@ import xarray as xr
 from typer.testing import CliRunner
 
 import gnipy
-import gnipy.cli as cli
-from gnipy.cli import app
+from gnipy.cli import app, resources
+from gnipy.cli.output import safe
 
 runner = CliRunner()
 
@@ -357,15 +357,15 @@ def test_config_with_a_huge_step_count_is_refused_at_once(tmp_path, no_computati
 
 def test_memory_and_file_bounds_and_yes(tmp_path, monkeypatch):
     out = tmp_path / "x.nc"
-    monkeypatch.setattr(cli, "MAX_MEMORY_BYTES", 1000)
+    monkeypatch.setattr(resources, "MAX_MEMORY_BYTES", 1000)
     err = assert_usage_error(invoke(*BASE, "--out", out), "--steps/--save-every", "in memory", "--checkpoint-every",
                              "--yes")
     assert "bytes" in err or "KiB" in err
-    monkeypatch.setattr(cli, "MAX_MEMORY_BYTES", 2**33)
-    monkeypatch.setattr(cli, "MAX_OUTPUT_BYTES", 100)
+    monkeypatch.setattr(resources, "MAX_MEMORY_BYTES", 2**33)
+    monkeypatch.setattr(resources, "MAX_OUTPUT_BYTES", 100)
     assert_usage_error(invoke(*BASE, "--out", out), "--steps/--save-every", "the file would hold 11 saved nodes",
                        "--yes")
-    monkeypatch.setattr(cli, "MAX_OUTPUT_BYTES", 2**36)
+    monkeypatch.setattr(resources, "MAX_OUTPUT_BYTES", 2**36)
     import shutil
 
     class Usage:
@@ -374,7 +374,7 @@ def test_memory_and_file_bounds_and_yes(tmp_path, monkeypatch):
     monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage)
     assert_usage_error(invoke(*BASE, "--out", out), "free", "--yes")
     assert not out.exists()
-    monkeypatch.setattr(cli, "MAX_MEMORY_BYTES", 1000)
+    monkeypatch.setattr(resources, "MAX_MEMORY_BYTES", 1000)
     res = invoke(*BASE, "--out", out, "--yes")  # the user says so: it runs
     assert res.exit_code == 0, res.output
     assert out.is_file()
@@ -382,7 +382,7 @@ def test_memory_and_file_bounds_and_yes(tmp_path, monkeypatch):
 
 def test_memory_bound_is_at_most_half_the_ram():
     pages = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    assert cli._memory_bound() == min(cli.MAX_MEMORY_BYTES, pages // 2)
+    assert resources.memory_bound() == min(resources.MAX_MEMORY_BYTES, pages // 2)
 
 
 # --------------------------------------------------------------------------------------------------
@@ -422,7 +422,7 @@ def test_paths_with_markup_and_control_characters(tmp_path, name, no_computation
     path = tmp_path / name.replace("/", "_") if name != "[/]" else tmp_path / "[" / "]"
     path.parent.mkdir(exist_ok=True)
     path.write_text("taken")
-    shown = cli._safe(path)
+    shown = safe(path)
     for args in (["info", path], ["verify", path], [*BASE, "--out", path], ["demo", "--out", path]):
         res = invoke(*args)
         assert res.exit_code == 2 and isinstance(res.exception, SystemExit), res.output
@@ -442,10 +442,10 @@ def test_a_run_whose_path_holds_markup(tmp_path):
 
 def test_safe_escapes_every_control_character():
     for code in [*range(0x20), 0x7F, *range(0x80, 0xA0), 0x202E, 0x2028]:
-        shown = cli._safe(f"a{chr(code)}b")
+        shown = safe(f"a{chr(code)}b")
         assert shown.startswith("a\\") and shown.endswith("b") and shown.isprintable(), (code, shown)
-    assert cli._safe("plain [text] é ü 🚀") == "plain [text] é ü 🚀"
-    assert cli._safe("\udcff") == "\\udcff"  # an undecodable byte of a path
+    assert safe("plain [text] é ü 🚀") == "plain [text] é ü 🚀"
+    assert safe("\udcff") == "\\udcff"  # an undecodable byte of a path
 
 
 # --------------------------------------------------------------------------------------------------

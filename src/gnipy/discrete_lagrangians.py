@@ -1,4 +1,4 @@
-"""Discrete Lagrangians $l_d(q_k, q_{k+1}, h) \\approx \\int_0^h l\\,dt$ (DESIGN.md §2, (LagEuler), (Verlet)).
+"""Discrete Lagrangians $l_d(q_k, q_{k+1}, h) \\approx \\int_0^h l\\,dt$ (paper (LagEuler), (Verlet)).
 
 Each family is written once against the configuration space's `step_points`, so the same classes
 serve $\\mathbb{R}^n$ and, later, $\\mathbb{R}^n \\times G$.
@@ -27,11 +27,13 @@ class DiscreteLagrangian(eqx.Module):
     unknowns `z` (the increment $z = q_{k+1} - q_k$ on $\\mathbb{R}^n$, see :mod:`gnipy.spaces`).
 
     `explicit_if_flat` says that $FL^-$ is affine in the unknowns whenever the metric is constant,
-    so that the GNI step is explicit (one linear solve, no Newton iteration).
+    so that the GNI step is explicit (one linear solve, no Newton iteration). `order` is the
+    global order of the GNI built on it (None: not known); the GNI's `order` reads it.
     """
 
     explicit_if_flat: ClassVar[bool] = False
     name: ClassVar[str] = "discrete-lagrangian"
+    order: ClassVar[int | None] = None
 
     def __call__(self, system, b0, z, h):
         raise NotImplementedError
@@ -42,6 +44,7 @@ class EulerA(DiscreteLagrangian):
 
     explicit_if_flat: ClassVar[bool] = True
     name: ClassVar[str] = "euler-a"
+    order: ClassVar[int | None] = 1  # Thm 5.1
 
     def __call__(self, system, b0, z, h):
         _, _, v = system.space.step_points(b0, z, h)
@@ -53,6 +56,7 @@ class EulerB(DiscreteLagrangian):
 
     explicit_if_flat: ClassVar[bool] = True
     name: ClassVar[str] = "euler-b"
+    order: ClassVar[int | None] = 1  # Thm 5.1
 
     def __call__(self, system, b0, z, h):
         b1, _, v = system.space.step_points(b0, z, h)
@@ -67,6 +71,7 @@ class Trapezoid(DiscreteLagrangian):
 
     explicit_if_flat: ClassVar[bool] = True
     name: ClassVar[str] = "trapezoid"
+    order: ClassVar[int | None] = 2  # symmetric (RATTLE)
 
     def __call__(self, system, b0, z, h):
         b1, _, v = system.space.step_points(b0, z, h)
@@ -77,6 +82,7 @@ class Midpoint(DiscreteLagrangian):
     """Midpoint: $l_d = h\\, l((q_k + q_{k+1})/2, (q_{k+1} - q_k)/h)$."""
 
     name: ClassVar[str] = "midpoint"
+    order: ClassVar[int | None] = 2  # symmetric
 
     def __call__(self, system, b0, z, h):
         _, bm, v = system.space.step_points(b0, z, h)
@@ -93,10 +99,14 @@ class CustomDiscreteLagrangian(DiscreteLagrangian):
             $(q_1 - q_0)/h$ itself loses $\\varepsilon|q|/h$ there (the built-in families do not).
         explicit: declare that $-\\partial l_d / \\partial q_0$ is affine in `q1` (then the GNI step is
             one linear solve); leave False when unsure: the Newton solve is always correct.
+        order: declare the global order of the GNI built on it (e.g. 2 for a symmetric $l_d$);
+            None (the default) when it is not known. `gni convergence` compares the fitted order
+            with it.
     """
 
     fn: Callable = eqx.field(static=True)
     explicit: bool = eqx.field(static=True, default=False)
+    order: int | None = eqx.field(static=True, default=None, kw_only=True)
     name: ClassVar[str] = "custom"
 
     def __call__(self, system, b0, z, h):

@@ -1,4 +1,7 @@
-"""Method names (as used by the CLI) and the integrator objects they stand for."""
+"""Method names (as used by the CLI) and the integrator objects they stand for.
+
+A method's expected order is not stated here: it is the `order` of the integrator object
+(`get_method(name).order`), which `gni methods` shows."""
 
 from __future__ import annotations
 
@@ -29,21 +32,21 @@ def _lazy(module: str, cls: str):
 
 
 _METHODS: dict[str, tuple[str, Callable[[], object]]] = {
-    "gni-euler-a": ("GNI with the Euler A discrete Lagrangian (order 1)", _gni("euler-a")),
-    "gni-euler-b": ("GNI with the Euler B discrete Lagrangian (order 1)", _gni("euler-b")),
-    "gni-trapezoid": ("GNI with the trapezoid (Störmer–Verlet) discrete Lagrangian: RATTLE (order 2)", _gni("trapezoid")),
-    "gni-midpoint": ("GNI with the midpoint discrete Lagrangian (order 2)", _gni("midpoint")),
-    "euler-a": ("nonholonomic Euler A, explicit (EuAHam) on (q, p̃, λ̃) (order 1)",
+    "gni-euler-a": ("GNI with the Euler A discrete Lagrangian", _gni("euler-a")),
+    "gni-euler-b": ("GNI with the Euler B discrete Lagrangian", _gni("euler-b")),
+    "gni-trapezoid": ("GNI with the trapezoid (Störmer–Verlet) discrete Lagrangian: RATTLE", _gni("trapezoid")),
+    "gni-midpoint": ("GNI with the midpoint discrete Lagrangian", _gni("midpoint")),
+    "euler-a": ("nonholonomic Euler A, explicit (EuAHam) on (q, p̃, λ̃)",
                 _lazy(".integrators.paper_schemes", "NonholonomicEulerA")),
-    "euler-b": ("nonholonomic Euler B, explicit (EuBHam) on (q, p̃, λ̃) (order 1)",
+    "euler-b": ("nonholonomic Euler B, explicit (EuBHam) on (q, p̃, λ̃)",
                 _lazy(".integrators.paper_schemes", "NonholonomicEulerB")),
-    "euler-ab": ("composition Euler A(h/2) ∘ Euler B(h/2) (order 2)",
+    "euler-ab": ("composition Euler A(h/2) ∘ Euler B(h/2)",
                  _lazy(".integrators.paper_schemes", "EulerABComposition")),
-    "shake": ("nonholonomic SHAKE, two-step form (Remark 5.1, (Afin)) (order 2)",
+    "shake": ("nonholonomic SHAKE, two-step form (Remark 5.1, (Afin))",
               _lazy(".integrators.paper_schemes", "Shake")),
-    "rattle": ("nonholonomic RATTLE, explicit (nonholonomicRATTLE), affine §6.1 (order 2)",
+    "rattle": ("nonholonomic RATTLE, explicit (nonholonomicRATTLE), affine §6.1",
                _lazy(".integrators.paper_schemes", "Rattle")),
-    "rat": ("reduced RATTLE algorithm (RAT) of §7.2 on R^n × G, constant metric (order 2)", _lazy(".integrators.reduced_rattle", "ReducedRattle")),
+    "rat": ("reduced RATTLE algorithm (RAT) of §7.2 on R^n × G, constant metric", _lazy(".integrators.reduced_rattle", "ReducedRattle")),
     "dla": ("discrete Lagrange–d'Alembert (Cortés–Martínez), midpoint constraint",
             _lazy(".integrators.comparators", "DiscreteLagrangeDAlembert")),
     "mp": ("McLachlan–Perlmutter reversible scheme (4.18)",

@@ -204,7 +204,9 @@ def test_reproduce_writes_the_report(tmp_path, stubs, capsys):
 
 def _app():
     app = typer.Typer()
-    app.command("reproduce")(rp.reproduce_command)
+    from gnipy.cli.reproduce import reproduce as command
+
+    app.command("reproduce")(command)
 
     @app.command("other")
     def other():  # a second command, so that typer keeps the subcommand name

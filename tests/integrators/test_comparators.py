@@ -63,7 +63,7 @@ def test_method_names_give_the_comparators():
     assert isinstance(dla, DiscreteLagrangeDAlembert) and isinstance(dla.discrete_lagrangian, Midpoint)
     assert isinstance(mp, McLachlanPerlmutter)
     assert (dla.name, dla.order, mp.name, mp.order) == ("dla", 2, "mp", 2)
-    assert dla.expected_order == 2 and DiscreteLagrangeDAlembert(EulerA()).expected_order == 1
+    assert DiscreteLagrangeDAlembert(EulerA()).order == 1
 
 
 def test_mp_refuses_a_position_dependent_metric(varmetric):

@@ -1,6 +1,53 @@
-"""The analysis layer: what is measured on simulations (fitted orders, and more to come here:
-diagnostics, invariants, convergence studies), shared by the CLI, the experiments and the tests."""
+"""The analysis layer: what is measured on simulations, shared by the CLI, the experiments and the
+tests.
 
+- :mod:`gnipy.analysis.diagnostics`: the run-time verdicts of a solution (the GNI's hidden
+  momentum, the drift of a conserved energy) and which quantity a model conserves;
+- :mod:`gnipy.analysis.invariants`: the drift of a model's invariants, the errors against its
+  exact solution;
+- :mod:`gnipy.analysis.orders`: the one fitted order of convergence;
+- :mod:`gnipy.analysis.convergence`: convergence studies (`gni convergence`).
+"""
+
+from .convergence import MEASURES, REFERENCE_FLOOR, ConvergenceStudy, convergence_study
+from .diagnostics import (
+    ENERGY_BAND,
+    HIDDEN_BAND,
+    HIDDEN_FLOOR,
+    EnergyVerdict,
+    HiddenMomentumVerdict,
+    StreamedVerdicts,
+    conserved_quantity,
+    energy_is_invariant,
+    energy_theorem_applies,
+    energy_verdict,
+    hidden_momentum_band,
+    hidden_momentum_verdict,
+)
+from .invariants import ExactErrors, exact_errors, invariant_drifts
 from .orders import ROUND_OFF, fit_points, fitted_order
 
-__all__ = ["ROUND_OFF", "fit_points", "fitted_order"]
+__all__ = [
+    "ConvergenceStudy",
+    "convergence_study",
+    "MEASURES",
+    "REFERENCE_FLOOR",
+    "ENERGY_BAND",
+    "HIDDEN_BAND",
+    "HIDDEN_FLOOR",
+    "EnergyVerdict",
+    "HiddenMomentumVerdict",
+    "StreamedVerdicts",
+    "conserved_quantity",
+    "energy_is_invariant",
+    "energy_theorem_applies",
+    "energy_verdict",
+    "hidden_momentum_band",
+    "hidden_momentum_verdict",
+    "ExactErrors",
+    "exact_errors",
+    "invariant_drifts",
+    "ROUND_OFF",
+    "fit_points",
+    "fitted_order",
+]

@@ -7,7 +7,7 @@ saved nodes) against the continuous reference (Dopri8 at tolerance 1e-12, at the
   $\\|R_k - R^{\\mathrm{ref}}(t_k)\\|$ on $\\mathbb{R}^n \\times G$),
 - the largest drift of the energy (where the motion conserves it) and of the model's registered
   invariants, relative to their size,
-- the run-time verdicts of :mod:`gnipy.diagnostics` (hidden momentum, energy drift) and solver
+- the run-time verdicts of :mod:`gnipy.analysis.diagnostics` (hidden momentum, energy drift) and solver
   failures.
 
 Rule: a method qualifies when the run completes, raises no warning, and keeps every invariant to

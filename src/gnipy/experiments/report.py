@@ -117,7 +117,7 @@ def _md_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> list[str]
 
 
 STRUGGLES_INTRO = ("Measured failures of the GNI family beyond the paper's examples, each with the run-time "
-                   "diagnostic that reports it (gnipy.diagnostics) and a method that works there.")
+                   "diagnostic that reports it (gnipy.analysis.diagnostics) and a method that works there.")
 
 
 def _md_figure(out_dir: Path, fig) -> list[str]:
@@ -326,11 +326,11 @@ def ensure_output_dir(out_dir, purpose: str = "gni reproduce: figures and report
     if out_dir.is_dir():
         return out_dir
     if os.path.lexists(out_dir):
-        raise OutputError(f"--out: {out_dir} exists and is not a directory")
+        raise OutputError(f"out_dir: {out_dir} exists and is not a directory")
     try:
         out_dir.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
-        raise OutputError(f"--out: cannot create {out_dir.parent}: {e.strerror or e}") from None
+        raise OutputError(f"out_dir: cannot create {out_dir.parent}: {e.strerror or e}") from None
     return make_owned_dir(out_dir, purpose)
 
 
@@ -342,8 +342,8 @@ def save_figure(fig, out_dir, name: str, dpi: float) -> list[Path]:
     out_dir = ensure_output_dir(out_dir)
     replace = may_replace(out_dir)
     files = [out_dir / f"{name}.png", out_dir / f"{name}.pdf"]
-    atomic_savefig(fig, files[0], overwrite=replace, argument="--out", dpi=dpi)
-    atomic_savefig(fig, files[1], overwrite=replace, argument="--out")
+    atomic_savefig(fig, files[0], overwrite=replace, argument="out_dir", dpi=dpi)
+    atomic_savefig(fig, files[1], overwrite=replace, argument="out_dir")
     return files
 
 
@@ -380,6 +380,6 @@ def write_report(out_dir, figures: Sequence, theorems: Sequence, errata: Sequenc
     md_path, html_path = out_dir / "report.md", out_dir / "report.html"
     md, page = (_markdown(out_dir, figures, theorems, errata, meta, struggles),
                 _html(out_dir, figures, theorems, errata, meta, struggles))
-    atomic_write_text(md_path, md, overwrite=replace, argument="--out")
-    atomic_write_text(html_path, page, overwrite=replace, argument="--out")
+    atomic_write_text(md_path, md, overwrite=replace, argument="out_dir")
+    atomic_write_text(html_path, page, overwrite=replace, argument="out_dir")
     return md_path, html_path

@@ -4,8 +4,8 @@ struggles (measured failures beyond the paper, :mod:`.struggles`), and the repor
 :func:`reproduce` runs every stage with a rich progress display (one bar per stage, fed by the
 stages' `progress(advance, description)` callbacks), writes `report.md` and the self-contained
 `report.html` (:func:`gnipy.experiments.report.write_report`) next to the figures, prints a short
-summary and returns the path of the HTML report. :func:`reproduce_command` is the same as a typer
-command (`gni reproduce`), which exits with code 1 when a theorem row fails or a stage fails.
+summary and returns the path of the HTML report. The command `gni reproduce`
+(:mod:`gnipy.cli.reproduce`) exits with code 1 when a theorem row fails or a stage fails.
 
 A stage that raises does not stop the others: its failure is recorded in the report (a figure
 with the error as its note, or a failed theorem row) and makes the command exit non-zero.
@@ -14,7 +14,7 @@ with the error as its note, or a failed theorem row) and makes the command exit 
 gnipy's marker `.gnipy-owned`, and in such a folder a rerun replaces gnipy's own files (so
 `gni reproduce` can always be run again into its own folder). In a folder gnipy did not create,
 existing files of the names in :data:`OUTPUT_FILES` are replaced only with `overwrite=True`
-(`--overwrite`); without it the run is refused before anything is computed. Every file is written
+; without it the run is refused before anything is computed. Every file is written
 atomically (:mod:`gnipy.files`): a full disk leaves earlier files as they were, and the command
 ends with a one-line message and exit code 1.
 """
@@ -30,9 +30,7 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
-import typer
-
-__all__ = ["reproduce", "reproduce_command", "ReproductionResult", "run_reproduction", "check_output_dir",
+__all__ = ["reproduce", "ReproductionResult", "run_reproduction", "check_output_dir",
            "OUTPUT_FILES"]
 
 FIGURE_NAMES = ("figure_1", "figure_2", "figure_3")
@@ -149,37 +147,37 @@ def check_output_dir(out_dir, overwrite: bool = False) -> Path:
     `overwrite`. Never: a symbolic link, directory or special file at one of those names.
 
     Raises:
-        gnipy.files.OutputError: the message (starting with `--out:`) says why.
+        gnipy.files.OutputError: the message (starting with `out_dir:`) says why.
     """
     from ..files import MARKER, OutputError, check_destination, is_owned_dir
 
     out_dir = Path(out_dir)
     text = str(out_dir)
     if "\x00" in text:
-        raise OutputError(f"--out: {text!r}: a path cannot contain a NUL character")
+        raise OutputError(f"out_dir: {text!r}: a path cannot contain a NUL character")
     if not out_dir.exists():
         if out_dir.is_symlink():
-            raise OutputError(f"--out: {text!r} is a dangling symbolic link")
+            raise OutputError(f"out_dir: {text!r} is a dangling symbolic link")
         parent = out_dir.parent
         while not parent.exists() and parent != parent.parent:
             parent = parent.parent
         if not parent.is_dir():
-            raise OutputError(f"--out: cannot create the folder {text!r}: {str(parent)!r} is not a directory")
+            raise OutputError(f"out_dir: cannot create the folder {text!r}: {str(parent)!r} is not a directory")
         if not os.access(parent, os.W_OK | os.X_OK):
-            raise OutputError(f"--out: cannot create the folder {text!r}: {str(parent)!r} is not writable")
+            raise OutputError(f"out_dir: cannot create the folder {text!r}: {str(parent)!r} is not writable")
         return out_dir
     if not out_dir.is_dir():
-        raise OutputError(f"--out: {text!r} is not a directory")
+        raise OutputError(f"out_dir: {text!r} is not a directory")
     replace = overwrite or is_owned_dir(out_dir)
     taken = []
     for name in OUTPUT_FILES:
-        check_destination(out_dir / name, overwrite=True, argument="--out")  # links, special files: never
+        check_destination(out_dir / name, overwrite=True, argument="out_dir")  # links, special files: never
         if (out_dir / name).exists():
             taken.append(name)
     if taken and not replace:
         raise OutputError(
-            f"--out: {text!r} is a folder gnipy did not create (no {MARKER} marker) and already holds "
-            f"{', '.join(taken[:4])}{', ...' if len(taken) > 4 else ''}; pass --overwrite to replace gnipy's "
+            f"out_dir: {text!r} is a folder gnipy did not create (no {MARKER} marker) and already holds "
+            f"{', '.join(taken[:4])}{', ...' if len(taken) > 4 else ''}; pass overwrite=True to replace gnipy's "
             "files there, or choose another folder"
         )
     return out_dir
@@ -266,7 +264,7 @@ def _run_stages(out_dir: Path, quick: bool, console, t_start: float) -> Reproduc
         **_versions(),
         "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
         "machine": _machine(),
-        "mode": "quick (--quick)" if quick else "full",
+        "mode": "quick" if quick else "full",
         "runtime_s": runtime,
         "stage_runtimes_s": stage_times,
     }
@@ -316,45 +314,3 @@ def reproduce(out_dir: Path, quick: bool) -> Path:
         The path of the HTML report.
     """
     return run_reproduction(Path(out_dir), quick).report
-
-
-def reproduce_command(
-    out: Path = typer.Option(Path("gnipy-reproduction"), "--out",
-                             help="Output folder for the figures (PNG, PDF) and the report (report.md, report.html)."),
-    quick: bool = typer.Option(False, "--quick",
-                               help="Short run, under a minute: fewer step sizes and shorter runs (full: a few minutes)."),
-    overwrite: bool = typer.Option(False, "--overwrite",
-                                   help="Replace the figures and reports in a folder gnipy did not create (in one it "
-                                   "created, marked by its .gnipy-owned file, a rerun replaces them)."),
-) -> None:
-    """Reproduce the paper: figures 1–3 (§7.4), the theorem table (orders of Thm 5.1 and the
-    remarks, adjointness of Thm 5.2, exact constraints, energy conservation on SO(3), the explicit
-    schemes equal to the GNI) and the errata, each measured by running gnipy; writes report.md and
-    a self-contained report.html into --out (a folder gnipy creates is marked .gnipy-owned and
-    rerunning into it replaces the files; in another folder existing files need --overwrite).
-    Exits with code 1 if a theorem row fails, a stage fails, or a file cannot be written; 2 if --out
-    may not be written."""
-    from ..files import OutputError
-
-    out = Path(out)
-    try:
-        check_output_dir(out, overwrite)
-    except OutputError as e:
-        _error(e, 2)
-    try:
-        result = run_reproduction(out, quick, overwrite=overwrite)
-    except OutputError as e:  # the folder, or the report, could not be written (a full disk)
-        _error(e, 1)
-    if not result.ok:
-        raise typer.Exit(1)
-
-
-def _error(message, code: int) -> None:
-    """A one-line error about --out on stderr (control characters escaped), and exit `code`."""
-    from ..cli import _safe
-
-    text = " ".join(str(message).split()).replace("overwrite=True (--overwrite)", "--overwrite")
-    if not text.startswith("--out"):
-        text = f"--out: {text}"
-    typer.echo("Error: " + _safe(text), err=True)
-    raise typer.Exit(code)

@@ -19,8 +19,8 @@ Two calls, both `(quick, progress=None)`:
   * §5: the explicit schemes (EuAHam), (EuBHam), (nonholonomicRATTLE) are the GNI with the Euler A,
     Euler B and trapezoid $l_d$ (equal node by node).
 
-- :func:`errata_rows` -> list of :class:`Erratum`: the misprints and readings of DESIGN.md
-  ("Errata in the paper"), each with a measurement that shows the printed form failing and the
+- :func:`errata_rows` -> list of :class:`Erratum`: the misprints and readings of the paper
+  (docs/conventions.md, "Errata"), each with a measurement that shows the printed form failing and the
   corrected one holding.
 
 **Order study.** Each method integrates the nonholonomic particle ($l = \\tfrac12|\\dot q|^2 -
@@ -1050,7 +1050,7 @@ def _erratum_ratc(quick: bool) -> Erratum:
 
 
 def errata_rows(quick: bool, progress: Progress = None) -> list[Erratum]:
-    """Measure each erratum of DESIGN.md ("Errata in the paper"): the printed form fails, the
+    """Measure each erratum of the paper (docs/conventions.md, "Errata"): the printed form fails, the
     corrected form holds (module docstring).
 
     Arguments:

@@ -267,6 +267,10 @@ class Integrator(eqx.Module):
     """
 
     name: ClassVar[str] = "integrator"
+    #: The expected global order of the method (None: not known), stated once, on the method: a
+    #: class attribute, or a property where it depends on the method's parameters (the GNI and DLA
+    #: read their discrete Lagrangian's). Everything else (`gni methods`, `gni convergence`, the
+    #: experiments, the tests) reads it.
     order: ClassVar[int | None] = None
 
     def check(self, system, q0) -> None:
@@ -303,8 +307,8 @@ class Integrator(eqx.Module):
         """The GNI family's hidden momentum $p^+_k - \\bar p_k = Q^*(p^+_k - \\Pi)$ at the node that
         `state` holds (a covector), or None for methods that carry no such state.
 
-        It should stay $\\approx -\\tfrac h2\\mu^T\\lambda$ (DESIGN §4 of the project notes; see
-        :mod:`gnipy.diagnostics`); on some problems it grows to O(1) and the motion goes wrong.
+        It should stay $\\approx -\\tfrac h2\\mu^T\\lambda$ (docs/conventions.md; see
+        :mod:`gnipy.analysis.diagnostics`); on some problems it grows to O(1) and the motion goes wrong.
         """
         return None
 

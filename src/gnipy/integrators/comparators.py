@@ -1,4 +1,4 @@
-"""Methods the GNI is compared against (DESIGN.md §2, "Methods to compare against").
+"""Methods the GNI is compared against.
 
 - :class:`DiscreteLagrangeDAlembert` (`"dla"`): the discrete Lagrange–d'Alembert principle of
   Cortés–Martínez, $p^+_k - p^-_k = \\mu(q_k)^T\\lambda_k$ with a discrete constraint imposed at the
@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 
 from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
-from ..discrete_lagrangians import DiscreteLagrangian, EulerA, EulerB, Midpoint, Trapezoid
+from ..discrete_lagrangians import DiscreteLagrangian, Midpoint
 from ..spaces import compensated_add
 from .base import Integrator, require_constant_metric, solve_step
 
@@ -37,7 +37,7 @@ class DLAState(NamedTuple):
 
 
 class DiscreteLagrangeDAlembert(Integrator):
-    """Discrete Lagrange–d'Alembert integrator (Cortés–Martínez; DESIGN.md §2).
+    """Discrete Lagrange–d'Alembert integrator (Cortés–Martínez).
 
     One step from $(q_k, p^+_k)$ solves, for the $n + m$ unknowns $(q_{k+1}, \\lambda_k)$,
 
@@ -51,7 +51,7 @@ class DiscreteLagrangeDAlembert(Integrator):
     (the documented base point of the discrete constraint). It starts from $p^+_0 = \\mathbb{G}(q_0)v_0$.
 
     On $\\mathbb{R}^n \\times G$ (IMMM) the unknowns are $(x_{k+1}, \\sigma_k)$ with
-    $R_{k+1} = R_k\\tau(\\sigma_k)$, $FL^\\mp$ are the (RedLegTr) transforms of DESIGN.md §2, and the
+    $R_{k+1} = R_k\\tau(\\sigma_k)$, $FL^\\mp$ are the (RedLegTr) transforms (:mod:`gnipy.spaces`), and the
     discrete constraint is imposed at the step velocity $(\\Delta_k, \\sigma_k/h)$,
     $\\Delta_k = (x_{k+1} - x_k)/h$, and the base point
     $b_{k+1/2} = \\big(\\tfrac12(x_k + x_{k+1}),\\ R_k\\tau(\\sigma_k/2)\\big)$:
@@ -79,18 +79,13 @@ class DiscreteLagrangeDAlembert(Integrator):
     root_finder: Any = None
     max_steps: int = eqx.field(static=True, default=50)
     name: ClassVar[str] = "dla"
-    order: ClassVar[int | None] = 2
 
     @property
-    def expected_order(self) -> int | None:
-        """Expected global order of the configurations: 2 for the midpoint and trapezoid $l_d$
-        (a symmetric two-step scheme), 1 for Euler A/B, None for a user-supplied $l_d$."""
-        ld = self.discrete_lagrangian
-        if isinstance(ld, (EulerA, EulerB)):
-            return 1
-        if isinstance(ld, (Trapezoid, Midpoint)):
-            return 2
-        return None
+    def order(self) -> int | None:  # type: ignore[override]
+        """Expected global order of the configurations: the discrete Lagrangian's `order` (2 for
+        the midpoint and trapezoid $l_d$, a symmetric two-step scheme; 1 for Euler A/B; what a
+        :class:`~gnipy.CustomDiscreteLagrangian` declares)."""
+        return self.discrete_lagrangian.order
 
     def init(self, system, q0, v0, h):
         """$(q_0, p^+_0 = \\mathbb{G}(q_0)v_0)$."""
@@ -144,7 +139,7 @@ class MPState(NamedTuple):
 
 
 class McLachlanPerlmutter(Integrator):
-    """The reversible nonholonomic scheme (4.18) of McLachlan–Perlmutter (2006), DESIGN.md §2.
+    """The reversible nonholonomic scheme (4.18) of McLachlan–Perlmutter (2006).
 
     For $l = \\tfrac12 v^TMv - V(q)$ with a constant metric $M$, one step from $(q_0, v_0)$:
 

@@ -1,4 +1,4 @@
-"""The Geometric Nonholonomic Integrator, written once (DESIGN.md §2; Def. 4.1, 6.1).
+"""The Geometric Nonholonomic Integrator, written once (paper Def. 4.1, 6.1).
 
 One step from $(b_k, p^+_k)$:
 
@@ -22,7 +22,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ..discrete_lagrangians import CustomDiscreteLagrangian, DiscreteLagrangian, EulerA, EulerB, Midpoint, Trapezoid
+from ..discrete_lagrangians import CustomDiscreteLagrangian, DiscreteLagrangian, Trapezoid
 from ..projectors import reflect_and_report
 from .base import Integrator, solve_step
 
@@ -54,21 +54,16 @@ class GNI(Integrator):
     root_finder: Any = None
     max_steps: int = eqx.field(static=True, default=50)
     explicit: bool | None = eqx.field(static=True, default=None)
-    order: ClassVar[int | None] = None
 
     @property
     def name(self) -> str:  # type: ignore[override]
         return f"gni-{self.discrete_lagrangian.name}"
 
     @property
-    def expected_order(self) -> int | None:
-        """1 for Euler A/B (Thm 5.1), 2 for trapezoid and midpoint."""
-        ld = self.discrete_lagrangian
-        if isinstance(ld, (EulerA, EulerB)):
-            return 1
-        if isinstance(ld, (Trapezoid, Midpoint)):
-            return 2
-        return None
+    def order(self) -> int | None:  # type: ignore[override]
+        """The expected global order: the discrete Lagrangian's `order` (Euler A/B 1, Thm 5.1;
+        trapezoid and midpoint 2; what a :class:`~gnipy.CustomDiscreteLagrangian` declares)."""
+        return self.discrete_lagrangian.order
 
     def prepare(self, system, q0):
         if self.explicit is not None:

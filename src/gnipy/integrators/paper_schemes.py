@@ -1,6 +1,6 @@
 """The paper's explicit schemes, written separately as one-step maps (paper §5, §6.1).
 
-These are the GNI of DESIGN.md §2 written in the paper's variables for a mechanical Lagrangian
+These are the GNI (:mod:`gnipy.integrators.gni`) written in the paper's variables for a mechanical Lagrangian
 $L = \\tfrac12 \\dot q^T M \\dot q - V(q)$ with a *constant* metric $M$. They do not call the GNI
 core: tests hold them equal to it, which checks both.
 
@@ -28,7 +28,7 @@ $(FL^- + FL^+)/2 = \\tilde p_k + (h/2) V_q(q_k)$ and (GNIintAffb) reads
 $\\mu M^{-1}(\\tilde p_k + (h/2)V_q - \\Pi) = 0$ (Euler B: $-(h/2)V_q$; trapezoid: none, which is
 the affine RATTLE of §6.1).
 
-Relation to the GNI state $(q_k, p^+_k)$ (DESIGN.md §2): the GNI's reported momentum is
+Relation to the GNI state $(q_k, p^+_k)$: the GNI's reported momentum is
 $\\bar p = (p^- + p^+)/2 = P^* p^+ + Q^* \\Pi$, and
 
     λ̃ = (2/h) C⁻¹ μ M⁻¹ (p⁺ − Π),      p̃ = p̄ − s (h/2) V_q.

@@ -56,12 +56,13 @@ $p^-_k$, $M_{k+1/2}$ the group part of $\\bar p_{k+1}$, and (RAT) is the GNI wit
   as the text after (RAT) says). Note that (RATb) uses the multiplier of node $k+1$, so $M_{k+1/2}$ is
   the group part of the node momentum $\\bar p_{k+1}$, not a half-step quantity like $p_{k+1/2}$.
 - For affine constraints the condition is $Q^*((p^- + p^+)/2 - \\Pi) = 0$, as in (GNIintAffb);
-  (GNIredb-aff) and (RBb) print $+2Q^*\\Pi$ (erratum, DESIGN.md §2).
+  (GNIredb-aff) and (RBb) print $+2Q^*\\Pi$ (an erratum: the docs' conventions page, "Errata in the
+  paper").
 
 **Start.** As the GNI: $p^+_0 = \\mathbb{G}v_0$, reflected at node 0, which gives $\\tilde\\lambda_0$,
 $\\tilde p_0$, $\\tilde M_0$; then $\\xi_0$ from the implicit equation above.
 
-**Reported.** At node k: $b_k = $ `Point(x_k, R_k)`, $\\bar p_k = (\\tilde p_k,\\ \\tilde M_k + \\tfrac h2\\tilde\\lambda_k\\eta(x_k))$
+**Reported.** At node k: $b_k$ = `Point(x_k, R_k)`, $\\bar p_k = (\\tilde p_k,\\ \\tilde M_k + \\tfrac h2\\tilde\\lambda_k\\eta(x_k))$
 (the GNI's $\\bar p_k$, on the constraints) and $\\bar v_k = \\mathbb{G}^{-1}\\bar p_k$.
 """
 

@@ -1,0 +1,5 @@
+"""`python -m gnipy.cli`: the `gni` command."""
+
+from . import app
+
+app()

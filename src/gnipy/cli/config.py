@@ -1,0 +1,141 @@
+"""Configuration files of `gni run --config RUN.toml`: the options as TOML keys.
+
+The keys are the option names (dashes or underscores); options given on the command line
+override the file; `--overwrite` and `--yes` are command-line options only (a configuration file
+cannot grant them). Relative paths in the file are relative to the file's directory.
+"""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+from typing import Any
+
+from .errors import UsageError
+
+__all__ = ["CONFIG_KEYS", "config_value", "load_config"]
+
+#: key (dashes read as underscores) -> (the CLI option it stands for, what it must hold)
+CONFIG_KEYS: dict[str, tuple[str, str]] = {
+    "model": ("MODEL", "string"),
+    "method": ("--method", "string"),
+    "h": ("--h", "number"),
+    "steps": ("--steps", "integer"),
+    "t_final": ("--t-final", "number"),
+    "set": ("--set", "set"),
+    "x0": ("--x0", "vector"),
+    "v0": ("--v0", "vector"),
+    "R0": ("--R0", "vector"),
+    "save_every": ("--save-every", "integer"),
+    "out": ("--out", "path"),
+    "plot": ("--plot", "path"),
+    "project_v0": ("--project-v0", "boolean"),
+    "checkpoint_every": ("--checkpoint-every", "integer"),
+}
+
+_KIND_TEXT = {
+    "string": "a string",
+    "number": "a number",
+    "integer": "an integer",
+    "set": "a table NAME = VALUE, or a list of \"NAME=VALUE\" strings",
+    "vector": "a list of numbers, or a string \"a,b,...\"",
+    "path": "a string (a path, relative to the config file)",
+    "boolean": "true or false",
+}
+
+
+#: A parameter name (what a key of the table form `set = { NAME = VALUE }` must be).
+_PARAM_NAME = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
+
+
+def config_value(where: str, key: str, kind: str, value, base: Path):
+    """Check one config value's type and turn it into what the CLI option would hold."""
+
+    def bad():
+        return UsageError("--config", f"{where}: key {key!r} must be {_KIND_TEXT[kind]}, got {value!r}")
+
+    if kind == "string":
+        if not isinstance(value, str):
+            raise bad()
+        return value
+    if kind == "number":
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise bad()
+        return float(value)
+    if kind == "integer":
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise bad()
+        return int(value)
+    if kind == "boolean":
+        if not isinstance(value, bool):
+            raise bad()
+        return value
+    if kind == "path":
+        if not isinstance(value, str) or not value:
+            raise bad()
+        try:
+            path = Path(value).expanduser()
+        except RuntimeError as e:  # "~user" of no such user
+            raise UsageError("--config", f"{where}: key {key!r}: cannot use {value!r}: {e}") from None
+        return path if path.is_absolute() else base / path
+    if kind == "vector":
+        if isinstance(value, str):
+            return value
+        if isinstance(value, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
+            return ",".join(repr(float(x)) for x in value)
+        raise bad()
+    if kind == "set":
+        if isinstance(value, str):
+            return [value]
+        if isinstance(value, list) and all(isinstance(x, str) for x in value):
+            return list(value)
+        if isinstance(value, dict):
+            items = []
+            for name, x in value.items():
+                if not _PARAM_NAME.fullmatch(name):  # e.g. { "m=2,g" = 1 } must not set m and g
+                    raise UsageError(
+                        "--config", f"{where}: key {key!r}: {name!r} is not a parameter name (in the table form "
+                        "each key is one name, e.g. set = { m = 2 }; or write set = [\"m=2\", ...])"
+                    )
+                if isinstance(x, bool) or not isinstance(x, (int, float)):
+                    raise UsageError("--config", f"{where}: key 'set.{name}' must be a number, got {x!r}")
+                items.append(f"{name}={float(x)!r}")
+            return items
+        raise bad()
+    raise AssertionError(kind)  # pragma: no cover
+
+
+def load_config(path: Path) -> dict[str, Any]:
+    """Read a run configuration (TOML): `{key: value}` with keys normalized (dashes → underscores)
+    and values in the form the CLI options take; raises `UsageError` naming the file and key."""
+    import tomllib
+
+    where = str(path)
+    if not path.exists():
+        raise UsageError("--config", f"cannot read {where!r}: no such file")
+    if not path.is_file():
+        raise UsageError("--config", f"cannot read {where!r}: not a file")
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except tomllib.TOMLDecodeError as e:
+        raise UsageError("--config", f"{where}: not valid TOML: {e}") from None
+    except UnicodeDecodeError:
+        raise UsageError("--config", f"{where}: not valid TOML: the file is not UTF-8 text") from None
+    except OSError as e:
+        raise UsageError("--config", f"cannot read {where!r}: {e.strerror or e}") from None
+    base = path.resolve().parent
+    out: dict[str, Any] = {}
+    for raw_key, value in data.items():
+        key = raw_key.replace("-", "_")
+        if key == "r0":
+            key = "R0"
+        if key not in CONFIG_KEYS:
+            known = ", ".join(k.replace("_", "-") for k in CONFIG_KEYS)
+            raise UsageError("--config", f"{where}: unknown key {raw_key!r} (known: {known})")
+        if key in out:
+            raise UsageError("--config", f"{where}: key {raw_key!r} given twice (with dashes and underscores)")
+        out[key] = config_value(where, raw_key, CONFIG_KEYS[key][1], value, base)
+    return out
+
+

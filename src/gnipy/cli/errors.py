@@ -1,0 +1,145 @@
+"""Errors of the `gni` commands: bad input names its option (exit code 2); a solver failure or a
+file that cannot be written gives exit code 1; neither prints a Python traceback.
+
+gnipy's own errors name the *argument* at fault (`h: ...`, `params: ...`, `chunk_steps: ...`,
+see :mod:`gnipy.errors`); :data:`ARGUMENT_OPTIONS` maps each argument to the option that sets it,
+and :func:`option_message` rewrites a message for the command line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+
+from .output import EXIT_FAILURE, EXIT_USAGE, fail
+
+__all__ = ["ARGUMENT_OPTIONS", "UsageError", "WriteFailure", "guarded", "option_message", "relabel", "writing"]
+
+#: The argument names of gnipy's error messages (`name: ...`) and the option each stands for.
+ARGUMENT_OPTIONS = {
+    "h": "--h",
+    "steps": "--steps",
+    "t_final": "--t-final",
+    "steps/t_final": "--steps/--t-final",
+    "save_every": "--save-every",
+    "q0": "--x0",
+    "v0": "--v0",
+    "q0/v0": "--x0/--v0",
+    "R0": "--R0",
+    "t0": "--t0",
+    "params": "--set",
+    "model": "MODEL",
+    "method": "--method",
+    "lagrangian": "--set/--x0",
+    "constraints": "--set/--x0",
+    "affine": "--set/--x0",
+    "chunk_steps": "--checkpoint-every",
+    "resume": "--resume",
+}
+
+#: Keyword arguments that gnipy's messages suggest (`pass overwrite=True`), as the flags.
+_KEYWORD_FLAGS = {"project_v0=True": "--project-v0", "overwrite=True": "--overwrite", "resume=True": "--resume",
+                  "rerun with resume=False": "rerun without --resume", "max_bytes=None": "--yes",
+                  "a larger save_every": "a larger --save-every"}
+
+
+class UsageError(Exception):
+    """Bad command-line input: `option` is named in the message."""
+
+    def __init__(self, option: str, message: str):
+        super().__init__(f"{option}: {message}")
+        self.option = option
+
+
+class WriteFailure(Exception):
+    """A file could not be written after the run (the message names the option and the path)."""
+
+
+def _flags(text: str) -> str:
+    for keyword, flag in _KEYWORD_FLAGS.items():
+        text = text.replace(f"{keyword} ({flag})", flag).replace(keyword, flag)
+    return text
+
+
+def option_message(message, options: dict[str, str] = ARGUMENT_OPTIONS) -> str:
+    """A gnipy error message (`argument: what was wrong`) as one about the command-line option of
+    that argument (:data:`ARGUMENT_OPTIONS`); the keyword arguments it suggests written as flags."""
+    head, sep, rest = str(message).partition(":")
+    if sep and head.strip() in options:
+        return f"{options[head.strip()]}:{_flags(rest)}"
+    return str(message)
+
+
+def relabel(option: str, message) -> str:
+    """An error message of gnipy.files / gnipy.io as one about the CLI `option`: its own argument
+    prefix (`path:`, `out:`, ...) replaced by the option, `overwrite=True` written as the flag."""
+    text = _flags(str(message))
+    head, sep, rest = text.partition(": ")
+    if sep and head in ("path", "out", "out_dir", "plot", option):
+        text = rest
+    elif sep and head in ARGUMENT_OPTIONS:  # about another argument (resume: ...)
+        return f"{ARGUMENT_OPTIONS[head]}: {rest}"
+    elif sep and re.fullmatch(r"--[\w-]+(/--[\w-]+)*", head):  # already about an option (e.g. --resume)
+        return text
+    return f"{option}: {text}"
+
+
+@contextlib.contextmanager
+def writing(option: str, path):
+    """Turn a failure to write `path` (an `OSError`, the netCDF library's `HDF error`) into a
+    one-line error about `option` (exit code 1); other errors pass."""
+    from gnipy.files import as_output_error
+
+    try:
+        yield
+    except (OSError, RuntimeError) as e:
+        err = as_output_error(e, path)
+        if err is None:
+            raise
+        raise WriteFailure(relabel(option, err)) from None
+
+
+def guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--method"):
+    """Run `fn()` turning gnipy's errors into one-line messages and exit codes.
+
+    `origins` maps an option to where its value came from (e.g. `"--h"` → `"key 'h' in run.toml"`):
+    a message about that option says so."""
+    import gnipy
+    from gnipy.io import OutputError
+
+    def usage(message: str):
+        head, sep, rest = message.partition(":")
+        if sep and origins:
+            for option in head.split("/"):
+                if option in origins:
+                    message = f"{head} (from {origins[option]}):{rest}"
+                    break
+        fail(message, EXIT_USAGE)
+
+    try:
+        return fn()
+    except UsageError as e:
+        usage(str(e))
+    except gnipy.MethodError as e:
+        message = option_message(e, {**ARGUMENT_OPTIONS, "method": method_option, "methods": method_option})
+        usage(message if message.startswith(method_option) else f"{method_option}: {message}")
+    except gnipy.InputError as e:
+        usage(option_message(e))
+    except gnipy.SolverFailure as e:
+        fail(f"solver failure: {e}", EXIT_FAILURE)
+    except WriteFailure as e:
+        fail(str(e), EXIT_FAILURE)
+    except OutputError as e:
+        fail(relabel("--out", e), EXIT_FAILURE)
+    except OSError as e:
+        where = f": {e.filename}" if getattr(e, "filename", None) else ""
+        fail(f"--out: {e.strerror or e}{where}", EXIT_FAILURE)
+    except RuntimeError as e:  # the netCDF library's failed write ("NetCDF: HDF error"), else a bug
+        from gnipy.files import as_output_error
+
+        err = as_output_error(e, "the output")
+        if err is None:
+            raise
+        fail(relabel("--out", err), EXIT_FAILURE)
+    except MemoryError:
+        fail("out of memory: save fewer nodes (--save-every) or stream the run (--checkpoint-every K)", EXIT_FAILURE)

@@ -1,0 +1,78 @@
+"""Printing for the `gni` commands: text shown literally, tables, consoles, one-line errors.
+
+Text from files and from the command line (paths, attributes, names) is printed literally (no
+rich markup), with control characters shown as escapes (`\\x1b`).
+"""
+
+from __future__ import annotations
+
+import re
+
+import typer
+
+__all__ = ["EXIT_FAILURE", "EXIT_USAGE", "cell", "console", "fail", "safe", "table", "warn"]
+
+#: Exit code of bad input (the message names the option).
+EXIT_USAGE = 2
+#: Exit code of a solver failure or a file that cannot be written.
+EXIT_FAILURE = 1
+
+# control characters (C0, DEL, C1), lone surrogates (undecodable bytes of a path), and the
+# invisible characters that reorder or break lines on a terminal
+_UNSAFE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
+_NAMED_ESCAPES = {"\n": "\\n", "\t": "\\t", "\r": "\\r"}
+
+
+def _escape_char(m) -> str:
+    ch = m.group()
+    if ch in _NAMED_ESCAPES:
+        return _NAMED_ESCAPES[ch]
+    o = ord(ch)
+    return f"\\x{o:02x}" if o < 0x100 else f"\\u{o:04x}"
+
+
+def safe(text) -> str:
+    """`text` for a terminal: control characters as visible escapes (`\\x1b`, `\\n`, `\\x07`, ...).
+    Print the result without markup (rich `Text`, or `markup=False`)."""
+    return _UNSAFE.sub(_escape_char, str(text))
+
+
+def cell(text):
+    """A table cell that shows `text` literally (no rich markup, control characters escaped)."""
+    from rich.text import Text
+
+    return Text(safe(text))
+
+
+def table(title=None, **kwargs):
+    """A rich `Table` whose title, headers and text cells are shown literally (:func:`cell`)."""
+    from rich.table import Table
+
+    class SafeTable(Table):
+        def add_row(self, *cells, **kw):
+            return super().add_row(*(cell(c) if isinstance(c, str) else c for c in cells), **kw)
+
+        def add_column(self, header="", *args, **kw):
+            return super().add_column(cell(header) if isinstance(header, str) else header, *args, **kw)
+
+    return SafeTable(title=None if title is None else cell(title), **kwargs)
+
+
+def console(stderr: bool = False):
+    """A rich console that interprets no markup or emoji codes in what it prints (text from files
+    and from the command line is shown as it is; pass it through :func:`safe`)."""
+    from rich.console import Console
+
+    return Console(highlight=False, soft_wrap=True, stderr=stderr, markup=False, emoji=False)
+
+
+def warn(text: str) -> None:
+    """Print a warning (a run-time diagnostic, a damaged chunk) on stderr, literally."""
+    console(stderr=True).print(safe(text), style="bold yellow", markup=False)
+
+
+def fail(message: str, code: int) -> None:
+    """Print a one-line error on stderr and exit with `code` (no traceback). Runs of whitespace
+    become one space; other control characters are shown as escapes."""
+    typer.echo("Error: " + safe(" ".join(str(message).split())), err=True)
+    raise typer.Exit(code)

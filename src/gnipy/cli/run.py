@@ -1,0 +1,289 @@
+"""`gni run`: integrate a model with a method and write netCDF (and a figure).
+
+Long runs are streamed (`--checkpoint-every K`, or more than
+:data:`~gnipy.cli.resources.STREAM_NODES` saved nodes): the nodes go to the file in chunks through
+:func:`gnipy.streaming.simulate_to_file`, and an interrupted run resumes (`--resume`).
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+from typing import Any
+
+import typer
+
+from . import resources
+from .app import app
+from .config import CONFIG_KEYS, load_config
+from .errors import UsageError, WriteFailure, guarded, writing
+from .parsing import parse_R0, prepare
+from .paths import check_output, check_plot, same_file
+from .progress import Progress, busy
+from .summary import attrs_for, run_report, streamed_report
+
+__all__ = ["PROGRESS_STEPS", "run", "run_streamed", "simulate_model", "write_plot"]
+
+#: In-memory runs of at least this many steps report their progress (a bar on a terminal, plain
+#: lines elsewhere: :mod:`gnipy.cli.progress`); shorter ones show a spinner on a terminal only.
+PROGRESS_STEPS = 10_000
+
+
+@app.command()
+def run(
+    model: str | None = typer.Argument(
+        None, help="Model name (see `gni models`); or `model` in --config.", show_default=False, metavar="MODEL"
+    ),
+    method: str | None = typer.Option(
+        None, "--method", "-m", help="Method name (see `gni methods`). [default: the model's, see `gni models`]", show_default=False
+    ),
+    h: float | None = typer.Option(None, "--h", help="Step size (> 0).", show_default=False),
+    steps: int | None = typer.Option(
+        None, "--steps", help="Number of steps (give this or --t-final).", show_default=False
+    ),
+    t_final: float | None = typer.Option(
+        None, "--t-final", help="Final time, a whole number of steps (give this or --steps).", show_default=False
+    ),
+    set_: list[str] | None = typer.Option(
+        None, "--set", help="Parameter override NAME=VALUE (repeatable, or comma-separated).", show_default=False
+    ),
+    x0: str | None = typer.Option(
+        None, "--x0", help="Initial configuration a,b,... (default: the model's).", show_default=False
+    ),
+    v0: str | None = typer.Option(
+        None, "--v0", help="Initial velocity a,b,... (default: the model's).", show_default=False
+    ),
+    R0: str | None = typer.Option(
+        None, "--R0", help="Initial orientation on R^n x G, row-major r11,...,r33 (default: the model's, or identity).",
+        show_default=False,
+    ),
+    project_v0: bool | None = typer.Option(
+        None, "--project-v0/--no-project-v0",
+        help="Project v0 onto the constraints instead of rejecting it. [default: no]", show_default=False,
+    ),
+    save_every: int | None = typer.Option(
+        None, "--save-every", help="Save every K-th node (and always the last). [default: 1]", show_default=False
+    ),
+    out: Path | None = typer.Option(None, "--out", "-o", help="Output netCDF file.", show_default=False),
+    plot: Path | None = typer.Option(
+        None, "--plot", help="Also write a figure (configuration path, energy error, constraint residual), "
+        "e.g. run.png.", show_default=False,
+    ),
+    config: Path | None = typer.Option(
+        None, "--config", "-c", help="A TOML file with any of these options (keys as the option names, "
+        "dashes or underscores); options given on the command line override it.", show_default=False,
+    ),
+    checkpoint_every: int | None = typer.Option(
+        None, "--checkpoint-every", help="Stream the run in chunks of K steps (a multiple of --save-every), "
+        "each committed to OUT.parts/ with the integrator state, so that an interrupted run can be resumed "
+        "(--resume). Runs saving more than 10^6 nodes are streamed in any case.", show_default=False,
+    ),
+    resume: bool = typer.Option(
+        False, "--resume", help="Continue an interrupted streamed run of the same options from its last "
+        "checkpoint (the result equals an uninterrupted run exactly).",
+    ),
+    overwrite: bool = typer.Option(
+        False, "--overwrite", help="Replace existing --out and --plot files (without it they are refused; a "
+        "symbolic link, directory or special file is refused always). Not read from --config.",
+    ),
+    yes: bool = typer.Option(
+        False, "--yes", help="Run even when the memory or the file the run needs is estimated beyond gnipy's "
+        "bounds (memory: the smaller of 8 GiB and half the RAM; file: 64 GiB, and the free disk space), which "
+        "are otherwise refused before anything is compiled. Not read from --config.",
+    ),
+):
+    """Integrate MODEL with METHOD and write the trajectory to a netCDF file.
+
+    The file holds t(time), q(time, coordinate), v(time, velocity), p(time, velocity),
+    energy(time) and constraint_residual(time, constraint), and R(time, i, j) on R^n x G, with
+    provenance attributes. With --plot, also a figure of the run.
+
+    A config file holds the same options, e.g.
+
+    \b
+        model = "vertical-disk"
+        method = "gni-midpoint"
+        h = 0.05
+        t-final = 10
+        x0 = [0, 0, 0, 0]
+        set = { I_rot = 2 }
+        out = "disk.nc"
+
+    (`set` may also be a list of "NAME=VALUE" strings, `x0`/`v0`/`R0` strings "a,b,...").
+    Relative paths in the file are relative to the file's directory.
+
+    Long runs are streamed: with --checkpoint-every K (or when more than 10^6 nodes are saved)
+    the nodes go to the file in chunks, memory holds one chunk, and the file appears (atomically)
+    when the run is complete; --resume continues an interrupted run.
+    """
+    origins: dict[str, str] = {}
+
+    def go():
+        from gnipy.analysis import exact_errors, invariant_drifts
+        from gnipy.io import write_netcdf
+
+        cfg: dict[str, Any] = {}
+        if config is not None:
+            cfg = load_config(config)
+            for key in cfg:
+                origins[CONFIG_KEYS[key][0]] = f"key {key.replace('_', '-')!r} in {str(config)}"
+
+        def pick(key: str, given, default=None):
+            if given is not None:
+                origins.pop(CONFIG_KEYS[key][0], None)
+                return given
+            return cfg.get(key, default)
+
+        model_ = pick("model", model)
+        if model_ is None:
+            raise UsageError("MODEL", "missing: give MODEL (or `model` in --config)")
+        method_ = pick("method", method)
+        if method_ is None:  # the model's measured default (gni models shows it and why)
+            from gnipy.models.registry import default_method_for
+
+            method_ = default_method_for(str(model_))
+        h_ = pick("h", h)
+        if h_ is None:
+            raise UsageError("--h", "missing: give --h (or `h` in --config)")
+        if steps is not None or t_final is not None:  # the command line decides the length
+            steps_, t_final_ = steps, t_final
+            origins.pop("--steps", None)
+            origins.pop("--t-final", None)
+        else:
+            steps_, t_final_ = cfg.get("steps"), cfg.get("t_final")
+        set_items = list(cfg.get("set", [])) + list(set_ or [])  # the command line wins per name
+        if set_:
+            origins.pop("--set", None)
+        x0_, v0_text, R0_text = pick("x0", x0), pick("v0", v0), pick("R0", R0)
+        project = bool(pick("project_v0", project_v0, False))
+        save_every_ = pick("save_every", save_every, 1)
+        out_ = pick("out", out)
+        plot_ = pick("plot", plot)
+        if out_ is None:
+            raise UsageError("--out", "missing: give --out FILE.nc (or `out` in --config)")
+
+        spec, params, q0, v0_ = prepare(model_, method_, h_, steps_, t_final_, set_items, x0_, v0_text, save_every_)
+        R0_ = parse_R0(spec, params, R0_text)
+        # --resume may find the run finished: its file is then read back, not replaced
+        check_output(out_, "--out", overwrite or resume)
+        if plot_ is not None:
+            check_plot(plot_, overwrite)
+            if same_file(out_, plot_):
+                raise UsageError("--plot", f"{str(plot_)!r} is also --out: choose another path for the figure")
+        chunk = pick("checkpoint_every", checkpoint_every)
+        if chunk is not None and (isinstance(chunk, bool) or chunk < 1):
+            raise UsageError("--checkpoint-every", f"must be a positive integer, got {chunk!r}")
+        if resume and chunk is None:
+            raise UsageError("--resume", "only streamed runs resume: give --checkpoint-every K as in the interrupted run")
+        from gnipy.simulate import MAX_STEPS, resolve_steps
+
+        n_steps = resolve_steps(h_, steps_, t_final_)[1]
+        stride = min(int(save_every_), n_steps)  # the stride the run has (the last node is always saved)
+        streamed = chunk is not None or n_steps // stride > resources.STREAM_NODES or n_steps > MAX_STEPS
+        if streamed:
+            if method_ == "reference":
+                raise UsageError("--checkpoint-every", "the continuous reference is not streamed")
+            if plot_ is not None:
+                raise UsageError("--plot", "not available for streamed runs: plot from the file (gnipy.plots)")
+            if stride > MAX_STEPS:
+                raise UsageError("--save-every", f"at most {MAX_STEPS} steps between saved nodes in a streamed run "
+                                 f"(a chunk holds at most {MAX_STEPS} steps), got {stride}")
+            if chunk is None:  # chunks of the default number of nodes, within the steps one chunk may hold
+                from gnipy.streaming import DEFAULT_CHUNK_NODES
+
+                chunk = stride * max(1, min(DEFAULT_CHUNK_NODES, MAX_STEPS // stride))
+        length = "--steps" if steps_ is not None else "--t-final"
+        if not yes:  # estimated before anything is compiled or allocated
+            resources.check_resources(spec.build(params), n_steps, stride, streamed, chunk, out_, length,
+                                      chunk_given=pick("checkpoint_every", checkpoint_every) is not None)
+        if streamed:
+            extra = {"save_every": stride, "project_v0": int(project), "command": "gni run",
+                     "q0": list(q0), "coordinates": ",".join(spec.coordinates)}
+            if config is not None:
+                extra["config_file"] = str(config)
+            if R0_ is not None:
+                extra["R0"] = list(R0_)
+            run_streamed(spec, params, method_, q0, v0_, R0_, h_, steps_, t_final_, project, stride, chunk,
+                         resume, out_, extra, overwrite=overwrite, yes=yes)
+            return
+        sol, v0_used, seconds = simulate_model(
+            spec, params, method_, q0, v0_, h_, steps_, t_final_, project, stride, R0=R0_
+        )
+        exact = exact_errors(spec, params, sol, q0, v0_used)
+        drifts = invariant_drifts(spec, params, sol.q, sol.v, sol.R)
+        extra = {"save_every": stride, "project_v0": int(project), "command": "gni run"}
+        if config is not None:
+            extra["config_file"] = str(config)
+        if R0_ is not None:
+            extra["R0"] = list(R0_)
+        attrs = attrs_for(spec, params, sol, q0, v0_used, exact, drifts, extra)
+        with writing("--out", out_):
+            write_netcdf(sol, out_, attrs=attrs, overwrite=overwrite)
+        written = str(out_)
+        if plot_ is not None:
+            write_plot(sol, plot_, overwrite)
+            written += f", {plot_}"
+        run_report("gni run", spec, params, sol, exact, drifts, seconds, written)
+
+    guarded(go, origins)
+
+
+def simulate_model(spec, params, method, q0, v0, h, steps, t_final, project_v0, save_every, R0=None):
+    """Run in memory; returns `(sol, v0_used, seconds)` (v0_used is the projected v0 with
+    --project-v0). Runs of :data:`PROGRESS_STEPS` steps or more report their progress."""
+    import gnipy
+    from gnipy.simulate import resolve_steps
+
+    system = spec.build(params)
+    # the initial velocity actually used: G-orthogonally projected onto the constraints if asked
+    _, v0_used = system.check(q0, v0, R0=R0, project_v0=project_v0)
+    v0_used = tuple(float(x) for x in v0_used)
+    n_steps = resolve_steps(h, steps, t_final)[1]
+    t0 = time.perf_counter()
+    what = f"{spec.name}: compiling and integrating with {method}"
+    if n_steps >= PROGRESS_STEPS:
+        with Progress("run", n_steps, "steps", description=what) as progress:
+            sol = gnipy.simulate(system, method, q0, v0_used, R0=R0, h=h, steps=steps, t_final=t_final,
+                                 save_every=save_every, progress=progress)
+            sol.q.block_until_ready()
+    else:
+        with busy(what):
+            sol = gnipy.simulate(system, method, q0, v0_used, R0=R0, h=h, steps=steps, t_final=t_final,
+                                 save_every=save_every)
+            sol.q.block_until_ready()
+    return sol, v0_used, time.perf_counter() - t0
+
+
+def run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, save_every, chunk, resume, out,
+                 extra, *, overwrite: bool = False, yes: bool = False) -> None:
+    """`gni run` in chunks through :func:`gnipy.streaming.simulate_to_file`, with its progress."""
+    from gnipy.streaming import simulate_to_file
+
+    system = spec.build(params)
+    _, v0_used = system.check(q0, v0, R0=R0, project_v0=project)
+    extra = dict(extra, v0=[float(x) for x in v0_used])
+    t0 = time.perf_counter()
+    total = steps if steps is not None else round(float(t_final) / float(h))
+    with Progress("run", total, "steps", description=f"{spec.name} with {method}") as progress:
+        # replacing an existing file: only with --overwrite (checked above, and again by the writer);
+        # --yes lifts the writer's own bound on the size of the run (max_bytes=None)
+        more = {"max_bytes": None} if yes else {}
+        with writing("--out", out):
+            result = simulate_to_file(
+                system, method, q0, v0_used, R0=R0, path=out, h=h, steps=steps, t_final=t_final,
+                save_every=save_every, chunk_steps=chunk, resume=resume, overwrite=overwrite, attrs=extra,
+                progress=progress, **more,
+            )
+    streamed_report(spec, params, method, h, result, time.perf_counter() - t0, out)
+
+
+def write_plot(sol, path: Path, overwrite: bool = False) -> None:
+    """The three-panel figure of a run (configuration path, energy error, constraint residual),
+    written atomically."""
+    from gnipy.plots import plot_solution
+
+    try:
+        with writing("--plot", path):
+            plot_solution(sol, path, overwrite=overwrite)
+    except WriteFailure as e:
+        raise WriteFailure(f"{e} (the result file was written; the figure was not)") from None
