@@ -1,8 +1,9 @@
 """The continuous equations of the benchmark cases, for `scipy.integrate.solve_ivp(method="DOP853")`.
 
 This is the other baseline: what a researcher integrates when no structure-preserving method is at
-hand. The Lagrange–d'Alembert(–Poincaré) equations (DESIGN.md §2, "Continuous reference"), for
-$l = \\tfrac12 v^T\\mathbb{G}v - V$ with a constant metric and constraints $\\mu(b)(v - Y(b)) = 0$:
+hand. The Lagrange–d'Alembert(–Poincaré) equations (gnipy's docs, theory page, "The continuous
+reference"), for $l = \\tfrac12 v^T\\mathbb{G}v - V$ with a constant metric and constraints
+$\\mu(b)(v - Y(b)) = 0$:
 
 $$\\mathbb{G}\\dot v = F + \\mu^T\\lambda, \\qquad F = (-\\nabla_x V,\\ \\mathrm{ad}^*_\\Omega I\\Omega) =
 (-\\nabla_x V,\\ I\\Omega\\times\\Omega),$$

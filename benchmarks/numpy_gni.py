@@ -1,14 +1,15 @@
 """The GNI step written the way a researcher writes it: NumPy, hand-derived formulas, SciPy's `root`.
 
-This is the *baseline* of the benchmark: the same discrete equations as gnipy's GNI (DESIGN.md §2,
-src/gnipy/integrators/gni.py), but written out by hand for each model, with one
+This is the *baseline* of the benchmark: the same discrete equations as gnipy's GNI (gnipy's docs,
+conventions page; src/gnipy/integrators/gni.py), but written out by hand for each model, with one
 `scipy.optimize.root(..., method="hybr", tol=1e-12)` per step and a Python `for` loop over steps.
 It is deliberately plain (readable, not optimized): no JAX, no compilation, no vectorization.
 Everything below is hand-derived because that is what a researcher without gnipy has to do:
 derive the gradients of the discrete Lagrangian, the retraction's tangent map and the projectors
 for each new model.
 
-One GNI step from $(b_k, p^+_k)$ (DESIGN §2):
+One GNI step from $(b_k, p^+_k)$ (gnipy's docs, conventions page, "Projectors and the reflection
+(Comb)" and "What is reported at a node"):
 
 1. reflect (Comb): $p^-_k = p^+_k - 2Q^*(p^+_k - \\Pi(b_k))$, $Q^* = \\mu^T C^{-1}\\mu\\mathbb{G}^{-1}$,
    $C = \\mu\\mathbb{G}^{-1}\\mu^T$;

@@ -1,11 +1,11 @@
 """Matrix Lie groups: SO(3), SE(2), $\\mathbb{R}^n$, products and the trivial group.
 
-Layer 1 of the architecture (DESIGN.md §3). A group is a small `equinox.Module` with static fields
-only; an element is a plain $k\\times k$ matrix and a Lie-algebra element a vector $\\xi\\in\\mathbb{R}^d$
+Part of the core of the package (the docs' conventions page, "Architecture"). A group is a small
+`equinox.Module` with static fields only; an element is a plain $k\\times k$ matrix and a Lie-algebra element a vector $\\xi\\in\\mathbb{R}^d$
 (its matrix is $\\hat\\xi$). Every function is written for one unbatched element (use `jax.vmap` for
 batches), in float64, and is `jit`/`vmap`/`grad` friendly.
 
-Conventions (paper §7, Appendix, and DESIGN.md §2):
+Conventions (paper §7 and Appendix; the docs' conventions page):
 
 - `hat`/`vee` identify $\\mathbb{R}^d$ with $\\mathfrak g$; for SO(3) `hat` is the paper's (hatso),
   $\\hat\\omega\\rho = \\omega\\times\\rho$.

@@ -1,7 +1,7 @@
 """The continuous reference: the Lagrange–d'Alembert(–Poincaré) equations with λ eliminated.
 
 For $l = \\tfrac12 v^T\\mathbb{G}(b)v - V(b)$ and constraints $\\mu(b)(v - Y(b)) = 0$, with $D_v$ the
-derivative along the motion ($b \\mapsto (x + \\epsilon\\dot x, R\\exp(\\epsilon\\xi))$, DESIGN.md §2):
+derivative along the motion ($b \\mapsto (x + \\epsilon\\dot x, R\\exp(\\epsilon\\xi))$):
 
 $$\\mathbb{G}\\,\\dot v = F + \\mu^T\\lambda, \\qquad
 F = \\partial_b l - D_v(\\partial_v l) + (0, \\mathrm{ad}^*_\\xi\\,\\partial_\\xi l),$$

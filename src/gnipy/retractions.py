@@ -1,7 +1,7 @@
 """Retraction maps $\\tau: \\mathfrak g \\to G$ and their right-trivialized tangents (paper, Appendix).
 
 A retraction is an analytic local diffeomorphism with $\\tau(0) = e$ and $\\tau(\\xi)\\tau(-\\xi) = e$.
-The GNI moves on the group by $R_{k+1} = R_k\\tau(\\sigma_k)$ (DESIGN.md §2), and its discrete
+The GNI moves on the group by $R_{k+1} = R_k\\tau(\\sigma_k)$ (paper §7.2), and its discrete
 Legendre transforms need the right-trivialized tangent (Definition "Retr_again")
 
 $$\\mathrm{d}\\tau_\\xi\\,\\eta = \\Bigl(\\tfrac{d}{d\\epsilon}\\tau(\\xi + \\epsilon\\eta)\\big|_{\\epsilon=0}\\,\\tau(\\xi)^{-1}\\Bigr)^\\vee

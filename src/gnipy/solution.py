@@ -46,17 +46,12 @@ RESULT_SOLVER_FAILED = int(RESULTS.solve_failed)
 
 def set_variable_attrs(ds) -> None:
     """Give the variables of a result dataset their attributes, in place: `long_name` and `units`
-    from :data:`gnipy.io.VARIABLE_ATTRS` (where not set already), and on `q`, `v`, `p` the names
-    of their components (attribute `components`, from the `coordinate` and `velocity` coordinates)."""
-    from .io import VARIABLE_ATTRS
+    as :mod:`gnipy.schema` states them (where not set already), and on `q`, `v`, `p` the names
+    of their components (attribute `components`, from the `coordinate` and `velocity` coordinates).
+    (:func:`gnipy.schema.apply`.)"""
+    from . import schema
 
-    for name, attrs in VARIABLE_ATTRS.items():
-        if name in ds.variables:
-            for key, value in attrs.items():
-                ds[name].attrs.setdefault(key, value)
-    for name, dim in (("q", "coordinate"), ("v", "velocity"), ("p", "velocity")):
-        if name in ds.variables and dim in ds.coords:
-            ds[name].attrs["components"] = ", ".join(str(x) for x in ds[dim].values)
+    schema.apply(ds)
 
 
 class Solution(eqx.Module):
@@ -65,7 +60,7 @@ class Solution(eqx.Module):
     Attributes:
         t: times, shape (T,).
         q: coordinates, (T, n) (the Euclidean part x on $\\mathbb{R}^n \\times G$).
-        v: reported velocities, (T, n) (for the GNI $\\bar v = \\mathbb{G}^{-1}\\bar p$, DESIGN §2).
+        v: reported velocities, (T, n) (for the GNI $\\bar v = \\mathbb{G}^{-1}\\bar p$, see docs/conventions.md).
         p: reported momenta, (T, n).
         energy: $\\tfrac12 v^T\\mathbb{G}v + V$, (T,).
         constraint_residual: $\\mu(q)(v - Y(q))$, (T, m).
@@ -88,7 +83,7 @@ class Solution(eqx.Module):
         states: the integrator's states at the saved nodes when asked (`SaveAt(states=True)`).
         hidden_momentum: the GNI family's hidden momentum $\\|p^+ - \\bar p\\|/\\|\\bar p\\|$ (norms in
             $\\mathbb{G}^{-1}$) at each saved node, (T,); None for other methods
-            (:mod:`gnipy.diagnostics`; its verdict is :attr:`hidden_verdict`).
+            (:mod:`gnipy.analysis.diagnostics`; its verdict is :attr:`hidden_verdict`).
         hidden_expected: the size it should have, $\\frac{|h|}2\\|\\mu^T\\lambda\\|/\\|\\bar p\\|$, (T,).
         energy_plus: the energy of the post-momentum, $\\tfrac12 p^{+T}\\mathbb{G}^{-1}p^+ + V$ (the
             quantity of the paper's energy theorem), (T,); None for other methods.
@@ -140,9 +135,9 @@ class Solution(eqx.Module):
 
     @property
     def energy_verdict(self):
-        """The :class:`~gnipy.diagnostics.EnergyVerdict` where the energy is a constant of the motion
+        """The :class:`~gnipy.analysis.diagnostics.EnergyVerdict` where the energy is a constant of the motion
         (None otherwise, and for a batch: read it per member)."""
-        from .diagnostics import energy_verdict
+        from .analysis.diagnostics import energy_verdict
 
         if not self.energy_invariant or self.batch_size is not None:
             return None
@@ -151,9 +146,9 @@ class Solution(eqx.Module):
 
     @property
     def hidden_verdict(self):
-        """The :class:`~gnipy.diagnostics.HiddenMomentumVerdict` of a GNI-family run (None for other
+        """The :class:`~gnipy.analysis.diagnostics.HiddenMomentumVerdict` of a GNI-family run (None for other
         methods; for a batch, read it per member: ``sol.member(i).hidden_verdict``)."""
-        from .diagnostics import hidden_momentum_verdict
+        from .analysis.diagnostics import hidden_momentum_verdict
 
         if self.hidden_momentum is None or self.batch_size is not None:
             return None
@@ -250,75 +245,58 @@ class Solution(eqx.Module):
         `node(time)` (the saved-node index) and `step(time)` (the step index k), the variables
         `q(time, coordinate)`, `v(time, velocity)`, `p(time, velocity)`, `energy(time)`,
         `constraint_residual(time, constraint)` (and `R(time, i, j)`, the GNI diagnostics), and
-        CF and provenance attributes (:mod:`gnipy.io`). A batch has a leading `member` axis."""
+        CF and provenance attributes (:mod:`gnipy.io`). A batch has a leading `member` axis. The
+        dimensions and the variables' attributes are those :mod:`gnipy.schema` states."""
         import xarray as xr
 
-        if self.batch_size is not None:
-            return self._batch_to_xarray(attrs)
-        n = self.q.shape[-1]
-        coords = list(self.coordinates) if len(self.coordinates) == n else [f"q{i}" for i in range(n)]
-        N = self.v.shape[-1]
-        vel = list(self.velocities) if len(self.velocities) == N else [f"v{i}" for i in range(N)]
-        m = self.constraint_residual.shape[-1]
-        t = ("time",)
-        ds = xr.Dataset(
-            {
-                "q": ((*t, "coordinate"), np.asarray(self.q)),
-                "v": ((*t, "velocity"), np.asarray(self.v)),
-                "p": ((*t, "velocity"), np.asarray(self.p)),
-                "energy": (t, np.asarray(self.energy)),
-                "constraint_residual": ((*t, "constraint"), np.asarray(self.constraint_residual)),
-            },
-            coords={**self._time_coords(), "coordinate": coords, "velocity": vel, "constraint": np.arange(m)},
-        )
-        if self.R is not None:
-            ds["R"] = ((*t, "i", "j"), np.asarray(self.R))
-        self._add_diagnostics(ds, t)
-        return self._with_attrs(ds, attrs)
+        from . import schema
 
-    def _time_coords(self) -> dict:
-        """`time` (the times), `node` and `step` (:func:`gnipy.io.time_coordinates`)."""
-        from .io import time_coordinates
-
-        return time_coordinates(np.asarray(self.t), self.h)
-
-    def _add_diagnostics(self, ds, dims):
-        """The GNI family's diagnostics as variables (their attributes: :func:`set_variable_attrs`)."""
-        if self.energy_plus is None:
-            return
-        ds["energy_plus"] = (dims, np.asarray(self.energy_plus))
-        ds["hidden_momentum"] = (dims, np.asarray(self.hidden_momentum))
-        ds["hidden_momentum_expected"] = (dims, np.asarray(self.hidden_expected))
-
-    def _batch_to_xarray(self, attrs):
-        import xarray as xr
-
+        lead = () if self.batch_size is None else ("member",)
         n, N, m = self.q.shape[-1], self.v.shape[-1], self.constraint_residual.shape[-1]
         coords = list(self.coordinates) if len(self.coordinates) == n else [f"q{i}" for i in range(n)]
         vel = list(self.velocities) if len(self.velocities) == N else [f"v{i}" for i in range(N)]
-        mt = ("member", "time")
+        names = ("q", "v", "p", "energy", "constraint_residual", *(("R",) if self.R is not None else ()))
         ds = xr.Dataset(
-            {
-                "q": ((*mt, "coordinate"), np.asarray(self.q)),
-                "v": ((*mt, "velocity"), np.asarray(self.v)),
-                "p": ((*mt, "velocity"), np.asarray(self.p)),
-                "energy": (mt, np.asarray(self.energy)),
-                "constraint_residual": ((*mt, "constraint"), np.asarray(self.constraint_residual)),
-                "result": (("member",), np.asarray(self.results)),
-                "failed_step": (("member",), np.asarray(self.failed_steps)),
-                "failed_residual": (("member",), np.full(self.batch_size, np.nan) if self.failed_residuals is None
-                                    else np.asarray(self.failed_residuals, dtype=np.float64)),
-                "valid": (mt, self.valid),
-            },
-            coords={"member": np.arange(self.batch_size), **self._time_coords(), "coordinate": coords,
-                    "velocity": vel, "constraint": np.arange(m)},
+            {name: (schema.dims(name, lead), np.asarray(getattr(self, name))) for name in names},
+            coords={**self._time_coords(), "coordinate": coords, "velocity": vel, "constraint": np.arange(m)},
         )
-        if self.R is not None:
-            ds["R"] = ((*mt, "i", "j"), np.asarray(self.R))
+        if self.batch_size is not None:
+            ds = self._batch_to_xarray(ds)
+        return self._with_attrs(self._add_diagnostics(ds, lead), attrs)
+
+    def _time_coords(self) -> dict:
+        """`time` (the times), `node` and `step` (:func:`gnipy.schema.time_coordinates`)."""
+        from .schema import time_coordinates
+
+        return time_coordinates(np.asarray(self.t), self.h)
+
+    def _add_diagnostics(self, ds, lead: tuple[str, ...] = ()):
+        """The GNI family's diagnostics as variables, after the `lead` dimensions (their
+        attributes: :func:`set_variable_attrs`); returns `ds`."""
+        from . import schema
+
+        if self.energy_plus is not None:
+            for name, a in (("energy_plus", self.energy_plus), ("hidden_momentum", self.hidden_momentum),
+                            ("hidden_momentum_expected", self.hidden_expected)):
+                ds[name] = (schema.dims(name, lead), np.asarray(a))
+        return ds
+
+    def _batch_to_xarray(self, ds):
+        """`ds` (the batch's saved nodes, along `member`) with the `member` coordinate and how each
+        member's run ended: `result`, `failed_step`, `failed_residual`, `valid`, and the
+        per-member parameters `param_NAME`."""
+        from . import schema
+
+        lead = ("member",)
+        ds = ds.assign_coords(member=np.arange(self.batch_size))
+        residuals = (np.full(self.batch_size, np.nan) if self.failed_residuals is None
+                     else np.asarray(self.failed_residuals, dtype=np.float64))
+        for name, a in (("result", self.results), ("failed_step", self.failed_steps),
+                        ("failed_residual", residuals), ("valid", self.valid)):
+            ds[name] = (schema.dims(name, lead), np.asarray(a))
         for k, v in (self.member_params or {}).items():
-            ds[f"param_{k}"] = (("member",), np.asarray(v), {"long_name": f"parameter {k}"})
-        self._add_diagnostics(ds, mt)
-        return self._with_attrs(ds, attrs)
+            ds[f"param_{k}"] = (lead, np.asarray(v), schema.param_attrs(k))
+        return ds
 
     def _with_attrs(self, ds, attrs):
         """The variables' attributes, the global CF and provenance attributes of a result dataset
@@ -381,7 +359,7 @@ class Solution(eqx.Module):
 
     def warnings(self) -> list[str]:
         """The run-time warnings of this solution: the GNI's hidden momentum out of its O(h) band,
-        and an energy that the motion conserves drifting away (:mod:`gnipy.diagnostics`)."""
+        and an energy that the motion conserves drifting away (:mod:`gnipy.analysis.diagnostics`)."""
         texts = []
         for kind in ("hidden", "energy"):
             verdicts = self._member_verdicts(kind)

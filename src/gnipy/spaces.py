@@ -1,8 +1,8 @@
 """Configuration spaces: how a step's unknowns become the next configuration.
 
-The GNI core (DESIGN.md §2) solves for the step unknowns $z$ and advances the configuration with
-them. The unknowns are *increments*: on $\\mathbb{R}^n$, $z = \\Delta x = x_{k+1} - x_k$; on
-$\\mathbb{R}^n \\times G$, $z = (\\Delta x, \\sigma_k)$ with $R_{k+1} = R_k \\tau(\\sigma_k)$. Solving for
+The GNI core (the formulation on the docs' conventions page) solves for the step unknowns $z$ and
+advances the configuration with them. The unknowns are *increments*: on $\\mathbb{R}^n$,
+$z = \\Delta x = x_{k+1} - x_k$; on $\\mathbb{R}^n \\times G$, $z = (\\Delta x, \\sigma_k)$ with $R_{k+1} = R_k \\tau(\\sigma_k)$. Solving for
 $x_{k+1}$ itself and forming $(x_{k+1} - x_k)/h$ would lose $\\varepsilon|x|/h$ in every step
 velocity, an error that adds up step after step (measured: 1.8e-5 at h = 1e-5 over T = 10 on
 `rotating-table-ball`); the increment carries the step velocity $\\Delta x/h$ to full precision.
@@ -14,7 +14,8 @@ once against them:
 - `step_points(b0, z, h)`: the end point, the midpoint and the step velocity;
 - `end_coordinates(b0, z)`: the unknowns with $x_{k+1}$ in place of $\\Delta x$ (user-supplied $l_d$);
 - `advance`, `initial_guess`: the step map and a first guess of the unknowns;
-- `legendre_minus`, `legendre_plus`: the discrete Legendre transforms $FL^\\mp$ of DESIGN §2, and
+- `legendre_minus`, `legendre_plus`: the discrete Legendre transforms $FL^\\mp$ ((RedLegTr); the docs' conventions page, "The group
+  part and retractions"), and
   `legendre_jump` = $FL^+ - FL^-$, the impulse of the step (the GNI forms $p^+_{k+1} = p^-_k +$ jump,
   so that the momentum is never rebuilt from the increment: $\\mathbb{G}(\\Delta x/h)$ rounds with a
   bias that adds up over $10^6$ steps, measured 1.4e-11 at h = 1e-5 over T = 10);
@@ -153,16 +154,16 @@ class GroupSpace(eqx.Module):
     A base point is a :class:`Point` $(x, R)$; a velocity is $v = (\\dot x, \\xi) \\in \\mathbb{R}^{n+d}$
     with $\\xi = R^{-1}\\dot R$; the step unknowns are $z = (\\Delta x, \\sigma_k)$,
     $x_{k+1} = x_k + \\Delta x$ and
-    $R_{k+1} = R_k\\tau(\\sigma_k)$, $\\sigma_k = h\\xi_k$ (DESIGN §2).
+    $R_{k+1} = R_k\\tau(\\sigma_k)$, $\\sigma_k = h\\xi_k$ (paper §7.2).
 
     **Reconstruction.** For a *reduced* system (nothing depends on R, paper §7) the equations of
     $(x, \\xi)$ do not involve R, and R is only reconstructed from ξ. With `reconstruction="right"`
     ξ is read as the *space* velocity $\\xi = (\\dot R R^{-1})^\\vee$ (right trivialization):
     $\\dot R = \\hat\\xi R$, and the steps reconstruct $R_{k+1} = \\tau(\\sigma_k)R_k$. This is how the
-    paper's §7.4 equations use ω (the rolling constraints hold for the space angular velocity,
-    DESIGN.md §2, errata). The equations and steps of $(x, \\xi)$ are unchanged, to the last bit;
-    only R differs. Systems that depend on R need the left-trivialized equations
-    (:class:`~gnipy.System` refuses the right side for them).
+    paper's §7.4 equations use ω (the rolling constraints hold for the space angular velocity: an
+    erratum of the paper, on the docs' conventions page, "Errata in the paper"). The equations and
+    steps of $(x, \\xi)$ are unchanged, to the last bit; only R differs. Systems that depend on R
+    need the left-trivialized equations (:class:`~gnipy.System` refuses the right side for them).
 
     Arguments:
         n: dimension of the Euclidean factor (may be 0).
@@ -241,7 +242,7 @@ class GroupSpace(eqx.Module):
 
     def legendre_minus(self, ld: Callable, b0, z):
         """$FL^- = (-\\partial l_d/\\partial x_k,\\ (d\\tau^{-1}_{\\sigma})^T \\partial l_d/\\partial\\sigma - \\nabla^L_{R_k} l_d)$
-        ((RedLegTr), DESIGN §2), with $\\partial/\\partial x_k$ at fixed $x_{k+1}$: with the increment as
+        ((RedLegTr)), with $\\partial/\\partial x_k$ at fixed $x_{k+1}$: with the increment as
         unknown, $\\partial_{x_k}|_{\\Delta x} - \\partial_{\\Delta x}$."""
         gx0, gR, gz = self._grads(ld, b0, z)
         _, sigma = self._split(z)

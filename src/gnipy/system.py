@@ -1,6 +1,6 @@
 """Nonholonomic mechanical systems: a Lagrangian, constraint one-forms and an affine part.
 
-A :class:`System` holds the user's data (DESIGN.md §2), on $Q = \\mathbb{R}^n$ or on
+A :class:`System` holds the user's data, on $Q = \\mathbb{R}^n$ or on
 $Q = \\mathbb{R}^n \\times G$ with velocities $v = (\\dot x, \\xi)$ in left trivialization:
 
 - a Lagrangian of mechanical type $l(b, v) = \\tfrac12 v^T \\mathbb{G}(b) v - V(b)$,

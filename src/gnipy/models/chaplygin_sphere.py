@@ -4,8 +4,8 @@ A ball of mass $m$ and radius $r$ whose centre of mass is its geometric centre, 
 moments of inertia $I_1, I_2, I_3$ (body frame = principal axes), rolls without slipping on a
 horizontal table that turns about the vertical axis through the origin at the constant rate
 $\\Omega_t$ (parameter `Omega`; 0, the default, is a fixed table). Paper §7.4 treats the same
-contact; its model is the physical ball only for $I_1 = I_2 = I_3$ (DESIGN.md, errata): here the
-constraints depend on the attitude, the Lie groupoid case of paper §9.
+contact; its model is the physical ball only for $I_1 = I_2 = I_3$ (an erratum of the paper: the
+docs' conventions page, "Errata in the paper"): here the constraints depend on the attitude, the Lie groupoid case of paper §9.
 
 **Configuration and conventions.** $Q = \\mathbb{R}^2\\times SO(3)$, $q = (x, y)$ the position of the
 centre (at height $r$), $R$ the attitude (body to space). Velocities

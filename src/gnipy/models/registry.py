@@ -59,16 +59,16 @@ class ModelSpec:
         for k, v in (overrides or {}).items():
             if k not in params:
                 known = ", ".join(params) or "none"
-                raise InputError(f"--set/params: unknown parameter {k!r} of model {self.name!r} (known: {known})")
+                raise InputError(f"params: unknown parameter {k!r} of model {self.name!r} (known: {known})")
             if isinstance(v, jax.core.Tracer):  # differentiated with respect to it (jax.grad): kept traced
                 params[k] = v
                 continue
             try:
                 v = float(v)
             except (TypeError, ValueError) as e:
-                raise InputError(f"--set/params: parameter {k!r} must be a number, got {v!r}") from e
+                raise InputError(f"params: parameter {k!r} must be a number, got {v!r}") from e
             if not math.isfinite(v):
-                raise InputError(f"--set/params: parameter {k!r} must be finite, got {v!r}")
+                raise InputError(f"params: parameter {k!r} must be finite, got {v!r}")
             params[k] = v
         return params
 

@@ -4,8 +4,9 @@ A ball of radius r and mass m rolls without slipping on a table turning at const
 about the vertical axis. A point is $b = (x, y; R)$, a velocity
 $v = (\\dot x, \\dot y, \\omega_1, \\omega_2, \\omega_3)$ with $\\omega$ the angular velocity as the paper's
 equations use it: the *space* angular velocity, $\\hat\\omega = \\dot R R^{-1}$ (the rolling constraints
-below are those of a ball for the space angular velocity, DESIGN.md §2, errata). The paper's reduced
-Lagrangian (LagCont) and constraints (Cona), (Conb):
+below are those of a ball for the space angular velocity: an erratum of the paper, on the docs'
+conventions page, "Errata in the paper"). The paper's reduced Lagrangian (LagCont) and
+constraints (Cona), (Conb):
 
 $$l = \\tfrac12 m(\\dot x^2 + \\dot y^2) + \\tfrac12(I_1\\omega_1^2 + I_2\\omega_2^2 + I_3\\omega_3^2),$$
 $$\\dot x - r\\omega_2 + \\Omega y = 0, \\qquad \\dot y + r\\omega_1 - \\Omega x = 0,$$
