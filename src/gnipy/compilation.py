@@ -135,6 +135,7 @@ def memory_map_count() -> int | None:
         return None
 
 
+@functools.cache
 def _max_map_count() -> int:
     try:
         with open("/proc/sys/vm/max_map_count") as f:

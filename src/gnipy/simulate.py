@@ -23,6 +23,7 @@ from .errors import InputError, MethodError, SolverFailure
 from .integrators.base import Integrator
 from .saveat import GRID_RTOL, SaveAt, schedule
 from .solution import RESULTS, Solution
+from .preparation import prepare
 from .stepping import progress_reporter, run_nodes, run_nodes_checkpointed
 from .system import System, concrete_value as _concrete, describe_orientations
 
@@ -154,13 +155,6 @@ def default_initial_condition(system: System, q0, v0, R0):
 @jit
 def _init_one(method, system, b0, v0, h):
     return method.init(system, b0, v0, h)
-
-
-@jit
-def _run_one(method, system, state0, h, lengths, tail, h_last, partial: bool, save_final: bool, save_states: bool,
-             progress: bool, progress_stride):
-    return run_nodes(method, system, state0, h, lengths, tail, h_last, partial=partial, save_final=save_final,
-                     save_states=save_states, progress=progress, progress_stride=progress_stride)
 
 
 @jit
@@ -313,11 +307,12 @@ def simulate(
     q0, v0, R0 = (q0, v0, R0) if state0 is not None else default_initial_condition(
         systems if systems and len(systems) > 1 else system, q0, v0, R0)
     meta = dict(system=system.name, method=method.name, h=h, coordinates=system.coordinates,
-                velocities=system.velocities, params=system.params,
-                orientation=describe_orientations(systems or [system]))
+                velocities=system.velocities, params=system.params)
     reporter = _Progress(progress, n + (1 if partial else 0))
 
     batched = systems is not None or (state0 is None and _is_batch(system, q0, v0, R0))
+    if batched or isinstance(method, ContinuousReference):
+        meta["orientation"] = describe_orientations(systems or [system])
     if isinstance(method, ContinuousReference):
         if batched:
             raise MethodError("method: the continuous reference runs one trajectory at a time; pass one system and one initial condition")
@@ -333,24 +328,25 @@ def simulate(
             return _simulate_batch(systems or [system], method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0,
                                    throw, meta, reporter)
 
-    prep = _prepare(system, method, q0, v0, R0, project_v0, state0)
-    hj = np.float64(h)
-    if state0 is None:
-        state0 = _init_one(prep.method, prep.core, prep.b0, prep.v0, hj)
+    prep = prepare(system, method, q0, v0, R0, project_v0, state0)
+    if "orientation" not in prep.cache:
+        prep.cache["orientation"] = describe_orientations([system])
+    meta["orientation"] = prep.cache["orientation"]
     with reporter:
-        out = _run_one(prep.method, prep.core, state0, hj, np.asarray(plan.lengths, np.int32), np.int32(plan.tail),
-                       np.float64(partial * h), bool(partial), plan.save_final, saveat.states, reporter.active,
-                       np.int32(reporter.stride))
+        out = prep.run(state0, h, plan.lengths, plan.tail, partial * h, times, partial=bool(partial),
+                       save_final=plan.save_final, save_states=saveat.states, progress=reporter.active,
+                       progress_stride=reporter.stride)
         if reporter.active:
             jax.block_until_ready(out)
     meta |= _diagnostic_meta(system, prep.core, prep.b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
-                             cached=prep.cache)
+                             cached=prep.cache, prepared=(prep, out.get("padded")))
     fail_k = int(out["fail_k"])
-    space = system.space
-    q, R = space.coordinates(out["b"]), space.orientation(out["b"])
-    common = dict(iterations=out["iterations"], R=R, final_state=out["final_state"], states=out["states"], **meta)
+    q = out["q"]
+    common = dict(iterations=out["iterations"], R=out["R"], final_state=out["final_state"], states=out["states"],
+                  **meta)
     if fail_k < 0:
-        return Solution(jnp.asarray(times), q, out["v"], out["p"], out["energy"], out["residual"], **common)
+        return Solution.of(t=out["t"], q=q, v=out["v"], p=out["p"], energy=out["energy"],
+                           constraint_residual=out["residual"], **common)
     good = int(np.searchsorted(np.asarray(plan.nodes), fail_k, side="right"))  # saved nodes with index <= fail_k
     cut = {k: (None if common.get(k) is None else jax.tree_util.tree_map(lambda a: a[:good], common[k]))
            for k in ("R", "states", *_DIAGNOSTIC_ARRAYS)}
@@ -419,75 +415,6 @@ class _Progress:
         return False
 
 
-class _Prepared:
-    """What a run needs from its system, method and initial condition, computed once per call
-    signature: the checked start `(b0, v0)`, the prepared method, the system without metadata,
-    and the diagnostics' host-side answers (`cache`)."""
-
-    __slots__ = ("b0", "v0", "method", "core", "cache", "refs")
-
-    def __init__(self, b0, v0, method, core, refs):
-        self.b0, self.v0, self.method, self.core, self.refs = b0, v0, method, core, refs
-        self.cache = {}
-
-
-_PREPARED: dict = {}
-_PREPARED_MAX = 64
-
-
-def _key_part(x):
-    if x is None:
-        return None
-    a = np.asarray(x)
-    if a.dtype == object:
-        raise TypeError
-    return a.dtype.str, a.shape, a.tobytes()
-
-
-def _prepare(system, method, q0, v0, R0, project_v0, state0) -> _Prepared:
-    """The checked start and prepared method (:meth:`System.check`, `method.check`,
-    `method.prepare`), from a cache keyed by the system and method objects (held, so their ids stay
-    theirs) and the bytes of the initial condition: a repeated call checks nothing again."""
-    key = None
-    if state0 is None:
-        try:
-            key = (id(system), id(method), _key_part(q0), _key_part(v0), _key_part(R0), bool(project_v0))
-        except (TypeError, ValueError):
-            key = None
-        hit = _PREPARED.get(key) if key is not None else None
-        if hit is not None:
-            return hit
-        b0, v0c = system.check(q0, v0, R0=R0, project_v0=project_v0)
-        v0c = np.asarray(v0c, dtype=np.float64)
-    else:
-        b0, v0c = _state_point(system, method, state0)
-    method.check(system, b0)
-    prepared = _Prepared(b0, v0c, method.prepare(system, b0), system.without_metadata(), (system, method))
-    if key is not None:
-        if len(_PREPARED) >= _PREPARED_MAX:
-            _PREPARED.pop(next(iter(_PREPARED)))
-        _PREPARED[key] = prepared
-    return prepared
-
-
-def _state_point(system, method, state0):
-    """The base point of a given integrator state (checked against the state `method.init` builds)."""
-    b_ref = system.initial_point(np.zeros(system.n)) if system.defaults is None else system.initial_point(
-        system.defaults[0], system.defaults[2] if len(system.defaults) > 2 else None)
-    ref = jax.eval_shape(lambda: method.init(system.without_metadata(), b_ref, jnp.zeros(system.dim), 1.0))
-    leaves, treedef = jax.tree_util.tree_flatten(state0)
-    ref_leaves, ref_def = jax.tree_util.tree_flatten(ref)
-    if treedef != ref_def or any(np.shape(a) != r.shape for a, r in zip(leaves, ref_leaves)):
-        raise InputError(
-            f"state0: not a state of {method.name} for {system.name!r} (expected {ref_def} with shapes "
-            f"{[r.shape for r in ref_leaves]}); pass the final_state of a run of the same method and system"
-        )
-    if not all(np.all(np.isfinite(np.asarray(a))) for a in leaves if np.issubdtype(np.asarray(a).dtype, np.inexact)):
-        raise InputError("state0: contains NaN or infinite values")
-    b0 = method.observe(system.without_metadata(), state0, 1.0)[0]
-    return b0, None
-
-
 def _simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, saveat, t0, state0, project_v0, throw):
     """`simulate` under a JAX transformation: the values are checked where they are known now
     (`jax.grad`/`jax.jacfwd` outside `jit`), the run is differentiable (static trip counts in
@@ -513,12 +440,19 @@ def _simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, sav
         raise InputError(f"t_final: not a whole number of steps of h, and {method.name} cannot shorten its last step")
     plan = schedule(saveat, n, partial, h=hv, t0=t0_num)
     if state0 is None:
+        if (q0 is None or v0 is None) and _traced(system):
+            # the defaults were computed from the parameters' values: their derivative is not in them
+            raise InputError(
+                "q0/v0: the system's parameters are traced (differentiated or inside jax.jit), and its default "
+                "initial condition was computed from their values without their derivatives; give q0 and v0 "
+                "(as functions of the parameters where they depend on them)"
+            )
         q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
     concrete = _concrete_tree((system, q0, v0, R0, state0))
     core = system.without_metadata()
     if concrete is not None:  # the full checks on the values, as in an untransformed call
         c_sys, c_q0, c_v0, c_R0, c_state0 = concrete
-        prep = _prepare(c_sys, method, c_q0, c_v0, c_R0, project_v0, c_state0)
+        prep = prepare(c_sys, method, c_q0, c_v0, c_R0, project_v0, c_state0)
         prepared = prep.method
     else:  # inside jit: shapes only; the implicit path (the explicit one is an optimization)
         import dataclasses
@@ -569,7 +503,7 @@ _DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
 
 
 def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False, batch: bool = False,
-                     cached: dict | None = None) -> dict:
+                     cached: dict | None = None, prepared=None) -> dict:
     """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
     the energy of p⁺ (:mod:`gnipy.analysis.diagnostics`), and the sentence on what is conserved (kept in
     `cached`, per system and start, when given)."""
@@ -586,7 +520,10 @@ def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False
                "energy_invariant": energy_is_invariant(system, b0)}
         if cached is not None:
             cached[key] = dict(out)
-    if gni_family:
+    if gni_family and prepared is not None:  # a single run: its nodes come padded from the run's program
+        diag = prepared[0].node_diagnostics(prepared[1], h, int(np.shape(nodes[1])[0]))
+        out |= dict(zip(_DIAGNOSTIC_ARRAYS, diag))
+    elif gni_family:
         diag = saved_node_diagnostics(core, *nodes, h, batched_system=batched_system, batch=batch)
         out |= dict(zip(_DIAGNOSTIC_ARRAYS, diag))
     return out

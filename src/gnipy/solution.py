@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import enum
 import html as _html
@@ -133,6 +134,19 @@ class Solution(eqx.Module):
     orientation: str = eqx.field(static=True, default="")
     energy_invariant: bool = eqx.field(static=True, default=False)
 
+    @classmethod
+    def of(cls, **fields) -> "Solution":
+        """The Solution with these fields (the others at their defaults), built without equinox's
+        per-field checks: what :func:`gnipy.simulate` calls on every run (equinox's constructor
+        costs about 0.1 ms, a fifth of a repeated call's overhead, measured). Same result as
+        `Solution(**fields)`."""
+        sol = object.__new__(cls)
+        for f in _FIELDS:
+            object.__setattr__(sol, f.name, fields.pop(f.name) if f.name in fields else f.default)
+        if fields:
+            raise TypeError(f"Solution.of: unknown fields {sorted(fields)}")
+        return sol
+
     @property
     def energy_verdict(self):
         """The :class:`~gnipy.analysis.diagnostics.EnergyVerdict` where the energy is a constant of the motion
@@ -141,7 +155,8 @@ class Solution(eqx.Module):
 
         if not self.energy_invariant or self.batch_size is not None:
             return None
-        kinetic = 0.5 * np.sum(np.asarray(self.v) * np.asarray(self.p), axis=-1)
+        with np.errstate(over="ignore", invalid="ignore"):  # a run that blew up: inf/NaN nodes
+            kinetic = 0.5 * np.sum(np.asarray(self.v) * np.asarray(self.p), axis=-1)
         return energy_verdict(self.t, self.energy, kinetic)
 
     @property
@@ -439,7 +454,9 @@ class Solution(eqx.Module):
         e = np.asarray(self.energy)
         r = np.abs(np.asarray(self.constraint_residual))
         if e.size and batch is None:
-            rows.append(("energy", f"initial {e[0]:.12g}, max |E − E0| = {np.max(np.abs(e - e[0])):.3e}"))
+            with np.errstate(over="ignore", invalid="ignore"):
+                drift = np.max(np.abs(e - e[0]))
+            rows.append(("energy", f"initial {e[0]:.12g}, max |E − E0| = {drift:.3e}"))
         if r.size:
             rows.append(("constraint residual", f"max {np.nanmax(r):.3e}"))
         rows.append(("Newton iterations", f"total {int(np.asarray(self.iterations)[0])}, "
@@ -451,3 +468,6 @@ class Solution(eqx.Module):
         warn = "".join(f"<li>{esc(w)}</li>" for w in self.warnings())
         warn = f"<p><b>Warnings</b></p><ul>{warn}</ul>" if warn else ""
         return f"<div><p><b>gnipy.Solution</b></p><table>{body}</table>{warn}</div>"
+
+
+_FIELDS = dataclasses.fields(Solution)

@@ -271,8 +271,8 @@ def energy_verdict(t, energy, kinetic, *, e0=None, kmax0: float = 0.0) -> Energy
     if e.size == 0:
         return EnergyVerdict(True, None, 0.0)
     scale = np.maximum.accumulate(np.maximum(np.where(np.isfinite(k), np.abs(k), np.inf), kmax0))
-    drift = np.abs(e - (e[0] if e0 is None else e0))
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):  # a run that blew up: inf/NaN nodes
+        drift = np.abs(e - (e[0] if e0 is None else e0))
         rel = np.where(scale > 0, drift / scale, np.where(drift > 0, np.inf, 0.0))
     rel = np.where(np.isfinite(e), rel, np.inf)
     out = np.flatnonzero(~(rel <= ENERGY_BAND))

@@ -68,12 +68,13 @@ NaN when $I_1 \\ne I_2$, where it is not conserved).
 
 from __future__ import annotations
 
+import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
 from ..lie_groups import SO3
-from ..system import System
+from ..system import System, _number
 from . import rotating_table_ball
 from .registry import ModelSpec, register
 
@@ -150,7 +151,11 @@ def build_system(p, *, retraction="cayley", defaults=None, reconstruction="right
             `"left"` (ω read as the body angular velocity, $\\dot R = R\\hat\\omega$: not the ball's attitude;
             for comparisons). The motion of $(x, y, \\omega)$ is the same.
     """
-    p = {k: float(v) for k, v in p.items()}
+    traced = any(isinstance(v, jax.core.Tracer) for v in p.values())  # differentiated: kept traced
+    p = {k: v if isinstance(v, jax.core.Tracer) else float(v) for k, v in p.items()}
+    if traced:  # the provenance numbers and the note from the values known now; no default start
+        known = {k: _number(v) for k, v in p.items()}
+        note = orientation_note(known) if reconstruction == "right" else None
     return System(
         jtu.Partial(_lagrangian, jnp.asarray(p["m"]), jnp.asarray([p["I1"], p["I2"], p["I3"]])),
         jtu.Partial(_constraints, jnp.asarray(p["r"])),
@@ -163,8 +168,8 @@ def build_system(p, *, retraction="cayley", defaults=None, reconstruction="right
         velocities=VELOCITIES,
         name="rolling-ball",
         params=p,
-        defaults=_default_ic(p) if defaults is None else defaults,
-        orientation_note=orientation_note(p) if reconstruction == "right" else
+        defaults=(None if traced else _default_ic(p)) if defaults is None else defaults,
+        orientation_note=(note if traced else orientation_note(p)) if reconstruction == "right" else
         "R is not the ball's attitude: omega read as the body angular velocity (reconstruction='left')",
     )
 

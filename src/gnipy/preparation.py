@@ -1,0 +1,205 @@
+"""What a run of :func:`gnipy.simulate` needs that depends only on its system, method and initial
+condition, computed once per call signature and kept: the checked start, the prepared method,
+the diagnostics' sentences, and the compiled programs with their inputs already split.
+
+A repeated call with the same system object, method object and initial condition (compared by
+value) checks nothing again (:meth:`gnipy.System.check`, `method.check`, `method.prepare` ran
+once) and calls its compiled programs directly: the arrays of the method and system are
+flattened once, and the programs are `jax.jit` functions shared by every run whose method and
+system have the same structure (the non-array parts, compared as equinox's `filter_jit` compares
+them) and that save as many nodes. `equinox.filter_jit` would partition and hash the whole
+method and system on every call (about 0.3 ms each time, measured), which is why this module
+dispatches by hand.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import InputError
+from .stepping import run_nodes
+
+__all__ = ["Prepared", "prepare", "state_point", "node_padding"]
+
+_CACHE: dict = {}
+_CACHE_MAX = 64
+_PROGRAMS: dict = {}
+_PROGRAMS_MAX = 256
+
+
+def node_padding(T: int) -> int:
+    """The number of nodes the diagnostics program is compiled for when `T` are saved: a power of
+    two (at least 16), so that runs saving different numbers of nodes share it."""
+    return max(16, 1 << (int(T) - 1).bit_length())
+
+
+def _key_part(x):
+    if x is None:
+        return None
+    a = np.asarray(x)
+    if a.dtype == object:
+        raise TypeError
+    return a.dtype.str, a.shape, a.tobytes()
+
+
+def _split(tree):
+    """`(leaves, structure_key, rebuild)`: the array leaves of `tree` (as jax arrays), a hashable
+    key of everything else (None when a static part cannot be hashed), and `rebuild(leaves)`."""
+    dyn, static = eqx.partition(tree, eqx.is_array)
+    leaves, treedef = jax.tree_util.tree_flatten(dyn)
+    static_leaves, static_def = jax.tree_util.tree_flatten(static)
+    key = (treedef, static_def, tuple(static_leaves))
+    try:
+        hash(key)
+    except TypeError:
+        key = None
+
+    def rebuild(ls):
+        return eqx.combine(jax.tree_util.tree_unflatten(treedef, ls), static)
+
+    return [jnp.asarray(a) for a in leaves], key, rebuild
+
+
+def _program(key, make):
+    """The compiled program under `key` (made by `make()` the first time; uncached when key is None)."""
+    from .compilation import compiler_options
+
+    if key is not None and key in _PROGRAMS:
+        return _PROGRAMS[key]
+    program = jax.jit(make(), compiler_options=compiler_options())
+    if key is not None:
+        if len(_PROGRAMS) >= _PROGRAMS_MAX:
+            _PROGRAMS.pop(next(iter(_PROGRAMS)))
+        _PROGRAMS[key] = program
+    return program
+
+
+class Prepared:
+    """A checked start `(b0, v0)`, the prepared method, the system without metadata (`core`), the
+    diagnostics' host-side answers (`cache`) and the compiled programs of runs from this start."""
+
+    __slots__ = ("b0", "v0", "method", "core", "cache", "refs", "_leaves", "_key", "_rebuild", "_sys_leaves",
+                 "_sys_key", "_sys_rebuild", "_start", "_runs")
+
+    def __init__(self, b0, v0, method, core, refs):
+        self.b0, self.v0, self.method, self.core, self.refs = b0, v0, method, core, refs
+        self.cache = {}
+        self._leaves = None
+        self._runs = {}
+
+    def _split(self):
+        if self._leaves is None:
+            self._leaves, self._key, self._rebuild = _split((self.method, self.core))
+            self._sys_leaves, self._sys_key, self._sys_rebuild = _split(self.core)
+            self._start = None if self.v0 is None else (
+                jax.tree_util.tree_map(jnp.asarray, self.b0), jnp.asarray(self.v0, jnp.float64))
+
+    def run(self, state0, h: float, lengths, tail: int, h_last: float, times, *, partial: bool, save_final: bool,
+            save_states: bool, progress: bool, progress_stride: int):
+        """:func:`gnipy.stepping.run_nodes` from `state0` (None: `method.init` at the checked start,
+        in the same program); also the saved nodes' coordinates `q`, orientations `R`, their
+        `times` as a device array `t`, and for the GNI family the saved nodes padded for
+        :meth:`node_diagnostics` (`out["padded"]`)."""
+        self._split()
+        from_state = state0 is not None
+        config = (len(lengths), bool(partial), bool(save_final), bool(save_states), bool(progress), from_state)
+        program = self._runs.get(config)
+        if program is None:
+            rebuild = self._rebuild
+
+            def make():
+                def run(leaves, start, h, lengths, tail, h_last, stride, times):
+                    method, system = rebuild(leaves)
+                    state = start if from_state else method.init(system, start[0], start[1], h)
+                    out = run_nodes(method, system, state, h, lengths, tail, h_last, partial=config[1],
+                                    save_final=config[2], save_states=config[3], progress=config[4],
+                                    progress_stride=stride)
+                    out["q"] = system.space.coordinates(out["b"])
+                    out["R"] = system.space.orientation(out["b"])
+                    out["t"] = times
+                    if out["hidden"] is not None:
+                        T = out["v"].shape[0]
+                        pad = node_padding(T) - T
+
+                        def edge(a):
+                            return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
+
+                        out["padded"] = jax.tree_util.tree_map(edge, (out["b"], out["v"], out["p"], out["hidden"]))
+                    return out
+
+                return run
+
+            program = _program(None if self._key is None else ("run", self._key, config), make)
+            self._runs[config] = program
+        start = state0 if from_state else self._start
+        return program(self._leaves, start, np.float64(h), np.asarray(lengths, np.int32), np.int32(tail),
+                       np.float64(h_last), np.int32(progress_stride), np.asarray(times, np.float64))
+
+    def node_diagnostics(self, padded, h: float, T: int):
+        """:func:`gnipy.analysis.diagnostics.node_diagnostics` at the first `T` of the padded saved
+        nodes: `(hidden_ratio, expected_ratio, energy_plus)` as arrays (T,). One program per
+        system structure and padded length, shared by every method."""
+        from .analysis.diagnostics import node_diagnostics
+
+        self._split()
+        rebuild = self._sys_rebuild
+
+        def make():
+            def diagnose(leaves, b, v, p, hidden, h):
+                system = rebuild(leaves)
+                return jax.vmap(lambda bb, vv, pp, xx: node_diagnostics(system, bb, vv, pp, xx, h))(b, v, p, hidden)
+
+            return diagnose
+
+        program = _program(None if self._sys_key is None else ("diagnostics", self._sys_key), make)
+        out = program(self._sys_leaves, *padded, np.float64(h))
+        # device arrays, not waited for: the run's caller goes on while they are computed
+        return tuple(x[:T] if x.shape[0] != T else x for x in out)
+
+
+def state_point(system, method, state0):
+    """The base point of a given integrator state (checked against the state `method.init` builds)."""
+    b_ref = system.initial_point(np.zeros(system.n)) if system.defaults is None else system.initial_point(
+        system.defaults[0], system.defaults[2] if len(system.defaults) > 2 else None)
+    ref = jax.eval_shape(lambda: method.init(system.without_metadata(), b_ref, jnp.zeros(system.dim), 1.0))
+    leaves, treedef = jax.tree_util.tree_flatten(state0)
+    ref_leaves, ref_def = jax.tree_util.tree_flatten(ref)
+    if treedef != ref_def or any(np.shape(a) != r.shape for a, r in zip(leaves, ref_leaves)):
+        raise InputError(
+            f"state0: not a state of {method.name} for {system.name!r} (expected {ref_def} with shapes "
+            f"{[r.shape for r in ref_leaves]}); pass the final_state of a run of the same method and system"
+        )
+    if not all(np.all(np.isfinite(np.asarray(a))) for a in leaves if np.issubdtype(np.asarray(a).dtype, np.inexact)):
+        raise InputError("state0: contains NaN or infinite values")
+    b0 = method.observe(system.without_metadata(), state0, 1.0)[0]
+    return b0, None
+
+
+def prepare(system, method, q0, v0, R0, project_v0: bool, state0) -> Prepared:
+    """The checked start and prepared method (:meth:`System.check`, `method.check`,
+    `method.prepare`), from a cache keyed by the system and method objects (held, so their ids stay
+    theirs) and the bytes of the initial condition: a repeated call checks nothing again. With
+    `state0` the state is checked (its structure, finite values) and nothing is cached."""
+    key = None
+    if state0 is None:
+        try:
+            key = (id(system), id(method), _key_part(q0), _key_part(v0), _key_part(R0), bool(project_v0))
+        except (TypeError, ValueError):
+            key = None
+        hit = _CACHE.get(key) if key is not None else None
+        if hit is not None:
+            return hit
+        b0, v0c = system.check(q0, v0, R0=R0, project_v0=project_v0)
+        v0c = np.asarray(v0c, dtype=np.float64)
+    else:
+        b0, v0c = state_point(system, method, state0)
+    method.check(system, b0)
+    prepared = Prepared(b0, v0c, method.prepare(system, b0), system.without_metadata(), (system, method))
+    if key is not None:
+        if len(_CACHE) >= _CACHE_MAX:
+            _CACHE.pop(next(iter(_CACHE)))
+        _CACHE[key] = prepared
+    return prepared
