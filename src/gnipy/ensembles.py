@@ -23,7 +23,9 @@ import numpy as np
 
 from .compilation import jit
 from .spaces import Point
-from .errors import InputError
+from .errors import InputError, SolverFailure
+from .solution import RESULTS, Solution
+from .stepping import run_nodes
 from .system import System, real_array
 
 __all__ = ["stack_systems", "model_systems", "broadcast_initial_conditions", "check_batch", "member_initial_conditions",
@@ -321,3 +323,114 @@ def member_params(systems: Sequence[System]) -> dict[str, np.ndarray]:
         for k in names:
             out[k][i] = p.get(k, np.nan)
     return out
+
+
+# ------------------------------------------------------------------------------------------------
+# The batched run of gnipy.simulate
+# ------------------------------------------------------------------------------------------------
+@jit
+def _run_batch(method, system, system_batched: bool, state0, h, lengths, tail, h_last, partial: bool,
+               save_final: bool, save_states: bool, progress: bool, progress_stride):
+    """:func:`gnipy.stepping.run_nodes` vmapped over the members (states, and systems when batched)."""
+    def one(s, st):
+        return run_nodes(method, s, st, h, lengths, tail, h_last, partial=partial, save_final=save_final,
+                         save_states=save_states, progress=progress, progress_stride=progress_stride)
+
+    return eqx.filter_vmap(one, in_axes=(eqx.if_array(0) if system_batched else None, 0))(system, state0)
+
+
+@jit
+def _init_batch(method, system, system_batched: bool, b0, v0, h):
+    return eqx.filter_vmap(
+        lambda s, b, v: method.init(s, b, v, h), in_axes=(eqx.if_array(0) if system_batched else None, 0, 0)
+    )(system, b0, v0)
+
+
+
+
+def is_batch(system: System, q0, v0, R0) -> bool:
+    """Whether the initial conditions carry a leading batch axis."""
+    try:
+        q = np.asarray(q0)
+        v = np.asarray(v0)
+    except (TypeError, ValueError):
+        return False  # let System.check name the bad argument
+    if q.ndim == 2 or v.ndim == 2:
+        return True
+    if system.group is not None and R0 is not None:
+        try:
+            R = np.asarray(R0, dtype=np.float64)
+        except (TypeError, ValueError):
+            return False
+        k = system.group.matrix_size
+        return R.ndim == 3 or (R.ndim == 2 and R.shape != (k, k) and R.shape[-1] == k * k)
+    return False
+
+
+def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0, throw, meta, reporter):
+    """The batched run of :func:`gnipy.simulate` (B members: initial conditions and/or systems),
+    one vmapped program; a failed member's nodes after its failure are NaN."""
+    from .simulate import _DIAGNOSTIC_ARRAYS, _diagnostic_meta
+
+    system = systems[0]
+    size = len(systems) if len(systems) > 1 else None
+    B, q0, v0, R0 = broadcast_initial_conditions(system, q0, v0, R0, size)
+    # the full checks (mechanical type, dimensions) once, on the first member; the value checks
+    # (metric, rank, v0 on the constraints) for every member, vectorized
+    system.check(q0[0], None, R0=None if R0 is None else R0[0])
+    sys_batched = len(systems) > 1
+    core = stack_systems(systems) if sys_batched else system.without_metadata()
+    b0, v0 = check_batch(core, sys_batched, q0, v0, R0, project_v0=project_v0)
+    first_b0 = jax.tree_util.tree_map(lambda a: a[0], b0)
+    method.check(system, first_b0)
+    method = method.prepare(system, first_b0)
+    hj = np.float64(h)
+    state0 = _init_batch(method, core, sys_batched, b0, v0, hj)
+    out = _run_batch(method, core, sys_batched, state0, hj, np.asarray(plan.lengths, np.int32), np.int32(plan.tail),
+                     np.float64(partial * h), bool(partial), plan.save_final, False, reporter.active,
+                     np.int32(reporter.stride))
+    if reporter.active:
+        jax.block_until_ready(out)
+    batch_diag = _diagnostic_meta(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
+                                  batched_system=sys_batched, batch=True)
+    space = system.space
+    q, R = space.coordinates(out["b"]), space.orientation(out["b"])
+    v, p, energy, residual = out["v"], out["p"], out["energy"], out["residual"]
+    fail_k = np.asarray(out["fail_k"])
+    failed = fail_k >= 0
+    fail_res = np.where(failed, np.asarray(out["fail_res"], dtype=np.float64), np.nan)
+    results = np.where(failed, int(RESULTS.solve_failed), int(RESULTS.successful)).astype(np.int32)
+    k_saved = np.asarray(plan.nodes)
+    if failed.any():  # a failed member is NaN after its failed step, never its last state repeated
+        valid = ~failed[:, None] | (k_saved[None, :] <= fail_k[:, None])
+
+        def blank(a):
+            if a is None:
+                return None
+            a = np.array(a, dtype=np.float64)
+            a[~valid] = np.nan
+            return jnp.asarray(a)
+
+        q, v, p, energy, residual, R = (blank(a) for a in (q, v, p, energy, residual, R))
+        batch_diag |= {k: blank(batch_diag[k]) for k in _DIAGNOSTIC_ARRAYS if batch_diag.get(k) is not None}
+    its = np.asarray(out["iterations"])
+    batch_meta = dict(meta)
+    if sys_batched:
+        batch_meta["params"] = ()
+    sol = Solution(
+        jnp.asarray(times), q, v, p, energy, residual, jnp.asarray([its[:, 0].sum(), its[:, 1].max()]), R=R,
+        result=RESULTS.solve_failed if failed.any() else RESULTS.successful,
+        failed_step=int(fail_k[failed].min()) if failed.any() else -1,
+        results=jnp.asarray(results), failed_steps=jnp.asarray(fail_k), failed_residuals=jnp.asarray(fail_res),
+        member_iterations=jnp.asarray(its), member_params=member_params(systems) if sys_batched else None,
+        final_state=out["final_state"], **batch_meta, **batch_diag,
+    )
+    if failed.any() and throw:
+        i = int(np.argmax(failed))
+        k = int(fail_k[i])
+        msg = (
+            f"{method.name}: member {i} of {B}: step {k} (t = {t0 + h * k:.6g} -> {t0 + h * (k + 1):.6g}) failed: "
+            f"{RESULTS.solve_failed.message} (residual {float(fail_res[i]):.3e}); {int(failed.sum())} member(s) failed"
+        )
+        raise SolverFailure(msg, step=k, time=t0 + h * k, residual=float(fail_res[i]), solution=sol)
+    return sol

@@ -4,16 +4,16 @@ and stepped by the one loop (:mod:`gnipy.stepping`), the result assembled (:clas
 Repeated calls are cheap: what depends only on the system, the method and the initial condition
 (the checks, the method's preparation, the diagnostics' sentences) is kept per call signature
 (:mod:`gnipy.preparation`), and the compiled programs are shared between runs that save as many
-nodes. Under a JAX transformation (`jax.grad`, `jax.jacrev`, `jax.jacfwd`, `jax.jit`) the run is
-differentiable: the loop has static trip counts in checkpointed blocks and the implicit steps are
-differentiated by the implicit function theorem.
+nodes. Under a JAX transformation (`jax.grad`, `jax.jacrev`, `jax.jacfwd`, `jax.jit`;
+:mod:`gnipy.transformed`) the run is differentiable: the loop has static trip counts in blocks
+(checkpointed for long runs) and the implicit steps are differentiated by the implicit function
+theorem. Batches of initial conditions or systems run vmapped (:mod:`gnipy.ensembles`).
 """
 
 from __future__ import annotations
 
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -23,9 +23,10 @@ from .errors import InputError, MethodError, SolverFailure
 from .integrators.base import Integrator
 from .saveat import GRID_RTOL, SaveAt, schedule
 from .solution import RESULTS, Solution
+from .ensembles import is_batch, simulate_batch
 from .preparation import prepare
-from .stepping import progress_reporter, run_nodes, run_nodes_checkpointed
-from .system import System, concrete_value as _concrete, describe_orientations
+from .stepping import progress_reporter
+from .system import System, describe_orientations
 
 __all__ = ["simulate", "resolve_steps", "resolve_run", "SaveAt", "MAX_STEPS", "MAX_TOTAL_STEPS", "MIN_STEP_SIZE"]
 
@@ -41,18 +42,6 @@ MIN_STEP_SIZE = float(np.finfo(np.float64).tiny)
 
 def _traced(*trees) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
-
-
-def _concrete_tree(tree):
-    """`tree` with every tracer replaced by its concrete value, or None if one has none."""
-    leaves, treedef = jax.tree_util.tree_flatten(tree)
-    out = []
-    for x in leaves:
-        c = _concrete(x)
-        if c is None:
-            return None
-        out.append(c)
-    return jax.tree_util.tree_unflatten(treedef, out)
 
 
 def _number(name: str, x, *, positive: bool) -> float:
@@ -155,24 +144,6 @@ def default_initial_condition(system: System, q0, v0, R0):
 @jit
 def _init_one(method, system, b0, v0, h):
     return method.init(system, b0, v0, h)
-
-
-@jit
-def _run_batch(method, system, system_batched: bool, state0, h, lengths, tail, h_last, partial: bool,
-               save_final: bool, save_states: bool, progress: bool, progress_stride):
-    """:func:`gnipy.stepping.run_nodes` vmapped over the members (states, and systems when batched)."""
-    def one(s, st):
-        return run_nodes(method, s, st, h, lengths, tail, h_last, partial=partial, save_final=save_final,
-                         save_states=save_states, progress=progress, progress_stride=progress_stride)
-
-    return eqx.filter_vmap(one, in_axes=(eqx.if_array(0) if system_batched else None, 0))(system, state0)
-
-
-@jit
-def _init_batch(method, system, system_batched: bool, b0, v0, h):
-    return eqx.filter_vmap(
-        lambda s, b, v: method.init(s, b, v, h), in_axes=(eqx.if_array(0) if system_batched else None, 0, 0)
-    )(system, b0, v0)
 
 
 def simulate(
@@ -284,7 +255,9 @@ def simulate(
 
     traced = _traced(system if systems is None else systems, q0, v0, R0, h, t0, state0)
     if traced:
-        return _simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, saveat, t0, state0,
+        from .transformed import simulate_traced
+
+        return simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, saveat, t0, state0,
                                 project_v0, throw)
 
     t0 = _number("t0", t0, positive=False)
@@ -310,7 +283,7 @@ def simulate(
                 velocities=system.velocities, params=system.params)
     reporter = _Progress(progress, n + (1 if partial else 0))
 
-    batched = systems is not None or (state0 is None and _is_batch(system, q0, v0, R0))
+    batched = systems is not None or (state0 is None and is_batch(system, q0, v0, R0))
     if batched or isinstance(method, ContinuousReference):
         meta["orientation"] = describe_orientations(systems or [system])
     if isinstance(method, ContinuousReference):
@@ -325,7 +298,7 @@ def simulate(
         if state0 is not None:
             raise InputError("state0: continuing from a state is for single trajectories")
         with reporter:
-            return _simulate_batch(systems or [system], method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0,
+            return simulate_batch(systems or [system], method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0,
                                    throw, meta, reporter)
 
     prep = prepare(system, method, q0, v0, R0, project_v0, state0)
@@ -415,90 +388,6 @@ class _Progress:
         return False
 
 
-def _simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, saveat, t0, state0, project_v0, throw):
-    """`simulate` under a JAX transformation: the values are checked where they are known now
-    (`jax.grad`/`jax.jacfwd` outside `jit`), the run is differentiable (static trip counts in
-    checkpointed blocks, :func:`gnipy.stepping.run_nodes_checkpointed`)."""
-    from .reference import ContinuousReference
-    from .system import project_velocity
-
-    if systems is not None and len(systems) > 1:
-        raise InputError("system: under a JAX transformation, batch with jax.vmap over one system's parameters")
-    if isinstance(method, ContinuousReference):
-        raise MethodError("method: the continuous reference (scipy) cannot be differentiated or traced; use an integrator")
-    if not throw:
-        raise InputError("throw: under a JAX transformation a failed step is raised at run time (throw=True)")
-    h_c, t0_c = _concrete(h), _concrete(t0)
-    if h_c is None and steps is None:
-        raise InputError("steps: h is traced (jax.jit), so the number of steps cannot follow from t_final; give steps")
-    t0_num = 0.0 if t0_c is None else _number("t0", t0_c, positive=False)
-    if h_c is not None:
-        hv, n, partial = resolve_run(h_c, steps, t_final, t0_num)
-    else:
-        hv, n, partial = None, _whole_steps(steps), 0.0
-    if partial and not method.can_change_step:
-        raise InputError(f"t_final: not a whole number of steps of h, and {method.name} cannot shorten its last step")
-    plan = schedule(saveat, n, partial, h=hv, t0=t0_num)
-    if state0 is None:
-        if (q0 is None or v0 is None) and _traced(system):
-            # the defaults were computed from the parameters' values: their derivative is not in them
-            raise InputError(
-                "q0/v0: the system's parameters are traced (differentiated or inside jax.jit), and its default "
-                "initial condition was computed from their values without their derivatives; give q0 and v0 "
-                "(as functions of the parameters where they depend on them)"
-            )
-        q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
-    concrete = _concrete_tree((system, q0, v0, R0, state0))
-    core = system.without_metadata()
-    if concrete is not None:  # the full checks on the values, as in an untransformed call
-        c_sys, c_q0, c_v0, c_R0, c_state0 = concrete
-        prep = prepare(c_sys, method, c_q0, c_v0, c_R0, project_v0, c_state0)
-        prepared = prep.method
-    else:  # inside jit: shapes only; the implicit path (the explicit one is an optimization)
-        import dataclasses
-
-        from .integrators.gni import GNI
-
-        prepared = dataclasses.replace(method, explicit=False) if isinstance(method, GNI) and method.explicit is None else method
-    hj = jnp.asarray(h, jnp.float64)
-    if state0 is None:
-        b0 = _traced_point(system, q0, R0)
-        v0 = jnp.asarray(v0, jnp.float64)
-        if v0.shape != (system.dim,):
-            raise InputError(f"v0: expected {system.dim} components, got shape {v0.shape}")
-        if project_v0:
-            v0 = project_velocity(core, b0, v0)
-        state0 = prepared.init(core, b0, v0, hj)
-    h_last = hj * partial
-    out = run_nodes_checkpointed(prepared, core, state0, hj, plan.lengths, plan.tail, h_last, partial=bool(partial),
-                                 save_final=plan.save_final, save_states=saveat.states)
-    k = np.asarray(plan.nodes, dtype=np.float64)
-    if plan.save_final:
-        k[-1] = n + partial
-    times = jnp.asarray(t0, jnp.float64) + hj * k
-    q = eqx.error_if(system.space.coordinates(out["b"]), out["fail_k"] >= 0,
-                     f"{method.name}: a step failed (its solve did not converge or gave a non-finite value)")
-    return Solution(
-        times, q, out["v"], out["p"], out["energy"], out["residual"], iterations=out["iterations"],
-        R=system.space.orientation(out["b"]), final_state=out["final_state"], states=out["states"],
-        system=system.name, method=method.name, h=float(hv) if hv is not None else float("nan"),
-        coordinates=system.coordinates, velocities=system.velocities, params=system.params,
-    )
-
-
-def _traced_point(system, q0, R0):
-    from .spaces import Point
-
-    x = jnp.asarray(q0, jnp.float64).reshape(-1) if system.n else jnp.zeros(0)
-    if x.shape != (system.n,):
-        raise InputError(f"q0: expected {system.n} coordinates, got shape {jnp.shape(q0)}")
-    if system.group is None:
-        return x
-    k = system.group.matrix_size
-    R = jnp.eye(k) if R0 is None else jnp.asarray(R0, jnp.float64).reshape(k, k)
-    return Point(x, R)
-
-
 _DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
 
 
@@ -529,87 +418,3 @@ def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False
     return out
 
 
-def _is_batch(system: System, q0, v0, R0) -> bool:
-    """Whether the initial conditions carry a leading batch axis."""
-    try:
-        q = np.asarray(q0)
-        v = np.asarray(v0)
-    except (TypeError, ValueError):
-        return False  # let System.check name the bad argument
-    if q.ndim == 2 or v.ndim == 2:
-        return True
-    if system.group is not None and R0 is not None:
-        try:
-            R = np.asarray(R0, dtype=np.float64)
-        except (TypeError, ValueError):
-            return False
-        k = system.group.matrix_size
-        return R.ndim == 3 or (R.ndim == 2 and R.shape != (k, k) and R.shape[-1] == k * k)
-    return False
-
-
-def _simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0, throw, meta, reporter):
-    from .ensembles import broadcast_initial_conditions, check_batch, member_params, stack_systems
-
-    system = systems[0]
-    size = len(systems) if len(systems) > 1 else None
-    B, q0, v0, R0 = broadcast_initial_conditions(system, q0, v0, R0, size)
-    # the full checks (mechanical type, dimensions) once, on the first member; the value checks
-    # (metric, rank, v0 on the constraints) for every member, vectorized
-    system.check(q0[0], None, R0=None if R0 is None else R0[0])
-    sys_batched = len(systems) > 1
-    core = stack_systems(systems) if sys_batched else system.without_metadata()
-    b0, v0 = check_batch(core, sys_batched, q0, v0, R0, project_v0=project_v0)
-    first_b0 = jax.tree_util.tree_map(lambda a: a[0], b0)
-    method.check(system, first_b0)
-    method = method.prepare(system, first_b0)
-    hj = np.float64(h)
-    state0 = _init_batch(method, core, sys_batched, b0, v0, hj)
-    out = _run_batch(method, core, sys_batched, state0, hj, np.asarray(plan.lengths, np.int32), np.int32(plan.tail),
-                     np.float64(partial * h), bool(partial), plan.save_final, False, reporter.active,
-                     np.int32(reporter.stride))
-    if reporter.active:
-        jax.block_until_ready(out)
-    batch_diag = _diagnostic_meta(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
-                                  batched_system=sys_batched, batch=True)
-    space = system.space
-    q, R = space.coordinates(out["b"]), space.orientation(out["b"])
-    v, p, energy, residual = out["v"], out["p"], out["energy"], out["residual"]
-    fail_k = np.asarray(out["fail_k"])
-    failed = fail_k >= 0
-    fail_res = np.where(failed, np.asarray(out["fail_res"], dtype=np.float64), np.nan)
-    results = np.where(failed, int(RESULTS.solve_failed), int(RESULTS.successful)).astype(np.int32)
-    k_saved = np.asarray(plan.nodes)
-    if failed.any():  # a failed member is NaN after its failed step, never its last state repeated
-        valid = ~failed[:, None] | (k_saved[None, :] <= fail_k[:, None])
-
-        def blank(a):
-            if a is None:
-                return None
-            a = np.array(a, dtype=np.float64)
-            a[~valid] = np.nan
-            return jnp.asarray(a)
-
-        q, v, p, energy, residual, R = (blank(a) for a in (q, v, p, energy, residual, R))
-        batch_diag |= {k: blank(batch_diag[k]) for k in _DIAGNOSTIC_ARRAYS if batch_diag.get(k) is not None}
-    its = np.asarray(out["iterations"])
-    batch_meta = dict(meta)
-    if sys_batched:
-        batch_meta["params"] = ()
-    sol = Solution(
-        jnp.asarray(times), q, v, p, energy, residual, jnp.asarray([its[:, 0].sum(), its[:, 1].max()]), R=R,
-        result=RESULTS.solve_failed if failed.any() else RESULTS.successful,
-        failed_step=int(fail_k[failed].min()) if failed.any() else -1,
-        results=jnp.asarray(results), failed_steps=jnp.asarray(fail_k), failed_residuals=jnp.asarray(fail_res),
-        member_iterations=jnp.asarray(its), member_params=member_params(systems) if sys_batched else None,
-        final_state=out["final_state"], **batch_meta, **batch_diag,
-    )
-    if failed.any() and throw:
-        i = int(np.argmax(failed))
-        k = int(fail_k[i])
-        msg = (
-            f"{method.name}: member {i} of {B}: step {k} (t = {t0 + h * k:.6g} -> {t0 + h * (k + 1):.6g}) failed: "
-            f"{RESULTS.solve_failed.message} (residual {float(fail_res[i]):.3e}); {int(failed.sum())} member(s) failed"
-        )
-        raise SolverFailure(msg, step=k, time=t0 + h * k, residual=float(fail_res[i]), solution=sol)
-    return sol
