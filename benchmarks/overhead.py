@@ -1,6 +1,7 @@
 """The fixed cost of a repeated `gnipy.simulate` call (issue 13: ≤ 0.5 ms of overhead).
 
-Run: `python benchmarks/overhead.py` (a fresh process; about a minute on 2 cores).
+Run: `python benchmarks/overhead.py` (5 fresh processes, the 2-core VM running each fast or slow
+for its whole life; the medians over them are printed; a few minutes on 2 cores).
 
 A call's overhead is its wall time less the time its steps take: for a run of S steps,
 `overhead = t(S) - S * per_step`, with `per_step` the slope between a 10 010-step and a 10-step run
@@ -15,7 +16,10 @@ Cases (rolling ball example 2, h = 0.01):
 - `dla` (no hidden momentum), 10 steps, every node saved.
 """
 
+import json
 import statistics
+import subprocess
+import sys
 import time
 
 import jax
@@ -44,7 +48,7 @@ def per_call(fn, calls: int = CALLS) -> float:
     return statistics.median(times)
 
 
-def main():
+def measure() -> list:
     system = gnipy.make_system("rolling-ball")
     last = gnipy.SaveAt(t1=True)
     rows = []
@@ -55,9 +59,19 @@ def main():
         step = (long - short) / 10_000
         every = per_call(lambda m=m: gnipy.simulate(system, m, h=0.01, steps=10))
         rows.append((method, step, every - 10 * step, short - 10 * step))
-    print("repeated gnipy.simulate calls, rolling ball example 2, h = 0.01 (median of "
-          f"{BLOCKS} blocks of {CALLS} calls)")
-    for method, step, every, short in rows:
+    return rows
+
+
+def main(processes: int = 5):
+    if "--child" in sys.argv:
+        print(json.dumps(measure()))
+        return
+    runs = [json.loads(subprocess.run([sys.executable, __file__, "--child"], check=True, capture_output=True,
+                                      text=True).stdout.splitlines()[-1]) for _ in range(processes)]
+    print(f"repeated gnipy.simulate calls, rolling ball example 2, h = 0.01 (per process: median of {BLOCKS} "
+          f"blocks of {CALLS} calls; medians over {processes} fresh processes)")
+    for i, (method, *_) in enumerate(runs[0]):
+        step, every, short = (statistics.median(r[i][j] for r in runs) for j in (1, 2, 3))
         print(f"  {method:14s} per step {step * 1e6:6.2f} us | overhead, 10 steps, every node saved "
               f"{every * 1e3:6.3f} ms | last node only {short * 1e3:6.3f} ms")
 
