@@ -29,6 +29,7 @@ __all__ = ["Prepared", "prepare", "state_point", "node_padding"]
 _CACHE: dict = {}
 _CACHE_MAX = 64
 _PROGRAMS: dict = {}
+_READINGS: dict = {}
 _PROGRAMS_MAX = 256
 
 
@@ -172,22 +173,45 @@ class Prepared:
         return out if out[0].shape[0] == T else _first(out, T)
 
 
+def _state_reading(system, method):
+    """`(structure, shapes, point)` for states of `method` on `system`: the pytree structure and
+    leaf shapes `method.init` builds, and `point(state)`, the state's base point (a compiled
+    program shared by methods and systems of one structure). Kept per structure: runs continued
+    from a state (streamed runs, the figures' starts) then trace nothing again."""
+    core = system.without_metadata()
+    leaves, key, rebuild = _split((method, core))
+    hit = _READINGS.get(key) if key is not None else None
+    if hit is None:
+        b_ref = system.initial_point(np.zeros(system.n)) if system.defaults is None else system.initial_point(
+            system.defaults[0], system.defaults[2] if len(system.defaults) > 2 else None)
+        ref = jax.eval_shape(lambda: method.init(core, b_ref, jnp.zeros(system.dim), 1.0))
+        ref_leaves, ref_def = jax.tree_util.tree_flatten(ref)
+
+        def point(leaves, state):
+            m, s = rebuild(leaves)
+            return m.observe(s, state, 1.0)[0]
+
+        hit = (ref_def, [r.shape for r in ref_leaves], jax.jit(point))
+        if key is not None:
+            if len(_READINGS) >= _CACHE_MAX:
+                _READINGS.pop(next(iter(_READINGS)))
+            _READINGS[key] = hit
+    ref_def, shapes, point = hit
+    return ref_def, shapes, lambda state: point(leaves, state)
+
+
 def state_point(system, method, state0):
     """The base point of a given integrator state (checked against the state `method.init` builds)."""
-    b_ref = system.initial_point(np.zeros(system.n)) if system.defaults is None else system.initial_point(
-        system.defaults[0], system.defaults[2] if len(system.defaults) > 2 else None)
-    ref = jax.eval_shape(lambda: method.init(system.without_metadata(), b_ref, jnp.zeros(system.dim), 1.0))
+    ref_def, shapes, point = _state_reading(system, method)
     leaves, treedef = jax.tree_util.tree_flatten(state0)
-    ref_leaves, ref_def = jax.tree_util.tree_flatten(ref)
-    if treedef != ref_def or any(np.shape(a) != r.shape for a, r in zip(leaves, ref_leaves)):
+    if treedef != ref_def or any(np.shape(a) != r for a, r in zip(leaves, shapes)):
         raise InputError(
             f"state0: not a state of {method.name} for {system.name!r} (expected {ref_def} with shapes "
-            f"{[r.shape for r in ref_leaves]}); pass the final_state of a run of the same method and system"
+            f"{shapes}); pass the final_state of a run of the same method and system"
         )
     if not all(np.all(np.isfinite(np.asarray(a))) for a in leaves if np.issubdtype(np.asarray(a).dtype, np.inexact)):
         raise InputError("state0: contains NaN or infinite values")
-    b0 = method.observe(system.without_metadata(), state0, 1.0)[0]
-    return b0, None
+    return point(state0), None
 
 
 def prepare(system, method, q0, v0, R0, project_v0: bool, state0) -> Prepared:

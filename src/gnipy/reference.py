@@ -81,16 +81,24 @@ class ContinuousReference(eqx.Module):
                 f"reference: the adaptive solver failed before t = {times[-1]:.6g} (step cap {self.max_steps} "
                 "or non-finite values)", step=-1, time=float(times[0]), residual=float("nan"),
             )
-        N = system.dim
-        space = system.space
-        b = jax.vmap(space.unpack)(ys[:, :-N])
-        v = ys[:, -N:]
-        p = jax.vmap(system.momentum)(b, v)
-        energy = jax.vmap(system.energy)(b, v)
-        res = jax.vmap(system.constraint_residual)(b, v)
+        q, R, v, p, energy, res = _nodes(system.without_metadata(), ys)
         its = jnp.asarray([int(num_steps), 0], dtype=jnp.int32)
-        return Solution(jnp.asarray(times), space.coordinates(b), v, p, energy, res, its,
-                        R=space.orientation(b), velocities=system.velocities, **meta)
+        return Solution(jnp.asarray(times), q, v, p, energy, res, its, R=R, velocities=system.velocities, **meta)
+
+
+@jit
+def _nodes(system, ys):
+    """The saved nodes' coordinates, orientations, velocities, momenta, energies and constraint
+    residuals from the solver's states (compiled: evaluated eagerly, the metric's Hessian alone
+    costs a second of small compilations)."""
+    N = system.dim
+    space = system.space
+    b = jax.vmap(space.unpack)(ys[:, :-N])
+    v = ys[:, -N:]
+    p = jax.vmap(system.momentum)(b, v)
+    energy = jax.vmap(system.energy)(b, v)
+    res = jax.vmap(system.constraint_residual)(b, v)
+    return space.coordinates(b), space.orientation(b), v, p, energy, res
 
 
 @jit

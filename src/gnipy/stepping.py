@@ -149,9 +149,12 @@ def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool
         carry = steps(carry, n)
         return carry, observe(carry[0], h)
 
+    # the tail runs as one more block, its observation dropped: the step is traced (and compiled)
+    # once, not once for the blocks and again for the tail
     carry = _carry0(state0)
-    carry, obs = jax.lax.scan(block, carry, lengths)
-    carry = steps(carry, tail)
+    blocks = jnp.concatenate([jnp.asarray(lengths, _INT).reshape(-1), jnp.asarray(tail, _INT).reshape(1)])
+    carry, obs = jax.lax.scan(block, carry, blocks)
+    obs = jax.tree_util.tree_map(lambda a: a[:-1], obs)
     if partial:
         carry = _final_step(method, system, carry, h, h_last)
         if save_final:

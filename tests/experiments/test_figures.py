@@ -16,7 +16,6 @@ Every expected number comes from theory or from the exact solution, never from a
 
 import math
 
-import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -109,20 +108,33 @@ def test_figure_3_paper_start_first_step():
     """The paper's start agrees with the GNI's own first step in (x₁, y₁) and differs in σ₀ by
     −(h²/2)I⁻¹(ω⁰ × Iω⁰) + O(h³)."""
     s, q0, v0 = rb.example_2()
-    b0, v0j = F._initial_point(s, q0, v0)
-    method = gnipy.GNI(gnipy.EulerA()).prepare(s, b0)
     w0 = np.asarray(rb.EXAMPLE_2["omega0"])
     inertia = np.array([1.0, 1.1, 1.2])
     h = 0.01
-    x1, R1, _ = F.run_nodes(method, s, F._init(method, s, b0, v0j, jnp.asarray(h)), h, 1, 1)
+    sol = gnipy.simulate(s, gnipy.GNI(gnipy.EulerA()), q0, v0, h=h, steps=1)  # the momentum start's first step
+    x1, Rm = np.asarray(sol.q)[1], np.asarray(sol.R)[1]
     start = F.paper_start(s, q0, w0, h)
-    np.testing.assert_allclose(np.asarray(start.b.x), x1[0], rtol=0, atol=1e-15)
-    Rm = R1[0]
+    np.testing.assert_allclose(np.asarray(start.b.x), x1, rtol=0, atol=1e-15)
     S = 2.0 * (Rm - np.eye(3)) @ np.linalg.inv(Rm + np.eye(3))  # Cayley inverse
     sigma = np.array([S[2, 1], S[0, 2], S[1, 0]])
     predicted = h * w0 - 0.5 * h**2 * np.cross(w0, inertia * w0) / inertia
     assert np.max(np.abs(sigma - predicted)) < 0.1 * h**3
     assert np.max(np.abs(sigma - h * w0)) > 0.9 * np.max(np.abs(predicted - h * w0))  # the h² term is seen
+
+
+def test_figure_3_paper_start_continues_with_the_gni_step():
+    """A run continued from the paper's start (state0 at node 1, t0 = h) takes the GNI's steps from
+    (b₁, p⁺₁): its node 2 is one step of the GNI from that state, whatever the run's length."""
+    s, q0, _ = rb.example_2()
+    w0 = np.asarray(rb.EXAMPLE_2["omega0"])
+    h = 0.05
+    method = gnipy.GNI(gnipy.EulerA())
+    start = F.paper_start(s, q0, w0, h)
+    one = gnipy.simulate(s, method, state0=start, t0=h, h=h, steps=1)
+    long = gnipy.simulate(s, method, state0=start, t0=h, h=h, steps=20, saveat=gnipy.SaveAt(ts=[2 * h, 21 * h]))
+    assert np.asarray(long.t) == pytest.approx([2 * h, 21 * h], rel=1e-12)
+    np.testing.assert_array_equal(np.asarray(one.q)[-1], np.asarray(long.q)[0])
+    np.testing.assert_allclose(np.asarray(one.q)[0], np.asarray(start.b.x), rtol=0, atol=0)  # node 1 is the start
 
 
 def test_figure_3_orders_of_both_starts(run):
@@ -146,11 +158,17 @@ def test_figure_3_orders_of_both_starts(run):
 
 
 def test_fitted_order_leaves_out_round_off():
+    """The figures' slopes: gnipy.analysis.fitted_order with stop_at_minimum=True, and over the
+    three smallest fitted h for the 'finest 3' slopes."""
     hs = np.array([0.1, 0.05, 0.025, 0.0125, 0.00625])
     errors = 3.0 * hs**2
-    assert F.fitted_order(hs, errors) == pytest.approx(2.0, abs=1e-12)
+    assert F._order(hs, errors) == pytest.approx(2.0, abs=1e-12)
     # a floor, and a point past the smallest error (round-off growing again), are left out
     errors_ro = np.concatenate([errors[:4], [1e-2]])
-    assert F.fitted_order(hs, errors_ro) == pytest.approx(2.0, abs=1e-12)
-    assert F.fitted_order(hs, errors, floor=3.0 * 0.025**2 * 0.99) == pytest.approx(2.0, abs=1e-12)
-    assert math.isnan(F.fitted_order(hs, errors, floor=1.0))
+    assert F._order(hs, errors_ro) == pytest.approx(2.0, abs=1e-12)
+    assert F._order(hs, errors, floor=3.0 * 0.025**2 * 0.99) == pytest.approx(2.0, abs=1e-12)
+    assert math.isnan(F._order(hs, errors, floor=1.0))
+    # the finest three: slope 1 there although the coarse points have slope 2
+    mixed = np.where(hs > 0.03, 3.0 * hs**2, 3.0 * 0.025 * hs)
+    assert F._fine_order(hs, mixed) == pytest.approx(1.0, abs=1e-12)
+    assert F._order(hs, mixed) > 1.2

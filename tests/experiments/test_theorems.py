@@ -1,4 +1,4 @@
-"""The quick theorem table and errata (gnipy.experiments.theorems).
+"""The quick theorem table and errata (gnipy.experiments.theorems, .errata, .particle_study).
 
 The expected values are the paper's: the orders of Theorem 5.1, Remark 5.1 and the remark after
 Theorem 5.2; zero for the identities (Theorem 5.2, exact constraints, the explicit schemes equal
@@ -14,7 +14,10 @@ import numpy as np
 import pytest
 
 import gnipy
+from gnipy.analysis import fitted_order
 from gnipy.experiments import theorems as th
+from gnipy.experiments.particle_study import particle, particle_study
+from gnipy.experiments.records import all_nodes
 from gnipy.lie_groups import SO3
 
 EPS = np.finfo(np.float64).eps
@@ -160,10 +163,14 @@ def test_all_five_errata_present(errata):
 # Helpers
 # ------------------------------------------------------------------------------------------------
 def test_fitted_order_recovers_known_slopes():
+    """The table's rule: gnipy.analysis.fitted_order above ROUND_OFF, on at least three points."""
     hs = 2.0 / 2.0 ** np.arange(5, 10)
-    assert abs(th.fitted_order(hs, 3.0 * hs**2) - 2.0) < 1e-12
-    assert abs(th.fitted_order(hs, np.maximum(5.0 * hs**3, 1e-13)) - 3.0) < 1e-12  # round-off dropped
-    assert math.isnan(th.fitted_order(hs, np.full(5, 1e-14)))
+    assert abs(fitted_order(hs, 3.0 * hs**2, th.ROUND_OFF, min_points=3) - 2.0) < 1e-12
+    # round-off dropped
+    assert abs(fitted_order(hs, np.maximum(5.0 * hs**3, 1e-13), th.ROUND_OFF, min_points=3) - 3.0) < 1e-12
+    assert math.isnan(fitted_order(hs, np.full(5, 1e-14), th.ROUND_OFF, min_points=3))
+    assert math.isnan(fitted_order(hs, np.concatenate([3.0 * hs[:2] ** 2, np.full(3, 1e-14)]), th.ROUND_OFF,
+                                   min_points=3))
 
 
 def test_cayley_steps_invert_the_cayley_map():
@@ -179,16 +186,26 @@ def test_cayley_steps_invert_the_cayley_map():
     np.testing.assert_allclose(th.cayley_steps(np.array(R_right), right=True), sig, atol=1e-14)
 
 
-def test_run_all_nodes_matches_simulate():
-    """The compiled driver reproduces gnipy.simulate node by node (and shares compilations)."""
-    system, q0, v0 = th._particle()
-    sol = gnipy.simulate(system, "rattle", q0, v0, h=0.0625, steps=32)
-    out = th.run_all_nodes("rattle", system, q0, v0, 0.0625, 32, length=256)  # the table's compile
+def test_study_runs_are_simulate_runs(table):
+    """The study's runs (each takes the steps of the finest h and keeps the nodes up to T) are, node
+    by node, gnipy.simulate's runs of their own length; the errors are taken at t = 0, 0.5, ..., 2
+    against the continuous reference; the expected orders (the methods' `order`) are the paper's."""
+    study = particle_study(True)
+    system, q0, v0 = particle()
+    N, h = study["Ns"][0], study["hs"][0]
+    sol = gnipy.simulate(system, "rattle", q0, v0, h=h, steps=N)
+    out = study["runs"]["rattle"][0]
+    assert out["q"].shape == (N + 1, 3)
     for k in ("q", "v", "p"):
         np.testing.assert_allclose(out[k], np.asarray(getattr(sol, k)), rtol=0, atol=1e-13)
-    assert out["q"].shape == (33, 3)
-    with pytest.raises(ValueError, match="violates the constraints"):
-        th.run_all_nodes("rattle", system, q0, v0 + np.array([0.0, 0.0, 0.5]), 0.0625, 32, length=256)
+    ref = gnipy.simulate(system, "reference", q0, v0, h=0.5, steps=4)
+    error = float(np.max(np.abs(np.asarray(sol.q)[:: N // 4] - np.asarray(ref.q))))
+    assert study["errors"]["rattle"][0] == pytest.approx(error, rel=1e-9, abs=1e-15)
+    assert {k: study["expected"][k] for k in PAPER_ORDERS} == PAPER_ORDERS
+    assert study["expected"]["euler-ab-literal"] == 1  # the errata: the literal composition
+    # the initial condition is checked by simulate (no own check): a v0 off the constraints raises
+    with pytest.raises(gnipy.InputError, match="violates the constraints"):
+        all_nodes(system, gnipy.get_method("rattle"), q0, v0 + np.array([0.0, 0.0, 0.5]), h=h, steps=N)
 
 
 def test_energy_theorem_system_is_bi_invariant_with_attitude_dependent_constraints():

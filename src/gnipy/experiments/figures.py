@@ -8,18 +8,17 @@ run (caption), the fitted orders (metrics), the per-h errors (table) and the fin
   of h, GNI (the paper's $l_d = h\\,l(q_k, \\Delta, \\omega_k)$, i.e. Euler A, with the Cayley map)
   against the discrete Lagrange–d'Alembert method of [IMMM] (method `dla`).
 - :func:`figure_2`: the contact point's path for h = 0.1 and 10000 steps, against the exact circle.
-- :func:`figure_3`: example 2 (unequal moments), errors against a fine GNI run, for two ways of
-  starting the GNI: the paper's start (constraints at node 0 with forward differences, then
-  $p^+_1 = FL^+$) and the momentum start $p^+_0 = \\mathbb{G}v_0$.
+- :func:`figure_3`: example 2, errors against a fine GNI run, for two ways of starting the GNI: the
+  paper's start (constraints at node 0 with forward differences, then $p^+_1 = FL^+$,
+  :func:`paper_start`) and the momentum start $p^+_0 = \\mathbb{G}v_0$.
 
-**One compilation for all runs.** :func:`gnipy.simulate` compiles once per (steps, save stride).
-Here every run goes through one jit-compiled driver, :func:`run_nodes`, whose step count, save
-stride, number of saved nodes and h are all traced values, and which writes the saved nodes into a
-buffer of fixed size (:data:`MAX_SAVES`): every GNI run of the three figures shares one
-compilation, every DLA run another. Example 2's System differs from example 1's only in its
-parameter values; they are arrays inside the System, but the System also keeps them as static
-provenance metadata, which would force a second compilation, so the driver receives the System's
-arrays under example 1's metadata (:func:`_shared_structure`).
+**Runs.** Every run is one call of :func:`gnipy.simulate`, which checks the initial condition and
+saves only the nodes a figure measures (`SaveAt(ts=...)`). Runs that save as many nodes share one
+compiled program whatever their h and step count: all GNI runs from an initial condition of
+Figures 1 and 3 (the examples' Systems differ only in parameter values), all DLA runs, both runs of
+Figure 2 (the h/2 run saves every second node), and all runs of Figure 3 that continue from the
+paper's start (`state0=`, the GNI state at node 1). The slopes are :func:`gnipy.analysis.fitted_order`
+with `stop_at_minimum=True` (no point past the smallest error: round-off, not truncation).
 
 **Progress.** `progress(advance, description)` is called as work proceeds; the advances of one
 figure add up to 1.0 (the caller scales them to its bar).
@@ -29,42 +28,23 @@ from __future__ import annotations
 
 import dataclasses
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from pathlib import Path
 
-import equinox as eqx
-import jax
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
+from ..analysis.orders import ROUND_OFF, fit_points, fitted_order
 from ..compilation import jit
 from ..discrete_lagrangians import EulerA
 from ..integrators.comparators import DiscreteLagrangeDAlembert
 from ..integrators.gni import GNI, GNIState
 from ..models import rolling_ball as rb
-from ..plots import fit_points as _plots_fit_points
-from ..plots import fitted_order as _plots_fitted_order
+from ..saveat import SaveAt
+from ..simulate import simulate
 from ..spaces import Point
 
-__all__ = [
-    "FIGURES",
-    "MAX_SAVES",
-    "ROUNDOFF_FLOOR",
-    "FigureResult",
-    "figure_1",
-    "figure_2",
-    "figure_3",
-    "fit_mask",
-    "fitted_order",
-    "paper_start",
-    "run_nodes",
-]
-
-#: Size of the driver's save buffer: the most nodes one run can save (Fig. 2 saves 10000).
-MAX_SAVES = 10_000
-#: Errors at or below this are treated as round-off and left out of the fitted slopes.
-ROUNDOFF_FLOOR = 1e-11
+__all__ = ["FIGURES", "FigureResult", "figure_1", "figure_2", "figure_3", "paper_start"]
 
 Progress = Callable[[float, str], None] | None
 
@@ -95,117 +75,24 @@ class FigureResult:
 # ------------------------------------------------------------------------------------------------
 # Numerics shared by the figures
 # ------------------------------------------------------------------------------------------------
-def fit_mask(hs: Sequence[float], errors: Sequence[float], floor: float = ROUNDOFF_FLOOR) -> np.ndarray:
-    """The points a slope is fitted on: finite errors above `floor`, and no point at a smaller h than
-    the smallest error (past it the error grows as h shrinks: round-off, not truncation)."""
-    return _plots_fit_points(hs, errors, floor, stop_at_minimum=True)
+def _order(hs, errors, floor: float = ROUND_OFF) -> float:
+    """The fitted slope (:func:`gnipy.analysis.fitted_order` with `stop_at_minimum=True`)."""
+    return fitted_order(hs, errors, floor, stop_at_minimum=True)
 
 
-def fitted_order(hs: Sequence[float], errors: Sequence[float], floor: float = ROUNDOFF_FLOOR) -> float:
-    """Least-squares slope of log(error) against log(h) over the points of :func:`fit_mask` (errors
-    above `floor`, and none past the smallest error); NaN when fewer than two such points remain
-    (:func:`gnipy.plots.fitted_order` with `stop_at_minimum=True`)."""
-    return _plots_fitted_order(hs, errors, floor, stop_at_minimum=True)
-
-
-def _fine_order(hs, errors, floor: float = ROUNDOFF_FLOOR, points: int = 3) -> float:
-    """The slope over the `points` smallest h of :func:`fit_mask` (the asymptotic order)."""
+def _fine_order(hs, errors, floor: float = ROUND_OFF, points: int = 3) -> float:
+    """The slope over the `points` smallest h among the fitted points (the asymptotic order)."""
     hs, errors = np.asarray(hs, dtype=np.float64), np.asarray(errors, dtype=np.float64)
-    keep = fit_mask(hs, errors, floor)
-    order = np.argsort(hs[keep])[:points]
-    return fitted_order(hs[keep][order], errors[keep][order], floor)
+    keep = fit_points(hs, errors, floor, stop_at_minimum=True)
+    finest = np.argsort(hs[keep])[:points]
+    return _order(hs[keep][finest], errors[keep][finest], floor)
 
 
-def _finite(tree) -> jax.Array:
-    leaves = [jnp.all(jnp.isfinite(x)) for x in jtu.tree_leaves(tree) if eqx.is_inexact_array(x)]
-    return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
-
-
-@jit
-def _drive(method, system, state0, h, first, block, n_saves):
-    """From `state0`, run `first` steps and save, then `n_saves - 1` times `block` steps and save.
-
-    Step counts, `n_saves` and `h` are traced (one compilation per method and system structure);
-    the saved nodes fill the first `n_saves` rows of buffers of :data:`MAX_SAVES` rows.
-    """
-    b0 = state0.b
-    bx = jnp.zeros((MAX_SAVES,) + b0.x.shape, b0.x.dtype)
-    bR = jnp.zeros((MAX_SAVES,) + b0.R.shape, b0.R.dtype)
-    bv = jnp.zeros((MAX_SAVES, system.dim), b0.x.dtype)
-
-    def one_step(_, carry):
-        state, ok = carry
-        new, info = method.step(system, state, h)
-        return new, ok & info.ok & _finite(new)
-
-    def one_save(j, carry):
-        state, ok, bx, bR, bv = carry
-        length = jnp.where(j == 0, first, block)
-        state, ok = jax.lax.fori_loop(0, length, one_step, (state, ok))
-        b, v, _ = method.observe(system, state, h)
-        return state, ok, bx.at[j].set(b.x), bR.at[j].set(b.R), bv.at[j].set(v)
-
-    carry = (state0, jnp.asarray(True), bx, bR, bv)
-    _, ok, bx, bR, bv = jax.lax.fori_loop(0, n_saves, one_save, carry)
-    return bx, bR, bv, ok
-
-
-_TEMPLATE = None
-
-
-def _template():
-    global _TEMPLATE
-    if _TEMPLATE is None:
-        _TEMPLATE = rb.build_system(rb.DEFAULT_PARAMS)
-    return _TEMPLATE
-
-
-def _shared_structure(system):
-    """`system`'s arrays under the static metadata (name, params, defaults) of example 1's System,
-    so that the driver compiles once for both examples. Only for rolling-ball Systems built by
-    :func:`gnipy.models.rolling_ball.build_system` with the same retraction (checked); others are
-    returned unchanged."""
-    t = _template()
-    same = (
-        type(system.space.retraction) is type(t.space.retraction)
-        and all(
-            getattr(getattr(system, f), "func", None) is getattr(getattr(t, f), "func", object())
-            for f in ("lagrangian", "constraints", "affine")
-        )
-    )
-    leaves, t_leaves = jtu.tree_leaves(system), jtu.tree_leaves(t)
-    same = same and len(leaves) == len(t_leaves) and all(
-        np.shape(a) == np.shape(b) and jnp.result_type(a) == jnp.result_type(b) for a, b in zip(leaves, t_leaves)
-    )
-    return jtu.tree_unflatten(jtu.tree_structure(t), leaves) if same else system
-
-
-def run_nodes(method, system, state0, h: float, steps: int, n_saves: int, *, start_node: int = 0):
-    """Run `method` from `state0` (held at node `start_node`) to node `steps`, saving the nodes
-    $k_j = j\\,\\mathrm{steps}/n_\\mathrm{saves}$, j = 1 .. n_saves.
-
-    Returns:
-        `(x, R, v)` at the saved nodes, shapes (n_saves, 2), (n_saves, 3, 3), (n_saves, 5); v is the
-        velocity the method reports (the GNI's $\\bar v_k$, DLA's $\\mathbb{G}^{-1}p^+_k$).
-
-    Raises:
-        ValueError: `n_saves` does not divide `steps`, or too many saves.
-        RuntimeError: a step failed (no convergence or a non-finite value).
-    """
-    if steps % n_saves or not 1 <= n_saves <= MAX_SAVES:
-        raise ValueError(f"n_saves = {n_saves} must divide steps = {steps} and be at most {MAX_SAVES}")
-    block = steps // n_saves
-    first = block - start_node
-    if first < 0:
-        raise ValueError(f"start_node = {start_node} lies beyond the first saved node {block}")
-    i32 = jnp.int32
-    x, R, v, ok = _drive(
-        method, _shared_structure(system), state0, jnp.asarray(h, jnp.float64),
-        jnp.asarray(first, i32), jnp.asarray(block, i32), jnp.asarray(n_saves, i32),
-    )
-    if not bool(ok):
-        raise RuntimeError(f"{method.name}: a step failed (h = {h:g}, {steps} steps)")
-    return np.asarray(x)[:n_saves], np.asarray(R)[:n_saves], np.asarray(v)[:n_saves]
+def _run(system, method, h: float, steps: int, saveat: SaveAt, q0=None, v0=None, *, state0=None, t0: float = 0.0):
+    """`(x, v)` at the saved nodes of one :func:`gnipy.simulate` call, as numpy arrays (v is the
+    velocity the method reports: the GNI's $\\bar v_k$, DLA's $\\mathbb{G}^{-1}p^+_k$)."""
+    sol = simulate(system, method, q0, v0, h=h, steps=steps, saveat=saveat, state0=state0, t0=t0)
+    return np.asarray(sol.q), np.asarray(sol.v)
 
 
 def paper_start(system, q0, omega0, h: float, R0=None) -> GNIState:
@@ -217,7 +104,8 @@ def paper_start(system, q0, omega0, h: float, R0=None) -> GNIState:
     $\\sigma_0 = h\\omega^0$ and $R_1$ from $\\sigma_0$ by the model's reconstruction
     ($\\mathrm{cay}(\\sigma_0)R_0$ for `rolling-ball`, :meth:`~gnipy.spaces.GroupSpace.advance`); the post-momentum is
     $p^+_1 = FL^+(b_0, (x_1 - x_0, \\sigma_0))$ with the paper's $l_d = h\\,l(q_k, \\Delta, \\omega_k)$
-    (Euler A), computed by the space's `legendre_plus`. The GNI continues from $(b_1, p^+_1)$.
+    (Euler A), computed by the space's `legendre_plus`. The GNI continues from $(b_1, p^+_1)$:
+    `gnipy.simulate(system, GNI(EulerA()), state0=paper_start(...), t0=h, ...)`.
     """
     p = system.parameters
     r, W = p["r"], p["Omega"]
@@ -232,12 +120,6 @@ def paper_start(system, q0, omega0, h: float, R0=None) -> GNIState:
 
 
 @jit
-def _init(method, system, b0, v0, h):
-    """`method.init` (the momentum start $p^+_0 = \\mathbb{G}v_0$), jit-compiled (cheaper than eager)."""
-    return method.init(system, b0, v0, h)
-
-
-@jit
 def _start_from_step(system, b0, z, h):
     """The GNI state at node 1 after the step `z` from `b0`: $(b_1, p^+_1 = FL^+(b_0, z))$ with the
     Euler A $l_d$ (jit-compiled: evaluated eagerly, the gradients cost seconds of small compiles)."""
@@ -248,19 +130,6 @@ def _start_from_step(system, b0, z, h):
 
     p1 = system.space.legendre_plus(l_d, b0, z)
     return GNIState(system.space.advance(b0, z), p1, jnp.zeros_like(b0.x))
-
-
-def _initial_point(system, q0, v0):
-    """`(Point(q0, I), v0)` as arrays, after checking that v0 satisfies (Cona), (Conb) at q0.
-
-    (:meth:`gnipy.System.check` does this and more, but its eager checks cost seconds of
-    compilation, as much as a figure's runs.)"""
-    p = system.parameters
-    q, v = np.asarray(q0, dtype=np.float64), np.asarray(v0, dtype=np.float64)
-    residual = (v[0] - p["r"] * v[3] + p["Omega"] * q[1], v[1] + p["r"] * v[2] - p["Omega"] * q[0])
-    if max(abs(c) for c in residual) > 1e-12:
-        raise ValueError(f"v0 = {v0} violates the rolling constraints at q0 = {q0}: residual {residual}")
-    return Point(jnp.asarray(q), jnp.eye(3)), jnp.asarray(v)
 
 
 def _energy(p, v):
@@ -333,7 +202,6 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     system = rb.build_system(rb.DEFAULT_PARAMS)
     p = system.parameters
     q0, v0 = system.defaults
-    b0, v0j = _initial_point(system, q0, v0)
     T, n_saves = 10.0, 10
     # quick: only the small h, where DLA's orders are asymptotic (its O(h) velocity term dominates
     # its large O(h²) term only for h below about 0.01)
@@ -341,18 +209,17 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     hs = [T / N for N in Ns]
     t_save = T * np.arange(1, n_saves + 1) / n_saves
     x_ex, v_ex = rb.exact(p, q0, v0, t_save)
+    save = SaveAt(ts=t_save)
     methods = {
-        "gni": (GNI(EulerA()).prepare(system, b0), "GNI", "-", "o"),
-        "dla": (DiscreteLagrangeDAlembert().prepare(system, b0), "DLA [IMMM]", "--", "s"),
+        "gni": (GNI(EulerA()), "GNI", "-", "o"),
+        "dla": (DiscreteLagrangeDAlembert(), "DLA [IMMM]", "--", "s"),
     }
     work = _Progress(progress, len(methods) * sum(N + _RUN_OVERHEAD for N in Ns))
     errors: dict[str, list[tuple[float, float, float]]] = {k: [] for k in methods}
     table: list[dict] = []
     for key, (method, *_rest) in methods.items():
-        method.check(system, b0)
         for N, h in zip(Ns, hs):
-            state0 = _init(method, system, b0, v0j, jnp.asarray(h))
-            x, _, v = run_nodes(method, system, state0, h, N, n_saves)
+            x, v = _run(system, method, h, N, save, q0, v0)
             e = _errors(x, v, x_ex, v_ex, p)
             errors[key].append(e)
             table.append({"method": key, "h": h, "steps": N, "error_position": e[0], "error_omega": e[1],
@@ -364,7 +231,7 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     for key in methods:
         arr = np.array(errors[key])
         for i, qn in enumerate(quantities):
-            metrics[f"{key}_order_{qn}"] = fitted_order(hs, arr[:, i])
+            metrics[f"{key}_order_{qn}"] = _order(hs, arr[:, i])
             metrics[f"{key}_order_{qn}_fine"] = _fine_order(hs, arr[:, i])
             metrics[f"{key}_error_{qn}_smallest_h"] = float(arr[-1, i])
 
@@ -399,7 +266,7 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
         "(x, y), in ω, and of the absolute error in the energy E = ½m(ẋ² + ẏ²) + ½Σ Iᵢωᵢ². Velocities are "
         "the ones each method reports: the GNI's v̄_k = 𝔾⁻¹(p⁻_k + p⁺_k)/2 (on the constraints), DLA's "
         "𝔾⁻¹p⁺_k. Slopes in the legends: least squares of log error against log h over the points above "
-        f"round-off (error > {ROUNDOFF_FLOOR:g} and not past the smallest error); 'finest 3': the same over the "
+        f"round-off (error > {ROUND_OFF:g} and not past the smallest error); 'finest 3': the same over the "
         "three smallest of those h."
         + (" Quick run: only the five smallest h of the full run's range." if quick else "")
     )
@@ -435,17 +302,16 @@ def figure_2(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     system = rb.build_system(rb.DEFAULT_PARAMS)
     p = system.parameters
     q0, v0 = system.defaults
-    b0, v0j = _initial_point(system, q0, v0)
     h, steps = 0.1, (1000 if quick else 10000)
     work = _Progress(progress, 3 * steps + 2 * _RUN_OVERHEAD)
-    method = GNI(EulerA()).prepare(system, b0)
-    x, _, v = run_nodes(method, system, _init(method, system, b0, v0j, jnp.asarray(h)), h, steps, steps)
+    method = GNI(EulerA())
+    path, v_path = _run(system, method, h, steps, SaveAt(steps=True), q0, v0)  # nodes 0 .. steps
     work(steps + _RUN_OVERHEAD, "figure 2: GNI h = 0.1")
     # the same total time with h/2 (not plotted): the distance from the circle should fall by 2² = 4
-    # (saved at every second node, i.e. at the times of the h run)
-    x2, _, _ = run_nodes(method, system, _init(method, system, b0, v0j, jnp.asarray(h / 2)), h / 2, 2 * steps, steps)
+    # (saved at every second node, i.e. at the times of the h run: as many nodes, the same program)
+    x2, _ = _run(system, method, h / 2, 2 * steps, SaveAt(every=2), q0, v0)
+    x2 = x2[1:]
     work(2 * steps + _RUN_OVERHEAD, "figure 2: GNI h = 0.05")
-    path = np.concatenate([np.asarray([q0], dtype=np.float64), x])
     t = h * np.arange(steps + 1)
 
     # the exact motion: z = x + iy runs round a circle at rate κ = IΩ/(I + mr²)
@@ -457,7 +323,7 @@ def figure_2(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     dist = np.abs(np.abs(z - centre) - radius)
     z2 = x2[:, 0] + 1j * x2[:, 1]
     dist_half_h = float(np.max(np.abs(np.abs(z2 - centre) - radius)))
-    jacobi = rb.jacobi_integral(p, path[1:], v)
+    jacobi = rb.jacobi_integral(p, path[1:], v_path[1:])
     J0 = float(rb.jacobi_integral(p, q0, v0))
     x_ex, _ = rb.exact(p, q0, v0, t)
     pos_err = np.linalg.norm(path - x_ex, axis=1)
@@ -561,12 +427,12 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     system, q0, v0 = rb.example_2()
     p = system.parameters
     omega0 = np.asarray(rb.EXAMPLE_2["omega0"], dtype=np.float64)
-    b0, v0j = _initial_point(system, q0, v0)
     T, n_saves = 15.0, 10
     Ns, N_ref = _figure_3_steps(quick)
     hs = [T / N for N in Ns]
     h_ref = T / N_ref
-    method = GNI(EulerA()).prepare(system, b0)
+    method = GNI(EulerA())
+    save = SaveAt(ts=T * np.arange(1, n_saves + 1) / n_saves)
     starts = {
         "paper": ("(a) paper's start", "-", "o"),
         "momentum": ("(b) momentum start", "--", "s"),
@@ -574,19 +440,16 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
 
     def run(start, N):
         h = T / N
-        if start == "paper":
-            return run_nodes(method, system, paper_start(system, q0, omega0, h), h, N, n_saves, start_node=1)
-        return run_nodes(method, system, _init(method, system, b0, v0j, jnp.asarray(h)), h, N, n_saves)
+        if start == "paper":  # from the state at node 1 (time h)
+            return _run(system, method, h, N - 1, save, state0=paper_start(system, q0, omega0, h), t0=h)
+        return _run(system, method, h, N, save, q0, v0)
 
     # full runs also measure everything against the continuous reference solver (Dopri8, tol 1e-12)
     continuous = not quick
     work = _Progress(progress, len(starts) * (N_ref + sum(Ns) + (len(Ns) + 1) * _RUN_OVERHEAD)
                      + (N_ref if continuous else 0))
     if continuous:
-        from ..simulate import simulate
-
-        sol = simulate(system, "reference", q0, v0, h=T / n_saves, steps=n_saves)
-        x_cont, v_cont = np.asarray(sol.q)[1:], np.asarray(sol.v)[1:]
+        x_cont, v_cont = (a[1:] for a in _run(system, "reference", T / n_saves, n_saves, SaveAt(steps=True), q0, v0))
         work(N_ref, "figure 3: continuous reference")
     errors_cont: dict[str, np.ndarray] = {}
     quantities = ("position", "omega", "energy")
@@ -594,12 +457,12 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     refs = {}
     table: list[dict] = []
     for start in starts:
-        x_ref, _, v_ref = run(start, N_ref)
+        x_ref, v_ref = run(start, N_ref)
         refs[start] = (x_ref, v_ref)
         work(N_ref + _RUN_OVERHEAD, f"figure 3: {start} start, reference h = {_fmt_h(h_ref)}")
         errs, errs_cont = [], []
         for N, h in zip(Ns, hs):
-            x, _, v = run(start, N)
+            x, v = run(start, N)
             e = _errors(x, v, x_ref, v_ref, p)
             errs.append(e)
             row = {"start": start, "h": h, "steps": N, "error_position": e[0], "error_omega": e[1],
@@ -618,21 +481,21 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     metrics: dict[str, float] = {"h_reference": h_ref}
     # the yardstick's own error, where it is known (full runs: against the continuous solution): errors
     # within 3 times of it measure the reference, not the run, and are left out of the fits
-    floors = {(start, qn): ROUNDOFF_FLOOR for start in starts for qn in quantities}
+    floors = {(start, qn): ROUND_OFF for start in starts for qn in quantities}
     if continuous:
         for start in starts:
             ref_err = _errors(refs[start][0], refs[start][1], x_cont, v_cont, p)
             for i, qn in enumerate(quantities):
                 metrics[f"{start}_reference_error_{qn}_vs_continuous"] = ref_err[i]
-                floors[start, qn] = max(ROUNDOFF_FLOOR, 3.0 * ref_err[i])
-                metrics[f"{start}_start_order_{qn}_vs_continuous"] = fitted_order(hs, errors_cont[start][:, i])
+                floors[start, qn] = max(ROUND_OFF, 3.0 * ref_err[i])
+                metrics[f"{start}_start_order_{qn}_vs_continuous"] = _order(hs, errors_cont[start][:, i])
                 metrics[f"{start}_start_order_{qn}_vs_continuous_fine"] = _fine_order(hs, errors_cont[start][:, i])
     for start in starts:
         for i, qn in enumerate(quantities):
             floor = floors[start, qn]
-            metrics[f"{start}_start_order_{qn}"] = fitted_order(hs, errors[start][:, i], floor)
+            metrics[f"{start}_start_order_{qn}"] = _order(hs, errors[start][:, i], floor)
             metrics[f"{start}_start_order_{qn}_fine"] = _fine_order(hs, errors[start][:, i], floor)
-            metrics[f"{start}_start_points_fitted_{qn}"] = float(fit_mask(hs, errors[start][:, i], floor).sum())
+            metrics[f"{start}_start_points_fitted_{qn}"] = float(fit_points(hs, errors[start][:, i], floor, stop_at_minimum=True).sum())
     # how far apart the two references are (both converge to the continuous solution)
     gap = _errors(refs["paper"][0], refs["paper"][1], refs["momentum"][0], refs["momentum"][1], p)
     for i, qn in enumerate(quantities):
@@ -693,7 +556,7 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
         "of the Euler A l_d); (b) the momentum start p⁺₀ = 𝔾v0 with v0 = (0, 0.4, −0.2, 0, 0.4) from the "
         "constraints (gnipy.simulate's start). Dotted: multiples of h, h and h², the caption's guides. Slopes: "
         "least squares of log error against log h over the points with error above a floor and not past the "
-        f"smallest error (round-off), the floor being {ROUNDOFF_FLOOR:g}"
+        f"smallest error (round-off), the floor being {ROUND_OFF:g}"
         + (" or 3 times the fine run's own error against the continuous solution, whichever is larger"
            if continuous else "")
         + "; 'finest 3': the same over the three smallest of those h."
