@@ -29,32 +29,10 @@ from .compilation import jit
 from .spaces import EuclideanSpace, GroupSpace, Point
 
 from .errors import InputError
+from .inputs import _as_vector, _fmt, _number, real_array, require_float64
+from .system_checks import _metric_derivatives, _validation_values
 
 __all__ = ["System"]
-
-
-def concrete_value(x):
-    """The value of `x` when it is known now (a Python/NumPy value, or a tracer of `jax.grad` or
-    `jax.jacfwd` called outside `jit`), else None (an abstract tracer of `jax.jit`)."""
-    if not isinstance(x, jax.core.Tracer):
-        return x
-    try:
-        from jax._src.core import to_concrete_value  # private: absent in some versions, then None
-
-        return to_concrete_value(x)
-    except Exception:  # pragma: no cover
-        return None
-
-
-def _number(x) -> float:
-    """A provenance number: `float(x)`, or for a value traced by JAX (a parameter being
-    differentiated) its value where known now, else NaN (the arrays of the functions carry it)."""
-    c = concrete_value(x)
-    return float("nan") if c is None else float(c)
-
-
-def _fmt(x: float) -> str:
-    return f"{float(x):.3e}"
 
 
 class System(eqx.Module):
@@ -493,67 +471,8 @@ def describe_orientations(systems) -> str:
 
 
 @jit
-def _validation_values(system, b0, ws, vs):
-    def at(w, v):
-        b = system.space.move(b0, w)
-        return dict(
-            lv=system.L(b, v),
-            Gs=system.metric(b),
-            Vs=system.potential(b),
-            lin=jax.grad(lambda u: system.L(b, u))(jnp.zeros_like(v)),
-        )
-
-    out = jax.vmap(at)(ws, vs)
-    out.update(G=system.metric(b0), mu=system.mu(b0), Y=system.Y(b0))
-    return out
-
-
-@jit
 def _project_velocity(system, b, v):
     return project_velocity(system, b, v)
-
-
-@jit
-def _metric_derivatives(system, b0, ws):
-    def one(w):
-        b = system.space.move(b0, w)
-        return jax.jacfwd(lambda u: system.metric(system.space.move(b, u)))(jnp.zeros(system.dim))
-
-    return jax.vmap(one)(ws)
-
-
-def real_array(name: str, x, what: str = "real numbers") -> np.ndarray:
-    """`x` as a float64 array; :class:`InputError` naming `name` if it is not numbers, or is
-    complex (an imaginary part would otherwise be dropped with only a NumPy warning)."""
-    try:
-        a = np.asarray(x)
-    except (TypeError, ValueError) as e:
-        raise InputError(f"{name}: expected {what}, got {x!r}") from e
-    if a.dtype.kind == "c":
-        raise InputError(f"{name}: expected {what}, got complex values (gnipy integrates real systems)")
-    try:
-        return np.asarray(a, dtype=np.float64)
-    except (TypeError, ValueError, OverflowError) as e:
-        raise InputError(f"{name}: expected {what}, got {x!r}") from e
-
-
-def require_float64() -> None:
-    """:class:`InputError` unless JAX computes in float64 (`jax_enable_x64`, which importing
-    gnipy turns on): in float32 nothing gnipy computes reaches its stated accuracy."""
-    if not jax.config.jax_enable_x64:
-        raise InputError(
-            "jax_enable_x64: gnipy computes in float64, but JAX's jax_enable_x64 is off (something turned it "
-            "off after importing gnipy); turn it back on with jax.config.update('jax_enable_x64', True)"
-        )
-
-
-def _as_vector(name: str, x, n: int) -> np.ndarray:
-    a = real_array(name, x, f"{n} real numbers")
-    if a.ndim != 1 or a.shape[0] != n:
-        raise InputError(f"{name}: expected a vector of length {n}, got shape {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise InputError(f"{name}: contains NaN or infinite values: {a.tolist()}")
-    return a
 
 
 def project_velocity(system: System, b, v):

@@ -17,7 +17,7 @@ from .saveat import schedule
 from .simulate import _number, _traced, _whole_steps, default_initial_condition, resolve_run
 from .solution import Solution
 from .stepping import run_nodes_checkpointed
-from .system import concrete_value as _concrete
+from .inputs import concrete_value as _concrete
 
 __all__ = ["simulate_traced"]
 

@@ -1,0 +1,36 @@
+"""The compiled evaluations behind :meth:`gnipy.System.check`, :meth:`~gnipy.System.check_mechanical`
+and :meth:`~gnipy.System.has_constant_metric`: a system's values and metric derivatives at sample
+points around $b_0$ (the system is an argument, so one compilation serves every system of a shape).
+"""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+
+from .compilation import jit
+
+
+@jit
+def _validation_values(system, b0, ws, vs):
+    def at(w, v):
+        b = system.space.move(b0, w)
+        return dict(
+            lv=system.L(b, v),
+            Gs=system.metric(b),
+            Vs=system.potential(b),
+            lin=jax.grad(lambda u: system.L(b, u))(jnp.zeros_like(v)),
+        )
+
+    out = jax.vmap(at)(ws, vs)
+    out.update(G=system.metric(b0), mu=system.mu(b0), Y=system.Y(b0))
+    return out
+
+
+@jit
+def _metric_derivatives(system, b0, ws):
+    def one(w):
+        b = system.space.move(b0, w)
+        return jax.jacfwd(lambda u: system.metric(system.space.move(b, u)))(jnp.zeros(system.dim))
+
+    return jax.vmap(one)(ws)
