@@ -1,0 +1,216 @@
+"""The destination of a streamed run (:mod:`gnipy.streaming`): the parts copied, one at a time
+and each verified again, into one netCDF file, written atomically."""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from .. import schema
+from ..analysis.diagnostics import StreamedVerdicts
+from ..files import DataChecksum, OutputError, atomic_write, remove_owned_dir
+from .interrupts import _DeferredInterrupt
+from .parts import _DATA_DIMS, _OWN_FILES, _Plan, _check_part, _own_temporaries, _part_path
+from .result import SPEC_ATTR, StreamResult, _failure
+
+#: For tests: called as `_merge_hook(i)` after the merge has copied part `i` (e.g. to send
+#: SIGINT to the process at a chosen moment). Looked up here, where the merge runs: set
+#: `gnipy.streaming.merge._merge_hook`.
+_merge_hook: Callable[[int], None] | None = None
+
+
+def _global_attrs(system, method, h, steps, result, it_tot, it_max, n_chunks, attrs) -> dict:
+    """The destination's global attributes, as :func:`gnipy.io.write_netcdf` writes them."""
+    import datetime as _dt
+
+    from ..io import CHECKSUM_ATTR, _attr_value, cf_attributes, provenance
+    from ..schema import CONVENTIONS, UNITS_CONVENTION
+    from ..system import describe_orientations
+
+    created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    out = {
+        **cf_attributes(system.name, method.name, created=created),
+        "model": system.name, "method": method.name, "h": float(h), "steps": int(steps), "start": "p+ = G v0",
+        "result": int(result), "newton_iterations_total": int(it_tot), "newton_iterations_max": int(it_max),
+        "streamed_chunks": int(n_chunks), "params": json.dumps(dict(system.params)),
+        **{f"param_{k}": float(v) for k, v in system.params},
+    }
+    if system.group is not None:
+        out["orientation"] = describe_orientations(system)
+    for k, v in provenance(created=created).items():
+        out.setdefault(k, v)
+    out.setdefault("units_convention", UNITS_CONVENTION)
+    out.setdefault("Conventions", CONVENTIONS)
+    out.setdefault("history", f"{out['created']} gnipy {out['gnipy_version']}: write_netcdf")
+    for k, v in attrs.items():
+        out[str(k)] = v
+    out.pop(CHECKSUM_ATTR, None)
+    return {k: _attr_value(v) for k, v in out.items()}
+
+
+def _write_destination(tmp: Path, files, counts, system, first: dict, load, interrupt) -> tuple:
+    """Copy the parts, one at a time, into a new netCDF file `tmp` (the layout of
+    :meth:`gnipy.Solution.to_xarray` written by :func:`gnipy.io.write_netcdf`), acting on SIGINT
+    between parts. `load(i)` reads and verifies part `i`. Returns the open file and the checksum
+    of its data; the caller adds the global attributes and closes it."""
+    import netCDF4
+
+    data0 = first["data"]
+    names = [v for v in _DATA_DIMS if v in data0]
+    sizes = {"time": int(sum(counts))}
+    for v in names:
+        for d, n in zip(_DATA_DIMS[v][1:], data0[v].shape[1:]):
+            sizes[d] = int(n)
+    coordinates = [str(x) for x in system.coordinates]
+    velocities = [str(x) for x in system.velocities]
+    if len(coordinates) != sizes["coordinate"]:
+        coordinates = [f"q{i}" for i in range(sizes["coordinate"])]
+    if len(velocities) != sizes["velocity"]:
+        velocities = [f"v{i}" for i in range(sizes["velocity"])]
+    checksum = DataChecksum()  # as gnipy.io.netcdf_checksum will compute it from the file
+    nc = netCDF4.Dataset(os.fspath(tmp), "w", clobber=False, format="NETCDF4")
+    try:
+        for d in ("time", "coordinate", "velocity", "constraint", "i", "j"):
+            if d in sizes:
+                nc.createDimension(d, sizes[d])
+        out = {}
+        names_of = {"coordinate": coordinates, "velocity": velocities}
+        for v in names:  # the attributes of gnipy.schema.apply, in write_netcdf's order
+            var = nc.createVariable(v, data0[v].dtype, _DATA_DIMS[v], fill_value=np.nan)
+            var.setncatts(schema.variable_attrs(v))
+            components = schema.VARIABLES[v].components
+            if components:
+                var.setncattr("components", ", ".join(names_of[components]))
+            var.setncattr("coordinates", "node step")
+            out[v] = var
+        for name in ("time", "step", "node"):
+            out[name] = nc.createVariable(name, schema.VARIABLES[name].dtype, schema.dims(name))
+            out[name].setncatts(schema.variable_attrs(name))
+        for name, values in names_of.items():
+            a = np.array(values, dtype=object)
+            var = nc.createVariable(name, str, schema.dims(name))
+            var.setncatts(schema.variable_attrs(name))
+            var[:] = a
+            checksum.update(name, a)
+        constraint = np.arange(sizes["constraint"], dtype=np.int64)
+        var = nc.createVariable("constraint", np.int64, schema.dims("constraint"))
+        var.setncatts(schema.variable_attrs("constraint"))
+        var[:] = constraint
+        checksum.update("constraint", constraint)
+
+        offset = 0
+        for i, f in enumerate(files):
+            part = first if i == 0 else load(i)
+            n = part["n"]
+            if n != counts[i]:
+                raise OutputError(f"{f} changed while it was merged; rerun with resume=True")
+            d = part["data"]
+            if sorted(v for v in d if v in _DATA_DIMS) != sorted(names) or any(
+                    d[v].shape[1:] != data0[v].shape[1:] for v in names):
+                raise OutputError(f"{f}: its variables differ from those of {files[0].name}; rerun with "
+                                  "resume=True to compute it again")
+            if n:
+                rows = slice(offset, offset + n)
+                for v in (*names, "time", "step"):
+                    if d[v].size:  # (a variable with an empty dimension, e.g. no constraints, holds nothing)
+                        out[v][rows] = d[v]
+                    checksum.update(v, d[v])
+                node = np.arange(offset, offset + n, dtype=np.int64)
+                out["node"][rows] = node
+                checksum.update("node", node)
+                offset += n
+            if _merge_hook is not None:
+                _merge_hook(i)
+            interrupt.check()
+        return nc, checksum
+    except BaseException:
+        nc.close()
+        raise
+
+
+def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant=False, *,
+            overwrite, plan: _Plan, spec, notes):
+    """Copy the parts (one in memory at a time, each verified again) into `path`, atomically;
+    then remove them."""
+    import netCDF4
+
+    from ..io import CHECKSUM_ATTR
+
+    files = [_part_path(parts, c) for c in range(n_chunks)]
+    stats = []
+    verdicts = StreamedVerdicts(h, h * steps, energy_invariant)
+
+    def load(c: int) -> dict:
+        part, why = _check_part(files[c], c, plan)
+        if part is None:
+            raise OutputError(f"{files[c]} does not verify ({why}); rerun with resume=True to compute "
+                              "it again")
+        d, a = part["data"], part["attrs"]
+        e = d["energy"]
+        kinetic = 0.5 * np.sum(d["v"] * d["p"], axis=-1)
+        hidden = (d["hidden_momentum"], d["hidden_momentum_expected"]) if "hidden_momentum" in d else (None, None)
+        verdicts.update(d["time"], e, kinetic, *hidden)
+        stats.append(dict(result=part["result"], failed=part["failed"], residual=float(a["residual"]),
+                          it_tot=int(a["iterations_total"]), it_max=int(a["iterations_max"]),
+                          e_min=float(e.min()) if e.size else np.inf, e_max=float(e.max()) if e.size else -np.inf,
+                          res=float(np.max(np.abs(d["constraint_residual"]), initial=0.0)),
+                          e0=float(e[0]) if e.size else np.nan, q=d["q"][-1:], v=d["v"][-1:], n=part["n"]))
+        return part
+
+    counts = []
+    for f in files:  # the nodes of every part (headers only), for the size of `time`
+        try:
+            with netCDF4.Dataset(os.fspath(f), "r") as nc:
+                counts.append(len(nc.dimensions["time"]))
+        except Exception as e:  # noqa: BLE001
+            raise OutputError(f"{f} does not verify (it cannot be read: {e}); rerun with resume=True "
+                              "to compute it again") from None
+    first = load(0)
+
+    def write(tmp: Path) -> None:
+        nc, checksum = _write_destination(tmp, files, counts, system, first, load, interrupt)
+        try:
+            result = max(s["result"] for s in stats)
+            failed_step = next((s["failed"] for s in stats if s["result"]), -1)
+            extra = dict(attrs, **verdicts.attrs(method.name, system.name))
+            if result:  # as Solution.to_xarray records a failure
+                s = next(s for s in stats if s["result"])
+                extra = {"failed_step": int(failed_step), "failed_residual": float(s["residual"]),
+                         "failed_time": float(t0 + h * failed_step), **extra}
+            extra[SPEC_ATTR] = json.dumps(spec, sort_keys=True)
+            nc.setncatts(_global_attrs(system, method, h, steps, result, sum(s["it_tot"] for s in stats),
+                                       max(s["it_max"] for s in stats), n_chunks, extra))
+            nc.setncattr(CHECKSUM_ATTR, checksum.hexdigest())
+        finally:
+            nc.close()
+        interrupt.check()
+
+    with _DeferredInterrupt() as interrupt:
+        atomic_write(path, write, overwrite=overwrite, argument="path")
+    _own_temporaries(parts)
+    if not remove_owned_dir(parts, _OWN_FILES) and parts.exists():
+        notes.append(f"{parts} is kept: it holds files gnipy did not write")
+    if interrupt.pending:  # Ctrl-C as the file was renamed: it is complete; stop here
+        raise KeyboardInterrupt
+    result = max(s["result"] for s in stats)
+    failed_step = next((s["failed"] for s in stats if s["result"]), -1)
+    nodes = sum(s["n"] for s in stats)
+    e0 = stats[0]["e0"]
+    energy_error = max((max(abs(s["e_max"] - e0), abs(s["e_min"] - e0)) for s in stats if s["n"]), default=np.nan)
+    last = next(s for s in reversed(stats) if s["n"])  # part 0 always holds the initial node
+    out = StreamResult(
+        path=path, complete=True, nodes=nodes, steps=steps if result == 0 else failed_step, chunks=n_chunks,
+        chunks_resumed=resumed, result=result, failed_step=failed_step, energy_error=float(energy_error),
+        constraint_residual=max(s["res"] for s in stats),
+        iterations=(int(sum(s["it_tot"] for s in stats)), int(max(s["it_max"] for s in stats))),
+        final_q=np.asarray(last["q"][-1]), final_v=np.asarray(last["v"][-1]),
+        warnings=[*notes, *verdicts.warnings(method.name, system.name)],
+    )
+    if result and throw:
+        s = next(s for s in stats if s["result"])
+        raise _failure(method.name, failed_step, t0, h, s["residual"], path)
+    return out
