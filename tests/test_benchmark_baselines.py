@@ -15,7 +15,7 @@ from scipy.integrate import solve_ivp
 
 import gnipy
 from gnipy.models.rolling_ball import example_2
-from gnipy.reference import lagrange_dalembert_acceleration
+from gnipy.equations import lagrange_dalembert_acceleration
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/ is not installed
 

@@ -1,4 +1,4 @@
-"""Run-time diagnostics (gnipy.analysis.diagnostics): the GNI's hidden momentum and its verdict, the energy
+"""Run-time diagnostics (gnipy.diagnostics): the GNI's hidden momentum and its verdict, the energy
 verdict, the energy of p⁺, and what summary() and the files say.
 
 What must fire: the Chaplygin sleigh and Suslov (the GNI's hidden momentum grows to O(1): the
@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import gnipy
-from gnipy.analysis.diagnostics import hidden_momentum_verdict
+from gnipy.diagnostics import hidden_momentum_verdict
 
 
 def _run(model, method, h, t_final, every=10):

@@ -15,7 +15,7 @@ from scipy.integrate import simpson
 import gnipy
 from gnipy import System
 from gnipy.models.nonholonomic_particle import exact_y
-from gnipy.reference import lagrange_dalembert_acceleration
+from gnipy.equations import lagrange_dalembert_acceleration
 
 H_SAVE = 0.1
 T_FINAL = 10.0

@@ -7,10 +7,10 @@ import jax as _jax
 
 _jax.config.update("jax_enable_x64", True)
 
-__version__ = "0.1.0"
+from .version import __version__  # noqa: E402
 
 from . import models  # noqa: E402
-from .analysis.diagnostics import EnergyVerdict, HiddenMomentumVerdict  # noqa: E402
+from .diagnostics import EnergyVerdict, HiddenMomentumVerdict  # noqa: E402
 from .discrete_lagrangians import (  # noqa: E402
     CustomDiscreteLagrangian,
     DiscreteLagrangian,

@@ -117,7 +117,7 @@ def model_systems(name: str, **params) -> list[System]:
     Raises:
         InputError: an unknown model or parameter, non-finite values, arrays of different lengths.
     """
-    from .models import get_model
+    from .registry import get_model
 
     spec = get_model(name)
     arrays = {}

@@ -89,7 +89,7 @@ def _attr_value(v):
 def cf_attributes(model: str, method: str, *, title: str | None = None, created: str | None = None) -> dict[str, str]:
     """The CF global attributes of a result of `model` with `method`: `Conventions`, `title`,
     `source` (gnipy and its version) and `history` (when and by what it was created)."""
-    from . import __version__
+    from .version import __version__
 
     created = created or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     return {
@@ -138,7 +138,7 @@ def _jax_version() -> str:
 
 def provenance(**extra) -> dict[str, Any]:
     """Base provenance attributes: gnipy and JAX versions and creation time (UTC), plus `extra`."""
-    from . import __version__
+    from .version import __version__
 
     attrs = {
         "gnipy_version": __version__,

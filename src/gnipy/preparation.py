@@ -148,12 +148,12 @@ class Prepared:
                        np.float64(h_last), np.int32(progress_stride), np.asarray(times, np.float64))
 
     def node_diagnostics(self, padded, h: float, T: int):
-        """:func:`gnipy.analysis.diagnostics.node_diagnostics` at the first `T` of the padded saved
+        """:func:`gnipy.diagnostics.node_diagnostics` at the first `T` of the padded saved
         nodes: `(hidden_ratio, expected_ratio, energy_plus)` as arrays (T,). One program per
         system structure and padded length, shared by every method."""
         program = self._runs.get("diagnostics")
         if program is None:
-            from .analysis.diagnostics import node_diagnostics
+            from .diagnostics import node_diagnostics
 
             self._split()
             rebuild = self._sys_rebuild

@@ -1,17 +1,7 @@
-"""The continuous reference: the Lagrange–d'Alembert(–Poincaré) equations with λ eliminated.
-
-For $l = \\tfrac12 v^T\\mathbb{G}(b)v - V(b)$ and constraints $\\mu(b)(v - Y(b)) = 0$, with $D_v$ the
-derivative along the motion ($b \\mapsto (x + \\epsilon\\dot x, R\\exp(\\epsilon\\xi))$):
-
-$$\\mathbb{G}\\,\\dot v = F + \\mu^T\\lambda, \\qquad
-F = \\partial_b l - D_v(\\partial_v l) + (0, \\mathrm{ad}^*_\\xi\\,\\partial_\\xi l),$$
-
-where $\\partial_b l = (\\partial_x l, \\nabla^L_R l)$. Differentiating the constraints along the
-motion, $\\mu\\dot v = \\mu\\,D_v Y - (D_v\\mu)(v - Y) =: c$, so
-$\\lambda = C^{-1}(c - \\mu\\mathbb{G}^{-1}F)$ with $C = \\mu\\mathbb{G}^{-1}\\mu^T$ (paper (H) in
-Lagrangian form; on SO(3), $\\mathrm{ad}^*_\\Omega M = M\\times\\Omega$ gives Euler's equations).
-With the reconstruction $\\dot R = R\\hat\\xi$, integrated with diffrax's 8th-order Dormand–Prince at
-tolerance ~1e-12.
+"""The continuous reference: the equations of motion of :mod:`gnipy.equations` (λ eliminated),
+with the reconstruction $\\dot R = R\\hat\\xi$, integrated with diffrax's 8th-order Dormand–Prince
+at tolerance ~1e-12 and returned as a :class:`~gnipy.Solution` (the driver's layer: it runs as the
+method `"reference"` of :func:`gnipy.simulate`).
 """
 
 from __future__ import annotations
@@ -25,32 +15,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .compilation import jit
+from .equations import lagrange_dalembert_acceleration
 from .solution import Solution, SolverFailure
 
-__all__ = ["ContinuousReference", "lagrange_dalembert_acceleration"]
-
-
-def _along(f, space, b, v):
-    """`(f(b), D_v f(b))`: the value and the derivative along the motion with velocity v."""
-    zero = jnp.zeros((), dtype=v.dtype)
-    return jax.jvp(lambda s: f(space.move(b, s * v)), (zero,), (jnp.ones_like(zero),))
-
-
-def lagrange_dalembert_acceleration(system, b, v):
-    """The constrained acceleration $\\dot v$ and the multipliers λ at `(b, v)`."""
-    space = system.space
-    G = system.metric(b)
-    p = system.momentum(b, v)
-    dl_db = jax.grad(lambda w: system.L(space.move(b, w), v))(jnp.zeros_like(v))
-    _, dp = _along(lambda c: system.momentum(c, v), space, b, v)
-    F = dl_db - dp + space.lie_correction(v, p)
-    mu, dmu = _along(system.mu, space, b, v)
-    Y, dY = _along(system.Y, space, b, v)
-    c = mu @ dY - dmu @ (v - Y)
-    Ginv_F = jnp.linalg.solve(G, F)
-    Ginv_muT = jnp.linalg.solve(G, mu.T)
-    lam = jnp.linalg.solve(mu @ Ginv_muT, c - mu @ Ginv_F)
-    return Ginv_F + Ginv_muT @ lam, lam
+__all__ = ["ContinuousReference"]
 
 
 class ContinuousReference(eqx.Module):

@@ -342,7 +342,7 @@ def _method(system, method):
     from .reference import ContinuousReference
 
     if method is None:
-        from .models.registry import default_method_for
+        from .registry import default_method_for
 
         method = default_method_for(system.name)
     if isinstance(method, str):
@@ -394,10 +394,10 @@ _DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
 def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False, batch: bool = False,
                      cached: dict | None = None, prepared=None) -> dict:
     """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
-    the energy of p⁺ (:mod:`gnipy.analysis.diagnostics`), and the sentence on what is conserved (kept in
+    the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved (kept in
     `cached`, per system and start, when given)."""
-    from .analysis.diagnostics import conserved_quantity, energy_is_invariant, saved_node_diagnostics
-    from .models.registry import registered_invariants
+    from .diagnostics import conserved_quantity, energy_is_invariant, saved_node_diagnostics
+    from .registry import registered_invariants
 
     gni_family = nodes[3] is not None
     key = ("conserved", gni_family)

@@ -84,7 +84,7 @@ class Solution(eqx.Module):
         states: the integrator's states at the saved nodes when asked (`SaveAt(states=True)`).
         hidden_momentum: the GNI family's hidden momentum $\\|p^+ - \\bar p\\|/\\|\\bar p\\|$ (norms in
             $\\mathbb{G}^{-1}$) at each saved node, (T,); None for other methods
-            (:mod:`gnipy.analysis.diagnostics`; its verdict is :attr:`hidden_verdict`).
+            (:mod:`gnipy.diagnostics`; its verdict is :attr:`hidden_verdict`).
         hidden_expected: the size it should have, $\\frac{|h|}2\\|\\mu^T\\lambda\\|/\\|\\bar p\\|$, (T,).
         energy_plus: the energy of the post-momentum, $\\tfrac12 p^{+T}\\mathbb{G}^{-1}p^+ + V$ (the
             quantity of the paper's energy theorem), (T,); None for other methods.
@@ -149,9 +149,9 @@ class Solution(eqx.Module):
 
     @property
     def energy_verdict(self):
-        """The :class:`~gnipy.analysis.diagnostics.EnergyVerdict` where the energy is a constant of the motion
+        """The :class:`~gnipy.diagnostics.EnergyVerdict` where the energy is a constant of the motion
         (None otherwise, and for a batch: read it per member)."""
-        from .analysis.diagnostics import energy_verdict
+        from .diagnostics import energy_verdict
 
         if not self.energy_invariant or self.batch_size is not None:
             return None
@@ -161,9 +161,9 @@ class Solution(eqx.Module):
 
     @property
     def hidden_verdict(self):
-        """The :class:`~gnipy.analysis.diagnostics.HiddenMomentumVerdict` of a GNI-family run (None for other
+        """The :class:`~gnipy.diagnostics.HiddenMomentumVerdict` of a GNI-family run (None for other
         methods; for a batch, read it per member: ``sol.member(i).hidden_verdict``)."""
-        from .analysis.diagnostics import hidden_momentum_verdict
+        from .diagnostics import hidden_momentum_verdict
 
         if self.hidden_momentum is None or self.batch_size is not None:
             return None
@@ -316,7 +316,7 @@ class Solution(eqx.Module):
     def _with_attrs(self, ds, attrs):
         """The variables' attributes, the global CF and provenance attributes of a result dataset
         (and the caller's `attrs`)."""
-        from . import __version__
+        from .version import __version__
         from .io import cf_attributes
 
         set_variable_attrs(ds)
@@ -374,7 +374,7 @@ class Solution(eqx.Module):
 
     def warnings(self) -> list[str]:
         """The run-time warnings of this solution: the GNI's hidden momentum out of its O(h) band,
-        and an energy that the motion conserves drifting away (:mod:`gnipy.analysis.diagnostics`)."""
+        and an energy that the motion conserves drifting away (:mod:`gnipy.diagnostics`)."""
         texts = []
         for kind in ("hidden", "energy"):
             verdicts = self._member_verdicts(kind)

@@ -141,4 +141,4 @@ def test_invariant_drifts_and_exact_errors_of_a_run():
 
 def test_the_package_root_keeps_the_verdicts():
     assert gnipy.EnergyVerdict is gnipy.analysis.EnergyVerdict
-    assert gnipy.HiddenMomentumVerdict is gnipy.analysis.diagnostics.HiddenMomentumVerdict
+    assert gnipy.HiddenMomentumVerdict is gnipy.diagnostics.HiddenMomentumVerdict

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import gnipy
-from gnipy.models.registry import get_model
+from gnipy.registry import get_model
 
 EPS = np.finfo(np.float64).eps
 T = 10.0

@@ -1,8 +1,9 @@
 """The analysis layer: what is measured on simulations, shared by the CLI, the experiments and the
 tests.
 
-- :mod:`gnipy.analysis.diagnostics`: the run-time verdicts of a solution (the GNI's hidden
-  momentum, the drift of a conserved energy) and which quantity a model conserves;
+- the run-time verdicts of a solution (the GNI's hidden momentum, the drift of a conserved
+  energy) and which quantity a model conserves, re-exported from :mod:`gnipy.diagnostics` (they
+  live with the driver, which computes them as it runs);
 - :mod:`gnipy.analysis.invariants`: the drift of a model's invariants, the errors against its
   exact solution;
 - :mod:`gnipy.analysis.orders`: the one fitted order of convergence;
@@ -10,7 +11,7 @@ tests.
 """
 
 from .convergence import MEASURES, REFERENCE_FLOOR, ConvergenceStudy, convergence_study
-from .diagnostics import (
+from ..diagnostics import (
     ENERGY_BAND,
     HIDDEN_BAND,
     HIDDEN_FLOOR,

@@ -162,8 +162,8 @@ def convergence_study(
         InputError: bad arguments or initial condition (the message names the argument).
         MethodError: a method that cannot integrate this system (checked before anything runs).
     """
-    import gnipy
-    from gnipy.errors import InputError, MethodError
+    from ..errors import InputError, MethodError
+    from ..simulate import simulate
 
     if measure not in MEASURES:
         raise InputError(f"measure: expected one of {', '.join(MEASURES)}, got {measure!r}")
@@ -200,7 +200,7 @@ def convergence_study(
         floor_rel = 2.0 * math.sqrt(max(counts)) * float(np.finfo(np.float64).eps)
     else:
         report(_REFERENCE)
-        ref = gnipy.simulate(system, "reference", q0, v0_used, R0=R0, h=T / saves, steps=saves)
+        ref = simulate(system, "reference", q0, v0_used, R0=R0, h=T / saves, steps=saves)
         q_true, v_true = np.asarray(ref.q), np.asarray(ref.v)
         yardstick, description, floor_rel = "reference", _REFERENCE, REFERENCE_FLOOR
         done += 1
@@ -214,7 +214,7 @@ def convergence_study(
         for i, n in enumerate(counts):
             h = T / n
             report(f"{name}, h = {h:.4g}" + (" (compiling)" if i == 0 else ""))
-            sol = gnipy.simulate(system, method, q0, v0_used, R0=R0, h=h, steps=n, save_every=n // saves,
+            sol = simulate(system, method, q0, v0_used, R0=R0, h=h, steps=n, save_every=n // saves,
                                  throw=False)
             e_q = e_v = float("nan")
             if sol.result == 0:
@@ -244,17 +244,18 @@ def convergence_study(
 
 def _resolve(methods, system, b0, MethodError) -> dict:
     """`{name: prepared method}`: each method checked against the system before any of them runs."""
-    import gnipy
+    from ..integrators.base import Integrator
+    from ..methods import get_method
 
     if isinstance(methods, str):
         methods = [methods]
     out = {}
     for m in methods:
-        m = gnipy.get_method(m) if isinstance(m, str) else m
+        m = get_method(m) if isinstance(m, str) else m
         name = getattr(m, "name", None)
         if name == "reference":
             raise MethodError("methods: the continuous reference is the yardstick of the study, not a method to study")
-        if not isinstance(m, gnipy.Integrator):
+        if not isinstance(m, Integrator):
             raise MethodError(f"methods: expected method names or integrators, got {type(m).__name__}")
         if name in out:
             raise MethodError(f"methods: {name!r} given twice")

@@ -1,6 +1,6 @@
 """How well a run keeps what the model conserves, and how far it is from the model's exact solution.
 
-A zoo model (:class:`~gnipy.models.registry.ModelSpec`) may register invariants (conserved
+A zoo model (:class:`~gnipy.registry.ModelSpec`) may register invariants (conserved
 quantities, `f(params, q, v)` or on $\\mathbb{R}^n \\times G$ `f(params, q, v, R)`) and an exact
 solution (`exact(params, q0, v0, t)`). These functions evaluate them on the saved nodes of a run;
 `gni run` and `gni demo` print and store what they return.
@@ -20,7 +20,7 @@ def invariant_drifts(spec, params, q, v, R=None) -> dict[str, float]:
     """The drift of each invariant of the model `spec`: `{name: max_k |f(q_k, v_k) − f(q_0, v_0)|}`.
 
     Arguments:
-        spec: the :class:`~gnipy.models.registry.ModelSpec` (its `invariants`).
+        spec: the :class:`~gnipy.registry.ModelSpec` (its `invariants`).
         params: the model's parameter values (`spec.resolve_params(...)`).
         q, v: the saved configurations (T, n) and velocities (T, N).
         R: the saved orientations (T, k, k) on $\\mathbb{R}^n \\times G$; an invariant with four

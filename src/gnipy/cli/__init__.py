@@ -50,6 +50,5 @@ from .app import app, main
 
 # the commands register on `app` when their modules are imported, in the order `gni --help` lists them
 from . import run, convergence, sweep, info, demo, listings, reproduce  # noqa: E402, F401  isort: skip
-from .output import safe as _safe  # noqa: E402  (gnipy.experiments.reproduce prints through it)
 
 __all__ = ["app", "main"]

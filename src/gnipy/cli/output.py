@@ -6,9 +6,9 @@ rich markup), with control characters shown as escapes (`\\x1b`).
 
 from __future__ import annotations
 
-import re
-
 import typer
+
+from ..text import safe
 
 __all__ = ["EXIT_FAILURE", "EXIT_USAGE", "cell", "console", "fail", "safe", "table", "warn"]
 
@@ -16,26 +16,6 @@ __all__ = ["EXIT_FAILURE", "EXIT_USAGE", "cell", "console", "fail", "safe", "tab
 EXIT_USAGE = 2
 #: Exit code of a solver failure or a file that cannot be written.
 EXIT_FAILURE = 1
-
-# control characters (C0, DEL, C1), lone surrogates (undecodable bytes of a path), and the
-# invisible characters that reorder or break lines on a terminal
-_UNSAFE = re.compile("[\x00-\x1f\x7f-\x9f\u061c\u200e\u200f\u2028\u2029\u202a-\u202e\u2066-\u2069\ud800-\udfff]")
-_NAMED_ESCAPES = {"\n": "\\n", "\t": "\\t", "\r": "\\r"}
-
-
-def _escape_char(m) -> str:
-    ch = m.group()
-    if ch in _NAMED_ESCAPES:
-        return _NAMED_ESCAPES[ch]
-    o = ord(ch)
-    return f"\\x{o:02x}" if o < 0x100 else f"\\u{o:04x}"
-
-
-def safe(text) -> str:
-    """`text` for a terminal: control characters as visible escapes (`\\x1b`, `\\n`, `\\x07`, ...).
-    Print the result without markup (rich `Text`, or `markup=False`)."""
-    return _UNSAFE.sub(_escape_char, str(text))
-
 
 def cell(text):
     """A table cell that shows `text` literally (no rich markup, control characters escaped)."""

@@ -139,7 +139,7 @@ def run(
             raise UsageError("MODEL", "missing: give MODEL (or `model` in --config)")
         method_ = pick("method", method)
         if method_ is None:  # the model's measured default (gni models shows it and why)
-            from gnipy.models.registry import default_method_for
+            from gnipy.registry import default_method_for
 
             method_ = default_method_for(str(model_))
         h_ = pick("h", h)

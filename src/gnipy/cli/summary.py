@@ -53,7 +53,7 @@ def run_report(title: str, spec, params, sol, exact, drifts, seconds: float, out
         t.add_row("note", note)
     con = console()
     con.print(t)
-    for warning in sol.warnings():  # the run-time diagnostics (gnipy.analysis.diagnostics): never silent
+    for warning in sol.warnings():  # the run-time diagnostics (gnipy.diagnostics): never silent
         warn(warning)
     if out is not None:
         con.print(f"written: {safe(out)}", markup=False)

@@ -7,7 +7,7 @@ saved nodes) against the continuous reference (Dopri8 at tolerance 1e-12, at the
   $\\|R_k - R^{\\mathrm{ref}}(t_k)\\|$ on $\\mathbb{R}^n \\times G$),
 - the largest drift of the energy (where the motion conserves it) and of the model's registered
   invariants, relative to their size,
-- the run-time verdicts of :mod:`gnipy.analysis.diagnostics` (hidden momentum, energy drift) and solver
+- the run-time verdicts of :mod:`gnipy.diagnostics` (hidden momentum, energy drift) and solver
   failures.
 
 Rule: a method qualifies when the run completes, raises no warning, and keeps every invariant to
@@ -107,7 +107,7 @@ def measure_model(name: str, *, h: float = H, t_final: float = T_FINAL, nodes: i
                   methods=None, progress=None) -> list[MethodMeasurement]:
     """Measure every applicable method on the zoo model `name` (see the module docstring)."""
     import gnipy
-    from gnipy.models.registry import get_model
+    from gnipy.registry import get_model
 
     spec = get_model(name)
     params = spec.resolve_params()

@@ -117,7 +117,7 @@ def _md_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> list[str]
 
 
 STRUGGLES_INTRO = ("Measured failures of the GNI family beyond the paper's examples, each with the run-time "
-                   "diagnostic that reports it (gnipy.analysis.diagnostics) and a method that works there.")
+                   "diagnostic that reports it (gnipy.diagnostics) and a method that works there.")
 
 
 def _md_figure(out_dir: Path, fig) -> list[str]:

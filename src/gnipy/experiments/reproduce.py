@@ -86,7 +86,7 @@ def _versions() -> dict:
 
     import jax
 
-    from .. import __version__
+    from ..version import __version__
 
     try:
         from importlib.metadata import version
@@ -281,7 +281,7 @@ def _print_summary(console, result: ReproductionResult, quick: bool) -> None:
     from rich.markup import escape
     from rich.table import Table
 
-    from ..cli import _safe
+    from ..text import safe as _safe
 
     table = Table(title=f"Theorem table ({'quick' if quick else 'full'} run)", show_lines=False, expand=True)
     table.add_column("#", justify="right")

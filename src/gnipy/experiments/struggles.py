@@ -5,7 +5,7 @@ Three cases, each against the continuous reference (Dopri8 at tolerance 1e-12):
 
 1. The Chaplygin sleigh (`chaplygin-sleigh`, gni-trapezoid, h = 0.05): the GNI's hidden momentum
    $p^+ - \\bar p$ grows exponentially from the start, drains the energy of the reported motion and
-   sends the sleigh round looping petals; :mod:`gnipy.analysis.diagnostics` calls it out of band within a few
+   sends the sleigh round looping petals; :mod:`gnipy.diagnostics` calls it out of band within a few
    time units, while the energy is still within 1%. `dla`, the model's measured default, follows
    the reference.
 2. The Suslov problem (`suslov`, gni-midpoint, h = 0.01): the same mechanism on SO(3).
@@ -41,7 +41,7 @@ def _run(model: str, method: str, h: float, t_final: float, every: int):
 
 def _hidden_panel(ax, sol, label: str, color: str) -> None:
     """The hidden-momentum ratio, its band, and the time the verdict fires."""
-    from ..analysis.diagnostics import hidden_momentum_band
+    from ..diagnostics import hidden_momentum_band
 
     t = np.asarray(sol.t)
     ax.semilogy(t, np.maximum(np.asarray(sol.hidden_momentum), 1e-16), color=color, lw=1.0,
@@ -148,7 +148,7 @@ def sleigh_figure(out_dir: Path, quick: bool, progress: Progress = None):
             f"chaplygin-sleigh (m = I = 1, a = 0.5; q0 = 0, v0 = (1, 0.5, 1)), h = {h:g}, t ≤ {T:g}: "
             "gni-trapezoid (= rattle, and every GNI variant here), dla (the model's default) and the continuous "
             "reference. Right: the hidden-momentum ratio r = |p⁺ − p̄|/|p̄| and its O(h) band "
-            "(gnipy.analysis.diagnostics)."),
+            "(gnipy.diagnostics)."),
         files=files, metrics=metrics, table=[], notes=notes)
 
 

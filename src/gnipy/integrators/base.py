@@ -308,7 +308,7 @@ class Integrator(eqx.Module):
         `state` holds (a covector), or None for methods that carry no such state.
 
         It should stay $\\approx -\\tfrac h2\\mu^T\\lambda$ (docs/conventions.md; see
-        :mod:`gnipy.analysis.diagnostics`); on some problems it grows to O(1) and the motion goes wrong.
+        :mod:`gnipy.diagnostics`); on some problems it grows to O(1) and the motion goes wrong.
         """
         return None
 

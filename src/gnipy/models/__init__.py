@@ -6,6 +6,7 @@ from . import (  # noqa: F401  (registration)
     chaplygin_sphere,
     chaplygin_top,
     contact_oscillator,
+    default_methods,
     knife_edge,
     nonholonomic_particle,
     rolling_ball,
@@ -14,6 +15,6 @@ from . import (  # noqa: F401  (registration)
     veselova,
     vertical_disk,
 )
-from .registry import ModelSpec, get_model, make_system, model_names, register
+from ..registry import ModelSpec, get_model, make_system, model_names, register
 
 __all__ = ["ModelSpec", "get_model", "make_system", "model_names", "register"]

@@ -47,7 +47,7 @@ import jax.tree_util as jtu
 import numpy as np
 
 from ..system import System
-from .registry import ModelSpec, register
+from ..registry import ModelSpec, register
 
 __all__ = ["MODEL", "exact_body_velocities", "exact_heading", "body_velocities"]
 

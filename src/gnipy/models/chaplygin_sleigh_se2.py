@@ -38,7 +38,7 @@ import numpy as np
 from ..lie_groups import SE2
 from ..system import System
 from .chaplygin_sleigh import exact_body_velocities
-from .registry import ModelSpec, register
+from ..registry import ModelSpec, register
 
 __all__ = ["MODEL", "exact"]
 

@@ -54,7 +54,7 @@ import jax.tree_util as jtu
 
 from ..lie_groups import SO3
 from ..system import System
-from .registry import ModelSpec, register
+from ..registry import ModelSpec, register
 
 __all__ = [
     "MODEL",

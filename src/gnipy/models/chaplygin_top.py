@@ -43,7 +43,7 @@ import numpy as np
 from ..lie_groups import SO3
 from ..system import System
 from .chaplygin_sphere import rolling_constraints, table_drift
-from .registry import ModelSpec, register
+from ..registry import ModelSpec, register
 
 __all__ = ["MODEL", "R0", "center_of_mass_offset"]
 

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 
 from ..system import System
-from .registry import ModelSpec, register
+from ..registry import ModelSpec, register
 
 __all__ = ["MODEL"]
 

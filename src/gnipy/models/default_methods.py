@@ -8,11 +8,9 @@ full measurement table is in the models guide of the documentation. `gni models`
 
 from __future__ import annotations
 
-__all__ = ["DEFAULT_METHODS", "FALLBACK_METHOD"]
+from ..registry import FALLBACK_METHOD, set_default_methods
 
-#: The default for systems that are not zoo models (symmetric, order 2, diagnosed; explicit for a
-#: constant metric on R^n).
-FALLBACK_METHOD = "gni-trapezoid"
+__all__ = ["DEFAULT_METHODS", "FALLBACK_METHOD"]
 
 #: model name -> (method, why), from the measurements of gnipy.experiments.method_choice.
 DEFAULT_METHODS: dict[str, tuple[str, str]] = {
@@ -82,3 +80,5 @@ DEFAULT_METHODS: dict[str, tuple[str, str]] = {
         "; next dla 9.2e-03, gni-euler-a 9.8e-03",
     ),
 }
+
+set_default_methods(DEFAULT_METHODS)

@@ -76,7 +76,7 @@ import numpy as np
 from ..lie_groups import SO3
 from ..system import System, _number
 from . import rotating_table_ball
-from .registry import ModelSpec, register
+from ..registry import ModelSpec, register
 
 __all__ = ["EXAMPLE_2", "MODEL", "build_system", "exact", "example_2", "jacobi_integral", "orientation_note",
            "velocity_from_constraints"]

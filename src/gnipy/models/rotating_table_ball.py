@@ -48,7 +48,7 @@ import numpy as np
 
 from ..system import System
 from .elementary import sinc, sine_defect_ratio, versine_ratio
-from .registry import ModelSpec, register
+from ..registry import ModelSpec, register
 
 __all__ = ["MODEL", "exact"]
 

@@ -53,7 +53,7 @@ import numpy as np
 
 from ..lie_groups import SO3
 from ..system import System
-from .registry import ModelSpec, register
+from ..registry import ModelSpec, register
 
 __all__ = ["MODEL", "adapted_frame", "exact", "inertia_tensor"]
 

@@ -35,7 +35,7 @@ import numpy as np
 
 from ..system import System
 from .elementary import sinc
-from .registry import ModelSpec, register
+from ..registry import ModelSpec, register
 
 __all__ = ["MODEL", "exact"]
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import schema
-from ..analysis.diagnostics import StreamedVerdicts
+from ..diagnostics import StreamedVerdicts
 from ..files import DataChecksum, OutputError, atomic_write, remove_owned_dir
 from .interrupts import _DeferredInterrupt
 from .parts import _DATA_DIMS, _OWN_FILES, _Plan, _check_part, _own_temporaries, _part_path

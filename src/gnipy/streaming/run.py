@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..analysis.diagnostics import conserved_quantity, energy_is_invariant
+from ..diagnostics import conserved_quantity, energy_is_invariant
 from ..errors import InputError
 from ..files import (
     OutputError,
@@ -28,7 +28,7 @@ from ..files import (
     remove_owned_dir,
 )
 from ..integrators.base import Integrator, MethodError
-from ..models.registry import registered_invariants
+from ..registry import registered_invariants
 from ..saveat import SaveAt
 from ..simulate import MAX_STEPS, _init_one, default_initial_condition, resolve_steps, simulate
 from ..solution import RESULT_SOLVER_FAILED
@@ -125,7 +125,7 @@ def simulate_to_file(
     if not isinstance(system, System):
         raise InputError(f"system: expected a gnipy.System, got {type(system).__name__}")
     if method is None:  # as simulate: the model's measured default
-        from ..models.registry import default_method_for
+        from ..registry import default_method_for
 
         method = default_method_for(system.name if isinstance(system, System) else "")
     if isinstance(method, str):

@@ -155,10 +155,10 @@ def make_plan(model, grid, *, method, h, steps, t_final, save_every, set_params,
     """Validate a sweep's input and work out its specification (or raise SweepError,
     InputError or MethodError). The sizes are checked (:func:`check_size`, with `max_bytes` and
     `disk`) before anything of the sweep's size is allocated."""
-    from .. import __version__
+    from ..version import __version__
     from ..methods import method_names
     from ..models import get_model
-    from ..models.registry import default_method_for
+    from ..registry import default_method_for
     from ..simulate import resolve_steps
 
     if not isinstance(model, str):

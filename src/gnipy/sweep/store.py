@@ -45,7 +45,7 @@ def template(plan: Plan):
     import dask.array as da
     import xarray as xr
 
-    from .. import __version__
+    from ..version import __version__
     from ..io import _jax_version, cf_attributes
 
     grid = tuple(a.name for a in plan.axes)

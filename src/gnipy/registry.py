@@ -1,5 +1,9 @@
 """The model registry: each model is a :class:`ModelSpec` with parameters, defaults, and its exact
-solution or invariants where known."""
+solution or invariants where known.
+
+The zoo (:mod:`gnipy.models`) registers its models here; the driver (:func:`gnipy.simulate`, the
+streamed runs, the sweeps) looks up a system's default method and registered invariants by its
+name, so it depends on this table and not on the models above it."""
 
 from __future__ import annotations
 
@@ -9,11 +13,11 @@ from typing import Any
 
 import jax
 
-from ..errors import InputError
-from ..system import System
+from .errors import InputError
+from .system import System
 
-__all__ = ["ModelSpec", "register", "get_model", "model_names", "make_system", "registered_invariants",
-           "default_method_for"]
+__all__ = ["ModelSpec", "FALLBACK_METHOD", "set_default_methods", "register", "get_model", "model_names", "make_system",
+           "registered_invariants", "default_method_for"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -83,16 +87,12 @@ class ModelSpec:
     def default_method(self) -> str:
         """The method that runs when none is named, chosen from measurements
         (:mod:`gnipy.models.default_methods`)."""
-        from .default_methods import DEFAULT_METHODS, FALLBACK_METHOD
-
-        return DEFAULT_METHODS.get(self.name, (FALLBACK_METHOD, ""))[0]
+        return _DEFAULT_METHODS.get(self.name, (FALLBACK_METHOD, ""))[0]
 
     @property
     def default_reason(self) -> str:
         """Why :attr:`default_method` (the measurements that chose it)."""
-        from .default_methods import DEFAULT_METHODS
-
-        return DEFAULT_METHODS.get(self.name, ("", "not measured: the library-wide default"))[1]
+        return _DEFAULT_METHODS.get(self.name, ("", "not measured: the library-wide default"))[1]
 
     def system(self, **overrides) -> System:
         """Build the System for the defaults updated with `overrides`."""
@@ -101,6 +101,18 @@ class ModelSpec:
 
 
 _REGISTRY: dict[str, ModelSpec] = {}
+
+#: The default for systems that are not zoo models (symmetric, order 2, diagnosed; explicit for a
+#: constant metric on R^n).
+FALLBACK_METHOD = "gni-trapezoid"
+
+#: model name -> (method, why): filled by :mod:`gnipy.models.default_methods` (the measurements).
+_DEFAULT_METHODS: dict[str, tuple[str, str]] = {}
+
+
+def set_default_methods(table: Mapping[str, tuple[str, str]]) -> None:
+    """Record the models' measured default methods, `name -> (method, why)`."""
+    _DEFAULT_METHODS.update(table)
 
 
 def register(spec: ModelSpec) -> ModelSpec:
@@ -136,7 +148,5 @@ def registered_invariants(name: str) -> tuple[str, ...]:
 
 def default_method_for(system_name: str) -> str:
     """The default method of the zoo model `system_name`, or the library-wide default for other systems."""
-    from .default_methods import FALLBACK_METHOD
-
     spec = _REGISTRY.get(system_name)
     return spec.default_method if spec is not None else FALLBACK_METHOD

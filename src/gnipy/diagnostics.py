@@ -1,4 +1,5 @@
-"""Run-time diagnostics of a solution: the GNI's hidden momentum and its verdict, the energy of
+"""Run-time diagnostics of a solution (the driver's layer: :func:`gnipy.simulate` and the streamed
+runs compute them as they run; :mod:`gnipy.analysis` re-exports them): the GNI's hidden momentum and its verdict, the energy of
 $p^+$, and which quantity the model conserves.
 
 **The hidden momentum.** The GNI family (the `gni-*` methods and the paper's schemes that are the
@@ -44,8 +45,8 @@ import dataclasses
 import jax.numpy as jnp
 import numpy as np
 
-from ..compilation import jit
-from ..linalg import solve_spd
+from .compilation import jit
+from .linalg import solve_spd
 
 __all__ = [
     "HIDDEN_BAND",
@@ -89,7 +90,7 @@ def node_diagnostics(system, b, v, p, hidden, h):
         of the post-momentum $E^+ = \\tfrac12 p^{+T}\\mathbb{G}^{-1}p^+ + V$, the quantity of the
         paper's energy theorem.
     """
-    from ..reference import lagrange_dalembert_acceleration
+    from .equations import lagrange_dalembert_acceleration
 
     G = system.metric(b)
     _, lam = lagrange_dalembert_acceleration(system, b, v)
@@ -374,7 +375,7 @@ def energy_theorem_applies(system, b0) -> bool:
     """Whether the hypotheses of the paper's energy theorem hold: V = 0, linear constraints, and a
     metric that is constant on $\\mathbb{R}^n$ or, with a group part, constant with the group block
     $c I$ on SO(3) (bi-invariant) and no coupling to $\\mathbb{R}^n$ (host side)."""
-    from ..lie_groups import SO3
+    from .lie_groups import SO3
 
     if not energy_is_invariant(system, b0) or not system.has_constant_metric(b0):
         return False
