@@ -72,6 +72,13 @@ NOT_RUN = {
     "gni reproduce --out quick/ --quick":
         "about a minute: this very command (--out in a temporary directory) runs in "
         "tests/experiments/test_reproduce.py::test_gni_reproduce_quick",
+    "gni atlas --out gnipy-atlas/":
+        "the full atlas takes about 20 minutes on 2 cores; its measurement and report run small in "
+        "tests/experiments/test_atlas.py::test_report_files_hold_every_measured_pair and through the CLI in "
+        "tests/experiments/test_atlas.py::test_gni_atlas_quick_cli",
+    "gni atlas --quick --out atlas-quick/":
+        "1.5-2.5 minutes: gni atlas --quick with --models and --methods runs in "
+        "tests/experiments/test_atlas.py::test_gni_atlas_quick_cli, and the small command of the atlas page here",
     "mkdocs build --strict":
         "tests/test_docs.py::test_site_builds_strict builds the site with --strict",
     "python -m benchmarks":

@@ -21,6 +21,8 @@ from .discrete_lagrangians import (  # noqa: E402
 )
 from .integrators import (  # noqa: E402
     GNI,
+    Composition,
+    DiscreteGradient,
     DiscreteLagrangeDAlembert,
     EulerABComposition,
     Integrator,
@@ -70,6 +72,8 @@ __all__ = [
     "Shake",
     "DiscreteLagrangeDAlembert",
     "McLachlanPerlmutter",
+    "DiscreteGradient",
+    "Composition",
     "ContinuousReference",
     "simulate",
     "model_systems",

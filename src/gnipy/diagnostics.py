@@ -350,7 +350,7 @@ class StreamedVerdicts:
         return [v.warning(method, system) for v in (self.hidden, self.energy) if v is not None and not v.in_band]
 
 
-def conserved_quantity(system, b0, *, gni_family: bool, invariants=()) -> str:
+def conserved_quantity(system, b0, *, gni_family: bool, invariants=(), conserves_energy: bool = False) -> str:
     """Which reported quantity the run should conserve, as a sentence for `summary()`.
 
     Linear constraints: the energy $\\tfrac12\\bar v^T\\mathbb{G}\\bar v + V$ is a constant of the
@@ -358,13 +358,16 @@ def conserved_quantity(system, b0, *, gni_family: bool, invariants=()) -> str:
     runs); with V = 0, a constant metric on $\\mathbb{R}^n$ or a bi-invariant one on SO(3), the GNI
     conserves the energy of $p^+$ exactly (the paper's energy theorem, §4). Affine constraints:
     neither energy is conserved (the constraint forces do work); the model's Jacobi integral
-    where one is registered.
+    where one is registered. `conserves_energy`: the method conserves the energy exactly
+    (`method.conserves_energy`, the discrete-gradient method).
     """
     names = tuple(invariants)
     if not energy_is_invariant(system, b0):
         if "jacobi" in names:
             return "affine constraints: neither energy is conserved; the Jacobi integral is (gnipy.get_model(...).invariants['jacobi'])"
         return "affine constraints: neither energy is conserved (the constraint forces do work)"
+    if conserves_energy:
+        return "the energy is conserved by the motion (linear constraints) and by the scheme, to round-off"
     if gni_family and energy_theorem_applies(system, b0):
         return ("the energy of p+ (energy_plus) is conserved exactly by the GNI (energy theorem: V = 0 and a "
                 "constant or bi-invariant metric); the reported energy is conserved by the motion, not exactly by the scheme")

@@ -392,7 +392,8 @@ def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, 
     if reporter.active:
         jax.block_until_ready(out)
     batch_diag = _diagnostic_meta(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
-                                  batched_system=sys_batched, batch=True)
+                                  batched_system=sys_batched, batch=True,
+                                  conserves_energy=bool(getattr(method, "conserves_energy", False)))
     space = system.space
     q, R = space.coordinates(out["b"]), space.orientation(out["b"])
     v, p, energy, residual = out["v"], out["p"], out["energy"], out["residual"]

@@ -35,13 +35,17 @@ class ContinuousReference(eqx.Module):
     name: ClassVar[str] = "reference"
     order: ClassVar[int | None] = None
 
-    def solve(self, system, b0, v0, times, *, h=float("nan")) -> Solution:
-        """Integrate from `times[0]` and save at `times` (host arrays); returns a Solution.
+    def solve(self, system, b0, v0, times, *, h=float("nan"), t0=None) -> Solution:
+        """Integrate from `t0` (default `times[0]`) and save at `times` (host arrays, monotone; a
+        run backward in time when they decrease); returns a Solution.
 
         `b0` is the base point (`q0` on $\\mathbb{R}^n$, a :class:`~gnipy.spaces.Point` on
         $\\mathbb{R}^n\\times G$), `v0` the velocity on the constraints."""
         times = np.asarray(times, dtype=np.float64)
-        ys, num_steps, ok = _solve(self, system, b0, jnp.asarray(v0), jnp.asarray(times))
+        start = times[0] if t0 is None else float(t0)
+        ts = times if start == times[0] else np.concatenate([[start], times])  # the start is not saved
+        ys, num_steps, ok = _solve(self, system, b0, jnp.asarray(v0), jnp.asarray(ts))
+        ys = ys[len(ts) - len(times):]
         meta = dict(system=system.name, method=self.name, h=float(h), coordinates=system.coordinates,
                     params=system.params, start="continuous", orientation=system.orientation_description)
         if not bool(ok):

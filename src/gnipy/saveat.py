@@ -70,8 +70,9 @@ class SaveAt:
                 raise InputError("saveat.ts: no times given")
             if not np.all(np.isfinite(ts)):
                 raise InputError("saveat.ts: contains NaN or infinite values")
-            if np.any(np.diff(ts) <= 0):
-                raise InputError("saveat.ts: the times must be strictly increasing")
+            if not (np.all(np.diff(ts) > 0) or np.all(np.diff(ts) < 0)):
+                raise InputError("saveat.ts: the times must be strictly increasing (or, for a run backward "
+                                 "in time, strictly decreasing)")
             object.__setattr__(self, "ts", tuple(float(t) for t in ts))
         chosen = [n for n in ("every", "ts") if getattr(self, n) is not None] + (["steps"] if self.steps else [])
         if len(chosen) > 1:
@@ -140,8 +141,8 @@ def schedule(saveat: SaveAt, steps: int, partial: float = 0.0, *, h: float | Non
                 nodes.add(last)
             elif abs(k - kr) <= tol and 0 <= kr <= steps:
                 nodes.add(int(kr))
-            elif k < -tol or t > t_end + GRID_RTOL * max(abs(t_end), abs(h)):
-                raise InputError(f"saveat.ts: {t!r} lies outside the run [{t0!r}, {t_end!r}]")
+            elif k < -tol or k > steps + partial + tol:
+                raise InputError(f"saveat.ts: {t!r} lies outside the run [{min(t0, t_end)!r}, {max(t0, t_end)!r}]")
             else:
                 raise InputError(
                     f"saveat.ts: {t!r} is not a node t0 + k h (h = {h!r}: it lies between k = {math.floor(k)} and "

@@ -21,6 +21,7 @@ import numpy as np
 from .compilation import jit
 from .errors import InputError, MethodError, SolverFailure
 from .integrators.base import Integrator
+from .integrators.reversal import backward
 from .saveat import GRID_RTOL, SaveAt, schedule
 from .solution import RESULTS, Solution
 from .ensembles import is_batch, simulate_batch
@@ -73,13 +74,17 @@ def _whole_steps(steps) -> int:
     return int(steps)
 
 
-def resolve_run(h, steps=None, t_final=None, t0: float = 0.0, *, shorten: bool = True) -> tuple[float, int, float]:
+def resolve_run(h, steps=None, t_final=None, t0: float = 0.0, *, shorten: bool = True,
+                backward: bool = False) -> tuple[float, int, float]:
     """Validate `h` and exactly one of `steps`, `t_final` (the final time); return `(h, steps,
     partial)`: the number of full steps of h and the shortened last step as a fraction of h (0
     when `t_final - t0` is a whole number of steps to within 1e-9 relative). With `shorten=False`
-    a fraction is refused with an error that says how to choose h or t_final."""
-    h = _number("h", h, positive=True)
-    if h < MIN_STEP_SIZE:
+    a fraction is refused with an error that says how to choose h or t_final. With `backward=True`
+    a negative h is allowed (a run backward in time, `t_final` before `t0`)."""
+    h = _number("h", h, positive=not backward)
+    if h == 0:
+        raise InputError("h: must be nonzero (h > 0 runs forward in time, h < 0 backward), got 0")
+    if abs(h) < MIN_STEP_SIZE:
         raise InputError(
             f"h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision (subnormal numbers; "
             "the time t0 + k h and the momenta divided by h would be meaningless)"
@@ -90,8 +95,9 @@ def resolve_run(h, steps=None, t_final=None, t0: float = 0.0, *, shorten: bool =
         return h, _whole_steps(steps), 0.0
     t_final = _number("t_final", t_final, positive=False)
     span = t_final - t0
-    if span <= 0:
-        raise InputError(f"t_final: must be after t0 = {t0!r}, got {t_final!r}")
+    if span * h <= 0:
+        raise InputError(f"t_final: must be {'after' if h > 0 else 'before'} t0 = {t0!r} for h = {h!r}, "
+                         f"got {t_final!r}")
     ratio = span / h
     if not math.isfinite(ratio) or ratio > MAX_TOTAL_STEPS:
         raise InputError(
@@ -178,7 +184,10 @@ def simulate(
             Arrays with a leading batch axis, (B, n) and (B, N), run B trajectories at once.
         R0: the initial orientation on $\\mathbb{R}^n \\times G$ (default: the system's, or the
             identity); (k, k), or (B, k, k) for a batch.
-        h: step size (> 0).
+        h: step size; h < 0 runs backward in time (`t_final` before `t0`): a symmetric method
+            (`method.symmetric_on(system)`) then runs its exact inverse $\\sigma\\circ\\Phi_{h}\\circ\\sigma$
+            (:mod:`gnipy.integrators.reversal`), so that N steps forward and N back return to the
+            start to round-off; other methods run their own formula at h < 0.
         steps / t_final: the number of steps, or the final time. When `t_final - t0` is not a
             whole number of steps, the last step is shortened to end at `t_final` where the method
             allows it (`method.can_change_step`: the GNI family rescales its hidden impulse to
@@ -257,11 +266,13 @@ def simulate(
     if traced:
         from .transformed import simulate_traced
 
+        method = backward(method, h, system)
         return simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, saveat, t0, state0,
                                 project_v0, throw)
 
     t0 = _number("t0", t0, positive=False)
-    h, n, partial = resolve_run(h, steps, t_final, t0)
+    h, n, partial = resolve_run(h, steps, t_final, t0, backward=True)
+    method = backward(method, h, system)
     if n > MAX_STEPS:
         raise InputError(
             f"steps: at most {MAX_STEPS} steps per call (the step counters are int32), got {n}; "
@@ -293,7 +304,7 @@ def simulate(
             raise MethodError("method: the continuous reference has no integrator state (state0, saveat.states)")
         b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
         with reporter:
-            return method.solve(system, b0, jnp.asarray(v0), times, h=h)
+            return method.solve(system, b0, jnp.asarray(v0), times, h=h, t0=t0)
     if batched:
         if state0 is not None:
             raise InputError("state0: continuing from a state is for single trajectories")
@@ -312,7 +323,8 @@ def simulate(
         if reporter.active:
             jax.block_until_ready(out)
     meta |= _diagnostic_meta(system, prep.core, prep.b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
-                             cached=prep.cache, prepared=(prep, out.get("padded")))
+                             cached=prep.cache, prepared=(prep, out.get("padded")),
+                             conserves_energy=bool(getattr(method, "conserves_energy", False)))
     fail_k = int(out["fail_k"])
     q = out["q"]
     common = dict(iterations=out["iterations"], R=out["R"], final_state=out["final_state"], states=out["states"],
@@ -330,7 +342,8 @@ def simulate(
         failed_residual=fail_res,
     )
     t_fail = float(times[-1]) if fail_k >= n else t0 + h * fail_k
-    msg = (f"{method.name}: step {fail_k} (t = {t_fail:.6g} -> {min(t_fail + h, t0 + h * (n + partial)):.6g}) failed: "
+    t_next = t0 + h * (n + partial) if fail_k >= n else t_fail + h
+    msg = (f"{method.name}: step {fail_k} (t = {t_fail:.6g} -> {t_next:.6g}) failed: "
            f"{RESULTS.solve_failed.message} (residual {fail_res:.3e})")
     if throw:
         raise SolverFailure(msg, step=fail_k, time=t_fail, residual=fail_res, solution=partial_sol)
@@ -392,7 +405,7 @@ _DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
 
 
 def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False, batch: bool = False,
-                     cached: dict | None = None, prepared=None) -> dict:
+                     cached: dict | None = None, prepared=None, conserves_energy: bool = False) -> dict:
     """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
     the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved (kept in
     `cached`, per system and start, when given)."""
@@ -400,12 +413,13 @@ def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False
     from .registry import registered_invariants
 
     gni_family = nodes[3] is not None
-    key = ("conserved", gni_family)
+    key = ("conserved", gni_family, conserves_energy)
     if cached is not None and key in cached:
         out = dict(cached[key])
     else:
         out = {"conserved": conserved_quantity(system, b0, gni_family=gni_family,
-                                               invariants=registered_invariants(system.name)),
+                                               invariants=registered_invariants(system.name),
+                                               conserves_energy=conserves_energy),
                "energy_invariant": energy_is_invariant(system, b0)}
         if cached is not None:
             cached[key] = dict(out)

@@ -251,7 +251,7 @@ class Solution(eqx.Module):
     @property
     def steps(self) -> int:
         """Number of steps from the first to the last saved node."""
-        if np.isnan(self.h) or self.h <= 0:
+        if np.isnan(self.h) or self.h == 0:
             return len(self.t) - 1
         return int(round((float(self.t[-1]) - float(self.t[0])) / self.h))
 

@@ -54,7 +54,7 @@ def simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, save
         raise InputError("steps: h is traced (jax.jit), so the number of steps cannot follow from t_final; give steps")
     t0_num = 0.0 if t0_c is None else _number("t0", t0_c, positive=False)
     if h_c is not None:
-        hv, n, partial = resolve_run(h_c, steps, t_final, t0_num)
+        hv, n, partial = resolve_run(h_c, steps, t_final, t0_num, backward=True)
     else:
         hv, n, partial = None, _whole_steps(steps), 0.0
     if partial and not method.can_change_step:

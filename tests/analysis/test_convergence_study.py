@@ -92,10 +92,14 @@ def test_a_custom_discrete_lagrangian_declares_its_order():
 def test_every_method_states_its_order():
     orders = {name: gnipy.get_method(name).order for name in gnipy.method_names()}
     assert orders.pop("reference") is None
-    assert set(orders.values()) <= {1, 2}
+    assert set(orders.values()) <= {1, 2, 4, 6}
     for name, order in orders.items():
-        if name.startswith("gni-"):
-            assert order == gnipy.get_method(name).discrete_lagrangian.order
+        method = gnipy.get_method(name)
+        if name.startswith(("gni-", "sgni-")):
+            assert order == method.discrete_lagrangian.order
+        if isinstance(method, gnipy.Composition):  # the scheme's order, at most 4 on a GNI
+            expected = gnipy.integrators.COMPOSITIONS[method.scheme][0]
+            assert order == (min(expected, 4) if isinstance(method.base, gnipy.GNI) else expected)
 
 
 @pytest.mark.parametrize("kwargs, argument", [

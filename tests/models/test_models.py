@@ -135,7 +135,7 @@ def test_parameter_overrides_reach_the_system(name):
         assert Y[:2] == pytest.approx([-p["Omega"] * q[1], p["Omega"] * q[0]])
 
 
-@pytest.mark.parametrize("name", NEW_MODELS)
+@pytest.mark.parametrize("name", gnipy.model_names())
 def test_unknown_or_bad_parameters_raise(name):
     with pytest.raises(gnipy.InputError, match="unknown parameter 'nonsense'"):
         gnipy.make_system(name, nonsense=1.0)

@@ -11,6 +11,7 @@ listings.
     gni info FILE.nc
     gni verify PATH
     gni reproduce [--out DIR] [--quick]
+    gni atlas [--quick] [--out DIR] [--models a,b] [--methods x,y]
     gni demo [--out FILE.nc]
     gni models
     gni methods
@@ -43,12 +44,12 @@ The package holds parsing and printing only; what the commands compute lives in 
 - one module per command group: :mod:`~gnipy.cli.run` (`run`, with
   :mod:`~gnipy.cli.summary`), :mod:`~gnipy.cli.demo`, :mod:`~gnipy.cli.convergence`, :mod:`~gnipy.cli.sweep`,
   :mod:`~gnipy.cli.info` (`info`, `verify`), :mod:`~gnipy.cli.reproduce`,
-  :mod:`~gnipy.cli.listings` (`models`, `methods`).
+  :mod:`~gnipy.cli.atlas`, :mod:`~gnipy.cli.listings` (`models`, `methods`).
 """
 
 from .app import app, main
 
 # the commands register on `app` when their modules are imported, in the order `gni --help` lists them
-from . import run, convergence, sweep, info, demo, listings, reproduce  # noqa: E402, F401  isort: skip
+from . import run, convergence, sweep, info, demo, listings, reproduce, atlas  # noqa: E402, F401  isort: skip
 
 __all__ = ["app", "main"]

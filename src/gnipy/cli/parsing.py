@@ -97,7 +97,7 @@ def prepare(model: str, method: str, h, steps, t_final, set_items, x0_text, v0_t
     import gnipy
 
     _model(model)
-    if method not in gnipy.method_names():
+    if not gnipy.methods.is_method_name(method):
         raise UsageError("--method", f"unknown method {method!r} (known: {', '.join(gnipy.method_names())})")
     check_positive("--h", h)
     if (steps is None) == (t_final is None):
@@ -136,7 +136,7 @@ def parse_methods(text: str) -> list[str]:
         name = part.strip()
         if not name:
             continue
-        if name not in gnipy.method_names():
+        if not gnipy.methods.is_method_name(name):
             raise UsageError("--methods", f"unknown method {name!r} (known: {', '.join(gnipy.method_names())})")
         if name == "reference":
             raise UsageError("--methods", "'reference' is the yardstick of the study, not a method to study")

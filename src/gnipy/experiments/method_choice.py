@@ -1,14 +1,16 @@
-"""Measurements that choose each zoo model's default method (`gni models` shows the choice).
+"""The rule that chooses each zoo model's default method (`gni models` shows the choice), and the
+measurements it reads.
 
-For every model and every method that applies to it, one long run (h = 0.01, T = 200, about 2000
-saved nodes) against the continuous reference (Dopri8 at tolerance 1e-12, at the same times):
+The measurements are the method atlas's (:mod:`gnipy.experiments.atlas`, `gni atlas`): for every
+model and every method that applies to it, one long run at h = 0.01 (10⁵ or 10⁶ steps) against
+the continuous reference (Dopri8 at tolerance 1e-12, at the same times, up to T = 200):
 
-- the largest position error $\\max_k |q_k - q^{\\mathrm{ref}}(t_k)|$ (with the orientation
-  $\\|R_k - R^{\\mathrm{ref}}(t_k)\\|$ on $\\mathbb{R}^n \\times G$),
+- the largest position error $\\max_k |q_k - q^{\\mathrm{ref}}(t_k)|$ over t <= 200 (with the
+  orientation $\\|R_k - R^{\\mathrm{ref}}(t_k)\\|$ on $\\mathbb{R}^n \\times G$),
 - the largest drift of the energy (where the motion conserves it) and of the model's registered
-  invariants, relative to their size,
-- the run-time verdicts of :mod:`gnipy.diagnostics` (hidden momentum, energy drift) and solver
-  failures.
+  invariants over the whole run, relative to their size,
+- the run-time verdicts of :mod:`gnipy.diagnostics` (hidden momentum, energy drift) over the whole
+  run, and solver failures.
 
 Rule: a method qualifies when the run completes, raises no warning, and keeps every invariant to
 1e-2 relative; the default is the qualifying method with the smallest position error, where
@@ -18,9 +20,14 @@ to the higher order, then to a method whose failure modes the run-time diagnosti
 family's hidden momentum), then to fewer Newton iterations per step. Methods are compared at the
 same h (euler-ab takes two half steps per step). When none qualifies, the default is
 the continuous reference itself. The registry holds the outcome
-(`ModelSpec.default_method`, `ModelSpec.default_reason`); `python -m gnipy.experiments.method_choice`
-reruns the measurements and prints the table (about 5 minutes on 2 cores) that
-docs/user-guide/models.md shows.
+(`ModelSpec.default_method`, `ModelSpec.default_reason`, recorded in
+:mod:`gnipy.models.default_methods`). The atlas is the one source of the record: `gni atlas --out
+DIR` writes `DIR/default_methods.py` (its recommendations; copy it over
+src/gnipy/models/default_methods.py) beside its report, and `python -m
+gnipy.experiments.method_choice [MODEL ...]` runs the same full measurement and prints the table,
+the choices and that module (about 30 minutes on 2 cores for every model).
+:func:`measure_model` measures one model over a single run of `t_final` (the atlas's
+measurement with the reference horizon the whole run).
 """
 
 from __future__ import annotations
@@ -28,8 +35,6 @@ from __future__ import annotations
 import dataclasses
 import math
 import sys
-
-import numpy as np
 
 __all__ = ["MethodMeasurement", "measure_model", "choose", "main", "H", "T_FINAL"]
 
@@ -79,77 +84,35 @@ class MethodMeasurement:
 
 
 def _invariant_values(spec, params, sol):
-    """Each registered invariant along the run, name -> (T,)."""
-    q, v = np.asarray(sol.q), np.asarray(sol.v)
-    R = None if sol.R is None else np.asarray(sol.R)
-    out = {}
-    for name, f in spec.invariants.items():
-        vals = []
-        for k in range(len(q)):
-            try:
-                vals.append(float(f(params, q[k], v[k])))
-            except TypeError:
-                vals.append(float(f(params, q[k], v[k], R[k])))
-        out[name] = np.asarray(vals)
-    return out
+    """Each registered invariant along the run, name -> (T,) (computed as the atlas does)."""
+    from .atlas import _invariant_functions, _invariant_values as values
 
-
-def _drift(values, reference_values) -> float:
-    """max |I_k − I_0| relative to the invariant's size along the reference, or absolute (to 1e-6)
-    for an invariant that stays near zero (e.g. the rolling ball's spin ω₃ = 0)."""
-    scale = max(float(np.max(np.abs(reference_values))), 1e-6)
-    if not np.all(np.isfinite(values)):
-        return math.inf
-    return float(np.max(np.abs(values - values[0])) / scale)
+    return values(_invariant_functions(spec, params), sol)
 
 
 def measure_model(name: str, *, h: float = H, t_final: float = T_FINAL, nodes: int = NODES,
                   methods=None, progress=None) -> list[MethodMeasurement]:
-    """Measure every applicable method on the zoo model `name` (see the module docstring)."""
-    import gnipy
-    from gnipy.registry import get_model
+    """Measure every applicable method on the zoo model `name` over one run of `t_final` (the
+    atlas's measurement, :func:`gnipy.experiments.atlas.measure_model`, with the reference horizon
+    the whole run and no reversibility run); `progress(name, method)` after each method."""
+    from .atlas import Plan, measure_model as atlas_model
 
-    spec = get_model(name)
-    params = spec.resolve_params()
-    system = spec.system()
     steps = round(t_final / h)
-    every = max(1, steps // nodes)
-    ref = gnipy.simulate(system, "reference", h=h, steps=steps, save_every=every)
-    ref_inv = _invariant_values(spec, params, ref)
-    out = []
-    for method in methods or [m for m in gnipy.method_names() if m != "reference"]:
-        try:
-            sol = gnipy.simulate(system, method, h=h, steps=steps, save_every=every, throw=False)
-        except gnipy.MethodError:
-            continue
-        if progress is not None:
-            progress(name, method)
-        good = len(sol.t)
-        err = np.max(np.abs(np.asarray(sol.q) - np.asarray(ref.q[:good])), initial=0.0)
-        if sol.R is not None:
-            err = max(err, float(np.max(np.abs(np.asarray(sol.R) - np.asarray(ref.R[:good])))))
-        drift = 0.0
-        if sol.energy_invariant:
-            drift = _drift(np.asarray(sol.energy), np.asarray(ref.energy))
-        for k, vals in _invariant_values(spec, params, sol).items():
-            if np.all(np.isfinite(ref_inv[k])):
-                drift = max(drift, _drift(vals, ref_inv[k]))
-        its = np.asarray(sol.iterations)
-        order = gnipy.get_method(method).order or 0  # the method's statement of its order (None: unknown)
-        residual = float(np.max(np.abs(np.asarray(sol.constraint_residual)), initial=0.0))
-        out.append(MethodMeasurement(method, float(err) if sol.result == 0 else math.inf, drift,
-                                     tuple(sol.warnings()), sol.result != 0, float(its[0]) / max(sol.steps, 1),
-                                     residual, int(order), sol.hidden_momentum is not None))
-    return out
+    p = Plan(h=h, steps=steps, t_ref=t_final, ref_every=max(1, steps // nodes), long_nodes=0, reverse=False)
+    return [r.measurement for r in atlas_model(name, p, methods=methods, progress=progress).pairs]
 
 
-def choose(measurements: list[MethodMeasurement]) -> tuple[str, str]:
-    """`(method, reason)` by the rule of the module docstring."""
+def choose(measurements: list[MethodMeasurement], *, h: float = H, t_final: float = T_FINAL,
+           t_ref: float | None = None) -> tuple[str, str]:
+    """`(method, reason)` by the rule of the module docstring, for measurements at step `h` over
+    `t_final` (the error against the reference over t <= `t_ref`, default the whole run; the reason
+    states them)."""
+    where = f"h = {h:g}, T = {t_final:g}" + ("" if t_ref is None or t_ref >= t_final else f", error over t <= {t_ref:g}")
     ok = [m for m in measurements if m.qualifies]
     if not ok:
         bad = ", ".join(f"{m.method} ({'failed' if m.failed else 'warning' if m.warnings else f'drift {m.invariant_drift:.1e}'})"
                         for m in measurements)
-        return "reference", (f"no discrete method qualifies at h = {H:g} over T = {T_FINAL:g}: {bad}; "
+        return "reference", (f"no discrete method qualifies ({where}): {bad}; "
                              "the continuous reference is the default")
     best = min(ok, key=lambda m: m.position_error)
     near = [m for m in ok if m.position_error <= 1.5 * best.position_error]
@@ -158,7 +121,7 @@ def choose(measurements: list[MethodMeasurement]) -> tuple[str, str]:
     others = sorted((m for m in ok if m is not choice), key=lambda m: m.position_error)[:2]
     failing = [m.method for m in measurements if not m.qualifies]
     reason = (f"best error against the reference among the methods without warnings, ties within a factor 1.5 "
-              f"broken by the rule (h = {H:g}, T = {T_FINAL:g}): "
+              f"broken by the rule ({where}): "
               f"{choice.position_error:.1e}, invariants to {choice.invariant_drift:.1e}")
     if others:
         reason += "; next " + ", ".join(f"{m.method} {m.position_error:.1e}" for m in others)
@@ -168,23 +131,25 @@ def choose(measurements: list[MethodMeasurement]) -> tuple[str, str]:
 
 
 def main(argv=None) -> None:
-    """Measure every model, print the table and each model's choice (Markdown)."""
-    import gnipy
+    """The full atlas's measurements of the named models (default: all), without its report files:
+    prints each model's table, its choice, and the module :mod:`gnipy.models.default_methods` that
+    records the choices (:func:`gnipy.experiments.atlas_report.default_methods_source`)."""
+    from .atlas import run_atlas
+    from .atlas_report import default_methods_source
 
-    names = list(argv if argv is not None else sys.argv[1:]) or gnipy.model_names()
-    print("| model | method | position error | invariant drift | constraint residual | verdict |")
+    names = list(argv if argv is not None else sys.argv[1:]) or None
+    result = run_atlas(models=names)
+    print("| model | method | error vs reference | invariant drift | constraint residual | verdict |")
     print("|---|---|---|---|---|---|")
-    choices = {}
-    for name in names:
-        ms = measure_model(name)
-        for m in ms:
-            verdict = "failed" if m.failed else ("warning" if m.warnings else "ok")
-            print(f"| {name} | {m.method} | {m.position_error:.2e} | {m.invariant_drift:.2e} | "
-                  f"{m.constraint_residual:.1e} | {verdict} |", flush=True)
-        choices[name] = choose(ms)
+    for model in result.models:
+        for r in model.pairs:
+            print(f"| {model.model} | {r.method} | {r.error:.2e} | {r.invariant_drift:.2e} | "
+                  f"{r.constraint_residual:.1e} | {r.verdict} |")
     print()
-    for name, (method, reason) in choices.items():
-        print(f"- `{name}`: **{method}** — {reason}")
+    for model in result.models:
+        print(f"- `{model.model}`: **{model.recommended[0]}** — {model.recommended[1]}")
+    print()
+    print(default_methods_source(result))
 
 
 if __name__ == "__main__":

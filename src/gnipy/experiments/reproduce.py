@@ -139,12 +139,13 @@ def _console(stderr: bool = False):
     return Console(stderr=stderr, highlight=False, soft_wrap=True)
 
 
-def check_output_dir(out_dir, overwrite: bool = False) -> Path:
+def check_output_dir(out_dir, overwrite: bool = False, files=OUTPUT_FILES) -> Path:
     """Check, before anything is computed, that a reproduction may write into `out_dir`.
 
     Allowed: a folder that does not exist and can be created; a folder gnipy created (marker
-    `.gnipy-owned`); any other folder when none of :data:`OUTPUT_FILES` is there, or with
-    `overwrite`. Never: a symbolic link, directory or special file at one of those names.
+    `.gnipy-owned`); any other folder when none of `files` (default :data:`OUTPUT_FILES`; the
+    atlas passes its own) is there, or with `overwrite`. Never: a symbolic link, directory or
+    special file at one of those names.
 
     Raises:
         gnipy.files.OutputError: the message (starting with `out_dir:`) says why.
@@ -170,7 +171,7 @@ def check_output_dir(out_dir, overwrite: bool = False) -> Path:
         raise OutputError(f"out_dir: {text!r} is not a directory")
     replace = overwrite or is_owned_dir(out_dir)
     taken = []
-    for name in OUTPUT_FILES:
+    for name in files:
         check_destination(out_dir / name, overwrite=True, argument="out_dir")  # links, special files: never
         if (out_dir / name).exists():
             taken.append(name)

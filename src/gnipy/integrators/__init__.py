@@ -2,8 +2,11 @@
 
 from .base import Integrator, MethodError, StepInfo
 from .comparators import DiscreteLagrangeDAlembert, McLachlanPerlmutter
+from .composition import COMPOSITIONS, Composition
+from .discrete_gradient import DiscreteGradient, DiscreteGradientState
 from .gni import GNI, GNIState
 from .paper_schemes import EulerABComposition, NonholonomicEulerA, NonholonomicEulerB, Rattle, Shake
+from .reversal import Reversed
 
 __all__ = [
     "Integrator",
@@ -18,4 +21,9 @@ __all__ = [
     "Shake",
     "DiscreteLagrangeDAlembert",
     "McLachlanPerlmutter",
+    "DiscreteGradient",
+    "DiscreteGradientState",
+    "Composition",
+    "COMPOSITIONS",
+    "Reversed",
 ]

@@ -292,6 +292,29 @@ class Integrator(eqx.Module):
         """The `(b, v, p)` reported at the node that `state` holds (b: the base point)."""
         raise NotImplementedError
 
+    #: Whether the method is symmetric (self-adjoint, hence time-reversible): its step with $-h$,
+    #: conjugated by the involution :meth:`reverse`, is the exact inverse of its step with $h$,
+    #: $\Phi_h^{-1} = \sigma\circ\Phi_{-h}\circ\sigma$. `simulate` with h < 0 runs that inverse
+    #: (a run of N steps forward and N back returns to the start to round-off; tested for every
+    #: symmetric method); a non-symmetric method runs backward with its own formula at $-h$.
+    symmetric: ClassVar[bool] = False
+
+    def symmetric_on(self, system) -> bool:
+        """Whether the method is symmetric on `system` (:attr:`symmetric`, unless the method says
+        otherwise for some systems, e.g. the midpoint $l_d$ on an orientation-dependent system with
+        the Cayley retraction)."""
+        return bool(self.symmetric)
+
+    def reverse(self, system, state):
+        """The involution $\\sigma$ on states with $\\Phi_h^{-1} = \\sigma\\circ\\Phi_{-h}\\circ\\sigma$ for a
+        :attr:`symmetric` method (default: the identity, for states that do not depend on the
+        direction of the step, e.g. $(q, v)$ or $(q, p)$)."""
+        return state
+
+    #: Whether the method conserves the energy exactly (to round-off) where the motion does
+    #: (linear constraints): the discrete-gradient method.
+    conserves_energy: ClassVar[bool] = False
+
     #: Whether :meth:`change_step` can continue a run with another step size (then `simulate`
     #: shortens the last step to end exactly at `t_final`).
     can_change_step: ClassVar[bool] = False

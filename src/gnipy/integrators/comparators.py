@@ -165,6 +165,8 @@ class McLachlanPerlmutter(Integrator):
     name: ClassVar[str] = "mp"
     can_change_step: ClassVar[bool] = True  # the state (q, v) does not depend on h
     order: ClassVar[int | None] = 2
+    #: the step at −h from $(q_1, v_1)$ has $q_{1/2}$ and the same λ as a root: it returns to $(q_0, v_0)$
+    symmetric: ClassVar[bool] = True
 
     def check(self, system, q0) -> None:
         """Raise :class:`~gnipy.MethodError` unless the metric is constant (the scheme uses $M^{-1}$)."""

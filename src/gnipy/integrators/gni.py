@@ -26,7 +26,7 @@ from ..discrete_lagrangians import CustomDiscreteLagrangian, DiscreteLagrangian,
 from ..projectors import reflect_and_report
 from .base import Integrator, solve_step
 
-__all__ = ["GNI", "GNIState"]
+__all__ = ["GNI", "GNIState", "START_OPTIONS", "consistent_impulse"]
 
 
 class GNIState(NamedTuple):
@@ -39,6 +39,19 @@ class GNIState(NamedTuple):
     x_err: jax.Array | None = None
 
 
+#: The GNI's starting impulses (:meth:`GNI.init`).
+START_OPTIONS = ("rest", "consistent")
+
+
+def consistent_impulse(system, b, v, h):
+    """$-\\tfrac h2\\mu(b)^T\\lambda(b, v)$: the hidden impulse $p^+ - \\bar p$ that a GNI step of size
+    h carries at $(b, v)$ to leading order ($\\lambda$ the continuous multiplier; docs/conventions.md)."""
+    from ..equations import lagrange_dalembert_acceleration
+
+    _, lam = lagrange_dalembert_acceleration(system, b, v)
+    return -0.5 * h * (system.mu(b).T @ lam)
+
+
 class GNI(Integrator):
     """The Geometric Nonholonomic Integrator for linear and affine constraints.
 
@@ -48,12 +61,21 @@ class GNI(Integrator):
         max_steps: Newton iteration cap.
         explicit: use the explicit fast path; `None` decides in :meth:`prepare` (constant metric and
             a discrete Lagrangian whose $FL^-$ is then affine).
+        start: the starting impulse (:meth:`init`): `"rest"`, the paper's $p^+_0 = \\bar p_0$, or
+            `"consistent"`, $p^+_0 = \\bar p_0 - \\tfrac h2\\mu^T\\lambda_0$.
     """
 
     discrete_lagrangian: DiscreteLagrangian = Trapezoid()
     root_finder: Any = None
     max_steps: int = eqx.field(static=True, default=50)
     explicit: bool | None = eqx.field(static=True, default=None)
+    start: str = eqx.field(static=True, default="rest")
+
+    def __check_init__(self):
+        if self.start not in START_OPTIONS:
+            from ..errors import InputError
+
+            raise InputError(f"start: expected one of {', '.join(START_OPTIONS)}, got {self.start!r}")
 
     @property
     def name(self) -> str:  # type: ignore[override]
@@ -79,8 +101,15 @@ class GNI(Integrator):
         return dataclasses.replace(self, explicit=explicit)
 
     def init(self, system, q0, v0, h):
+        """$(b_0, p^+_0)$: with `start="rest"` (the paper's) $p^+_0 = \\bar p_0 = \\mathbb{G}(b_0)v_0$, no
+        hidden impulse; with `start="consistent"` $p^+_0 = \\bar p_0 - \\tfrac h2\\mu(b_0)^T\\lambda_0$,
+        the impulse the steps carry afterwards ($\\lambda_0$ the continuous multiplier at
+        $(b_0, v_0)$, :func:`gnipy.equations.lagrange_dalembert_acceleration`)."""
         x = system.space.coordinates(q0)
-        return GNIState(q0, system.momentum(q0, v0), jnp.zeros_like(x))
+        p0 = system.momentum(q0, v0)
+        if self.start == "consistent":
+            p0 = p0 + consistent_impulse(system, q0, v0, h)
+        return GNIState(q0, p0, jnp.zeros_like(x))
 
     def _node(self, system, b):
         return system.metric(b), system.mu(b), system.Pi(b)
@@ -111,6 +140,22 @@ class GNI(Integrator):
         # not rebuilt from the increment (gnipy.spaces: rebuilding rounds with a bias that adds up)
         p1 = p_minus + space.legendre_jump(ld, b, z)
         return GNIState(b1, p1, x_err), info
+
+    @property
+    def symmetric(self) -> bool:  # type: ignore[override]
+        """Whether the discrete Lagrangian is symmetric (trapezoid, midpoint; a custom one that says so):
+        then $\\Phi_h^{-1} = \\sigma\\circ\\Phi_{-h}\\circ\\sigma$ with $\\sigma$ the reflection (Comb), :meth:`reverse`."""
+        return bool(getattr(self.discrete_lagrangian, "symmetric", False))
+
+    def symmetric_on(self, system) -> bool:
+        """:attr:`symmetric`, and the discrete Lagrangian symmetric on this system (see :class:`~gnipy.Midpoint`)."""
+        ld = self.discrete_lagrangian
+        return self.symmetric and (not hasattr(ld, "symmetric_on") or ld.symmetric_on(system))
+
+    def reverse(self, system, state):
+        """The reflection (Comb) $p^+ \\mapsto p^- = \\bar p - (p^+ - \\bar p)$: the hidden impulse of a
+        step of h turned into that of a step of $-h$."""
+        return self.change_step(system, state, 1.0, -1.0)
 
     can_change_step: ClassVar[bool] = True
 

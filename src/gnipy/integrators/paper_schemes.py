@@ -376,6 +376,8 @@ class Rattle(_TildeScheme):
 
     name: ClassVar[str] = "rattle"
     order: ClassVar[int | None] = 2
+    #: its step at −h from the end returns to the start ((q, p̃, λ̃) needs no involution)
+    symmetric: ClassVar[bool] = True
     _s: ClassVar[float] = _S_RATTLE
 
     def step(self, system, state, h):

@@ -3,6 +3,11 @@
 $H = \\tfrac12(|v|^2 + |q|^2 + \\varepsilon x^2 z^2)$ on $q = (x, y, z)$, constraint
 $\\dot x + y\\dot z = 0$. Both $H$ and $H_y = \\tfrac12(y^2 + \\dot y^2)$ are conserved (the constraint
 force has no y-component, so y is a free harmonic oscillator).
+
+The equations and ε = 0.3 are McLachlan–Perlmutter's; the initial condition $q_0 = (1, 1, 1)$,
+$\\dot q_0 = (-1, 1, 1)$ ($H = 3.15$, $H_y = 1$) is not their experimental set-up, which is the model
+`contact-oscillator-mp` (H = 1.5, H_y = 0.5, started on the section y = 0;
+:mod:`gnipy.models.contact_oscillator_mp`).
 """
 
 from __future__ import annotations

@@ -42,6 +42,18 @@ DEFAULT_METHODS: dict[str, tuple[str, str]] = {
         "; next shake 1.3e-03, gni-trapezoid 1.3e-03"
         "; disqualified: gni-euler-a, gni-euler-b, euler-a, euler-b",
     ),
+    "contact-oscillator-gauge": (
+        "suzuki4-gni-trapezoid",
+        "best error against the reference among the methods without warnings, ties within a factor 1.5 broken by the rule (h = 0.01, T = 200): 4.0e-09, invariants to 3.4e-10"
+        "; next kahanli6-gni-trapezoid 6.2e-08, yoshida4-gni-trapezoid 1.8e-07"
+        "; disqualified: gni-euler-a, gni-euler-b",
+    ),
+    "contact-oscillator-mp": (
+        "suzuki4-gni-trapezoid",
+        "best error against the reference among the methods without warnings, ties within a factor 1.5 broken by the rule (h = 0.01, T = 200): 6.1e-09, invariants to 4.8e-10"
+        "; next kahanli6-gni-trapezoid 4.3e-08, yoshida4-gni-trapezoid 2.8e-07"
+        "; disqualified: gni-euler-a, gni-euler-b, euler-a, euler-b",
+    ),
     "knife-edge": (
         "euler-ab",
         "best error against the reference among the methods without warnings, ties within a factor 1.5 broken by the rule (h = 0.01, T = 200): 3.9e-03, invariants to 5.5e-04"
@@ -53,6 +65,12 @@ DEFAULT_METHODS: dict[str, tuple[str, str]] = {
         "best error against the reference among the methods without warnings, ties within a factor 1.5 broken by the rule (h = 0.01, T = 200): 1.2e-03, invariants to 2.7e-05"
         "; next euler-ab 2.9e-03, gni-midpoint 4.3e-03"
         "; disqualified: gni-euler-a, gni-euler-b, euler-a, euler-b",
+    ),
+    "nonholonomic-particle-gauge": (
+        "suzuki4-gni-trapezoid",
+        "best error against the reference among the methods without warnings, ties within a factor 1.5 broken by the rule (h = 0.01, T = 200): 3.9e-07, invariants to 3.0e-09"
+        "; next kahanli6-gni-trapezoid 1.0e-06, yoshida4-gni-trapezoid 2.4e-05"
+        "; disqualified: gni-euler-a, gni-euler-b",
     ),
     "rolling-ball": (
         "gni-midpoint",

@@ -166,7 +166,8 @@ def simulate_to_file(
         attrs["save_every"] = save_every
     gni_family = type(method).hidden_momentum is not Integrator.hidden_momentum
     attrs["conserved"] = conserved_quantity(system, b0, gni_family=gni_family,
-                                            invariants=registered_invariants(system.name))
+                                            invariants=registered_invariants(system.name),
+                                            conserves_energy=bool(getattr(method, "conserves_energy", False)))
 
     n_chunks = -(-steps // chunk_steps)
     spec = {

@@ -156,7 +156,7 @@ def make_plan(model, grid, *, method, h, steps, t_final, save_every, set_params,
     InputError or MethodError). The sizes are checked (:func:`check_size`, with `max_bytes` and
     `disk`) before anything of the sweep's size is allocated."""
     from ..version import __version__
-    from ..methods import method_names
+    from ..methods import is_method_name, method_names
     from ..models import get_model
     from ..registry import default_method_for
     from ..simulate import resolve_steps
@@ -166,7 +166,7 @@ def make_plan(model, grid, *, method, h, steps, t_final, save_every, set_params,
     spec = get_model(model)  # InputError "model: unknown model ..."
     if method is None:  # the model's measured default
         method = default_method_for(model)
-    if not isinstance(method, str) or method not in method_names():
+    if not is_method_name(method):
         raise SweepError(f"method: unknown method {method!r} (known: {', '.join(method_names())})")
     if method == "reference":
         raise SweepError("method: the continuous reference runs one trajectory at a time; it cannot be swept")
