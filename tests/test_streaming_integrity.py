@@ -255,8 +255,10 @@ def test_sigint_during_the_merge_stops_cleanly_and_resume_finishes(knife, refere
     path = tmp_path / "int.nc"
     proc = _python(_script("""
         def hook(i):
-            if i == 3:  # in the middle of the merge
-                os.kill(os.getpid(), signal.SIGINT)
+            if i == 3:  # in the middle of the merge; raise_signal delivers it to this (the main)
+                # thread at once: os.kill may land on another of JAX's threads and reach the
+                # handler only after the merge has finished when the machine is loaded
+                signal.raise_signal(signal.SIGINT)
         streaming.merge._merge_hook = hook  # (looked up in gnipy.streaming.merge, where the merge runs)
         try:
             run(sys.argv[1])
