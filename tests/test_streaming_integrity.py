@@ -260,6 +260,9 @@ def test_sigint_during_the_merge_stops_cleanly_and_resume_finishes(knife, refere
                 # handler only after the merge has finished when the machine is loaded
                 signal.raise_signal(signal.SIGINT)
         streaming.merge._merge_hook = hook  # (looked up in gnipy.streaming.merge, where the merge runs)
+        # Python's own SIGINT handler, whatever this process inherited: a child of a pytest-xdist
+        # worker can start with SIGINT ignored, and gnipy leaves an ignored SIGINT alone
+        signal.signal(signal.SIGINT, signal.default_int_handler)
         try:
             run(sys.argv[1])
         except KeyboardInterrupt:
