@@ -21,10 +21,9 @@ def _run(model, method, h, t_final, every=10):
 
 FIRING = [
     ("chaplygin-sleigh", "gni-trapezoid", 0.05, 20.0, "hidden"),
-    ("chaplygin-sleigh", "gni-midpoint", 0.001, 20.0, "hidden"),  # a smaller h only delays it
+    ("chaplygin-sleigh", "gni-midpoint", 0.001, 40.0, "hidden"),  # a smaller h only delays it (t ≈ 29)
     ("chaplygin-sleigh-se2", "gni-midpoint", 0.05, 20.0, "hidden"),
     ("suslov", "gni-midpoint", 0.01, 200.0, "hidden"),
-    ("contact-oscillator", "gni-euler-a", 0.05, 100.0, "hidden"),
     ("contact-oscillator", "gni-euler-a", 0.05, 100.0, "energy"),
     ("contact-oscillator", "gni-euler-b", 0.05, 60.0, "energy"),
 ]
@@ -87,11 +86,12 @@ def test_hidden_momentum_is_the_gnis_normal_impulse():
 
 def test_energy_of_p_plus_is_conserved_under_the_energy_theorem():
     """V = 0 and a constant metric on R^n (vertical disk): |p⁺| is conserved exactly, while the
-    reported energy has an O(h²) error that oscillates."""
+    reported energy is not: its error oscillates, 2.6e-7 at h = 0.05 from the default consistent
+    start (the reported velocities converge at order 4 there), 1e-5 and more from rest."""
     sol = _run("vertical-disk", "gni-midpoint", 0.05, 50.0, every=1)
     e, ep = np.asarray(sol.energy), np.asarray(sol.energy_plus)
     assert np.max(np.abs(ep - ep[0])) <= 1e-13 * ep[0]
-    assert np.max(np.abs(e - e[0])) > 1e-5
+    assert np.max(np.abs(e - e[0])) > 1e-8  # 10⁵ times the bound on |p⁺|'s
     assert "energy of p+ (energy_plus) is conserved exactly" in sol.conserved
 
 

@@ -234,18 +234,18 @@ def test_a_failure_at_the_start_of_a_chunk_raises_the_solver_failure(tmp_path, m
     q0, v0 = spec.initial_condition(dict(spec.params))
     R0 = np.asarray(spec.R0).reshape(3, 3)
     path = tmp_path / "top.nc"
-    kw = dict(R0=R0, path=path, h=5.0, steps=22, chunk_steps=11)  # step 11 (the first of chunk 1) fails
-    with pytest.raises(gnipy.SolverFailure, match=r"step 11 \(t = 55 -> 60\) failed.* holds the run up to the last"):
+    kw = dict(R0=R0, path=path, h=5.0, steps=10, chunk_steps=5)  # step 5 (the first of chunk 1) fails
+    with pytest.raises(gnipy.SolverFailure, match=r"step 5 \(t = 25 -> 30\) failed.* holds the run up to the last"):
         simulate_to_file(spec.system(), "gni-midpoint", q0, v0, **kw)
     with netCDF4.Dataset(path) as nc:
-        assert nc.result == 1 and nc.failed_step == 11 and nc.streamed_chunks == 2
-        np.testing.assert_array_equal(nc["step"][:], np.arange(12))
+        assert nc.result == 1 and nc.failed_step == 5 and nc.streamed_chunks == 2
+        np.testing.assert_array_equal(nc["step"][:], np.arange(6))
         assert np.all(np.isfinite(nc["q"][:])) and np.all(np.isfinite(nc["R"][:]))
     assert verify_netcdf(path)[0] and not parts_directory(path).exists()
     # resumed, the finished failed run is read, not recomputed
     monkeypatch.setattr(streaming.run, "simulate", None)  # (simulate_to_file looks it up in gnipy.streaming.run)
     result = simulate_to_file(spec.system(), "gni-midpoint", q0, v0, resume=True, throw=False, **kw)
-    assert (result.complete, result.result, result.failed_step, result.nodes, result.steps) == (True, 1, 11, 12, 11)
+    assert (result.complete, result.result, result.failed_step, result.nodes, result.steps) == (True, 1, 5, 6, 5)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -111,7 +111,7 @@ def test_figure_3_paper_start_first_step():
     w0 = np.asarray(rb.EXAMPLE_2["omega0"])
     inertia = np.array([1.0, 1.1, 1.2])
     h = 0.01
-    sol = gnipy.simulate(s, gnipy.GNI(gnipy.EulerA()), q0, v0, h=h, steps=1)  # the momentum start's first step
+    sol = gnipy.simulate(s, gnipy.GNI(gnipy.EulerA(), start="rest"), q0, v0, h=h, steps=1)  # the momentum start's first step
     x1, Rm = np.asarray(sol.q)[1], np.asarray(sol.R)[1]
     start = F.paper_start(s, q0, w0, h)
     np.testing.assert_allclose(np.asarray(start.b.x), x1, rtol=0, atol=1e-15)

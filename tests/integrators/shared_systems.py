@@ -2,6 +2,8 @@
 particle), affine constraints with a potential (a ball on a rotating table with a spring), and a
 position-dependent metric (every GNI variant then takes the implicit Newton path)."""
 
+import dataclasses
+
 import jax.numpy as jnp
 import numpy as np
 
@@ -50,13 +52,15 @@ CURVED_V0 = np.array([1.0, 0.3, 1.0])
 
 
 def cached_runner(cases, h, steps):
-    """`run(case, method)`: a cached `gnipy.simulate` of `steps` steps of size h, every node saved."""
+    """`run(case, method, start=None)`: a cached `gnipy.simulate` of `steps` steps of size h, every
+    node saved; `start` sets a GNI's starting impulse (`"rest"`: the paper's)."""
     cache: dict = {}
 
-    def _run(case, method):
-        if (case, method) not in cache:
+    def _run(case, method, start=None):
+        if (case, method, start) not in cache:
             system, q0, v0 = cases[case]
-            cache[case, method] = gnipy.simulate(system, method, q0, v0, h=h, steps=steps)
-        return cache[case, method]
+            m = method if start is None else dataclasses.replace(gnipy.get_method(method), start=start)
+            cache[case, method, start] = gnipy.simulate(system, m, q0, v0, h=h, steps=steps)
+        return cache[case, method, start]
 
     return _run

@@ -84,7 +84,7 @@ def runs():
         s, q0, v0 = _case(name)
         out[name] = (
             gnipy.simulate(s, "rat", q0, v0, h=H, steps=N, project_v0=True),
-            gnipy.simulate(s, gnipy.GNI(gnipy.Trapezoid()), q0, v0, h=H, steps=N, project_v0=True),
+            gnipy.simulate(s, gnipy.GNI(gnipy.Trapezoid(), start="rest"), q0, v0, h=H, steps=N, project_v0=True),
         )
     return out
 

@@ -329,6 +329,9 @@ def test_gni_trapezoid_converges_at_order_two(name):
     errs_q, errs_v, worst_res = _gni_errors(name)
     assert np.all(np.diff(errs_q) < 0) and np.all(np.diff(errs_v) < 0), (errs_q, errs_v)
     assert fitted_order(HS, errs_q) == pytest.approx(2.0, abs=0.15), errs_q
-    assert fitted_order(HS, errs_v) == pytest.approx(2.0, abs=0.15), errs_v
+    # at least 2: from the consistent start (the default) the vertical disk's velocities converge at
+    # order 4 (measured 4.00; its heading and rolling rates are constant and the start excites no
+    # impulse oscillation)
+    assert fitted_order(HS, errs_v) >= 2.0 - 0.15, errs_v
     # the GNI's reported velocity satisfies the constraints to round-off (DESIGN §2)
     assert worst_res <= 1e-12

@@ -40,7 +40,8 @@ TITLE = "gnipy method atlas: which method works where"
 RULE = ("A method qualifies when its long run completes, raises no run-time warning (hidden momentum out of its "
         "O(h) band, a conserved energy drifting away) and keeps the energy and every registered invariant to 1e-2 "
         "relative over the whole run; the recommendation is the qualifying method with the smallest error against "
-        "the reference, methods within a factor 1.5 of the best counting as tied and the tie going to exact "
+        "the reference, methods within a factor 1.5 of the best or below 1e-9 (the reference's own accuracy) counting "
+        "as tied and the tie going to exact "
         "constraints, then the higher order, then a method the run-time diagnostics watch, then fewer Newton "
         "iterations (gnipy.experiments.method_choice.choose). When none qualifies, the continuous reference.")
 MEASURED = ("Each method runs once per model at h = 0.01 for N steps, saving the nodes of every 10 steps up to "
@@ -387,7 +388,7 @@ def default_methods_source(result) -> str:
              "from __future__ import annotations", "",
              "from ..registry import FALLBACK_METHOD, set_default_methods", "",
              '__all__ = ["DEFAULT_METHODS", "FALLBACK_METHOD"]', "",
-             "#: model name -> (method, why), from the measurements of gnipy.experiments.method_choice.",
+             "#: model name -> (method, why), the method atlas's recommendations (gnipy.experiments.atlas).",
              "DEFAULT_METHODS: dict[str, tuple[str, str]] = {"]
     for name in sorted(entries):
         method, reason = entries[name]

@@ -84,7 +84,7 @@ def five_equations(p: dict, x, y, w, h: float) -> np.ndarray:
 def _rolling_ball_nodes(system, q0, v0, h: float, steps: int):
     """`(x, R, v)` at the nodes 0..steps of the GNI (Euler A l_d, Cayley) on a rolling-ball System,
     from v0 projected onto the constraints."""
-    sol = simulate(system, GNI(EulerA()), q0, v0, h=h, steps=steps, project_v0=True)
+    sol = simulate(system, GNI(EulerA(), start="rest"), q0, v0, h=h, steps=steps, project_v0=True)
     return np.asarray(sol.q), np.asarray(sol.R), np.asarray(sol.v)
 
 
@@ -282,7 +282,7 @@ def _erratum_ratc(quick: bool) -> Erratum:
         s = System(_coupled_lagrangian, _coupled_mu, n=2, group=SO3(), retraction="cayley", name="coupled-reduced")
         q0, v0 = np.array([0.5, -0.3]), np.array([0.4, -0.2, 0.3, 0.5, -0.6])
         kw = dict(R0=np.eye(3), project_v0=True, h=0.05, steps=200)
-        gni = all_nodes(s, GNI(Trapezoid()), q0, v0, **kw)
+        gni = all_nodes(s, GNI(Trapezoid(), start="rest"), q0, v0, **kw)
         right = all_nodes(s, get_method("rat"), q0, v0, **kw)
         wrong = all_nodes(s, _BlockOfInverse(), q0, v0, **kw)
         corrected_value, printed_value = rel(right["q"], gni["q"]), rel(wrong["q"], gni["q"])

@@ -87,7 +87,7 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     Ns, N_ref = _figure_3_steps(quick)
     hs = [T / N for N in Ns]
     h_ref = T / N_ref
-    method = GNI(EulerA())
+    method = GNI(EulerA(), start="rest")
     save = SaveAt(ts=T * np.arange(1, n_saves + 1) / n_saves)
     starts = {
         "paper": ("(a) paper's start", "-", "o"),

@@ -68,7 +68,7 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     x_ex, v_ex = rb.exact(p, q0, v0, t_save)
     save = SaveAt(ts=t_save)
     methods = {
-        "gni": (GNI(EulerA()), "GNI", "-", "o"),
+        "gni": (GNI(EulerA(), start="rest"), "GNI", "-", "o"),
         "dla": (DiscreteLagrangeDAlembert(), "DLA [IMMM]", "--", "s"),
     }
     work = _Progress(progress, len(methods) * sum(N + _RUN_OVERHEAD for N in Ns))
@@ -161,7 +161,7 @@ def figure_2(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     q0, v0 = system.defaults
     h, steps = 0.1, (1000 if quick else 10000)
     work = _Progress(progress, 3 * steps + 2 * _RUN_OVERHEAD)
-    method = GNI(EulerA())
+    method = GNI(EulerA(), start="rest")
     path, v_path = _run(system, method, h, steps, SaveAt(steps=True), q0, v0)  # nodes 0 .. steps
     work(steps + _RUN_OVERHEAD, "figure 2: GNI h = 0.1")
     # the same total time with h/2 (not plotted): the distance from the circle should fall by 2² = 4

@@ -144,7 +144,7 @@ def energy_theorem(steps: int) -> dict:
     the drift of |p⁺_k| (max and fitted trend, against the round-off bound ROUNDOFF_WALK·√N·eps),
     the variation of the reported energy and the constraint residual."""
     s, R0, v0 = energy_theorem_system()
-    out = all_nodes(s, GNI(EulerA()), (), v0, R0=R0, h=ENERGY_H, steps=steps, states=True)
+    out = all_nodes(s, GNI(EulerA(), start="rest"), (), v0, R0=R0, h=ENERGY_H, steps=steps, states=True)
     p_plus = out["states"].p_plus
     norm = np.linalg.norm(p_plus, axis=1)
     norm0 = C_INERTIA * float(np.linalg.norm(v0))
