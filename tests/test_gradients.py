@@ -46,7 +46,8 @@ def test_gradient_wrt_the_initial_velocity_matches_central_differences(method):
     g = np.asarray(jax.grad(f)(jnp.asarray(v0)))
     expected = central(f, v0)
     np.testing.assert_allclose(g, expected, rtol=1e-6, atol=1e-7)
-    np.testing.assert_allclose(np.asarray(jax.jacfwd(f)(jnp.asarray(v0))), g, rtol=1e-10, atol=1e-12)
+    if method in ("gni-midpoint", "dla"):  # forward mode too, on two families (one compile each; the rest share the rules)
+        np.testing.assert_allclose(np.asarray(jax.jacfwd(f)(jnp.asarray(v0))), g, rtol=1e-10, atol=1e-12)
 
 
 @pytest.mark.parametrize("method", ["gni-trapezoid", "rat"])

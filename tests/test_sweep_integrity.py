@@ -37,8 +37,11 @@ from gnipy.sweep import SweepError, SweepWarning, open_sweep, run_sweep, verify_
 
 runner = CliRunner()
 
+# the method is named (not the model's default, which the atlas may change): rattle's explicit steps
+# overflow at step 4 for the members with v0.dx = 3000
 SMALL = dict(
     model="contact-oscillator",
+    method="rattle",
     grid=["epsilon=0.1:0.5:3", "v0.dx=-1:3000:2"],
     h=0.5,
     steps=20,
@@ -46,7 +49,7 @@ SMALL = dict(
     chunk_size=2,
 )
 SMALL_ARGS = (
-    "sweep contact-oscillator --grid epsilon=0.1:0.5:3 --grid v0.dx=-1:3000:2 --h 0.5 "
+    "sweep contact-oscillator --method rattle --grid epsilon=0.1:0.5:3 --grid v0.dx=-1:3000:2 --h 0.5 "
     "--steps 20 --save-every 2 --chunk-size 2"
 ).split()
 FAILED = [1, 3, 5]  # the members with v0.dx = 3000: step 4 fails
