@@ -22,7 +22,8 @@ from ..linalg import solve as small_solve
 from ..linalg import solve_spd
 from ..errors import MethodError
 
-__all__ = ["Integrator", "StepInfo", "MethodError", "solve_step", "implicit_solve", "newton", "default_root_finder"]
+__all__ = ["Integrator", "StepInfo", "MethodError", "solve_step", "implicit_solve", "newton", "default_root_finder",
+           "momentum_constraint_scale"]
 
 
 class StepInfo(NamedTuple):
@@ -174,6 +175,16 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
     done = done | at_floor(residual)
     ok = done & jnp.isfinite(size) & jnp.all(jnp.isfinite(z))
     return z, StepInfo(ok, k, residual)
+
+
+def momentum_constraint_scale(n: int, p, mu, v, Y):
+    """The `floor_scale` of :func:`newton` for a residual of n momentum rows, terms of the size of
+    the momentum `p`, followed by the constraint rows μ(v − Y), terms of size |μ|(|v| + |Y|)."""
+    m = mu.shape[0]
+    return jnp.concatenate([
+        jnp.full(n, jnp.max(jnp.abs(p))),
+        jnp.max(jnp.abs(mu)) * (jnp.max(jnp.abs(v)) + jnp.max(jnp.abs(Y))) * jnp.ones(m, dtype=p.dtype),
+    ])
 
 
 def implicit_solve(F: Callable, guess, solve: Callable, *args):

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
 from ..discrete_lagrangians import DiscreteLagrangian, Midpoint
 from ..spaces import compensated_add
-from .base import Integrator, require_constant_metric, solve_step
+from .base import Integrator, momentum_constraint_scale, require_constant_metric, solve_step
 
 __all__ = ["DiscreteLagrangeDAlembert", "DLAState", "McLachlanPerlmutter", "MPState"]
 
@@ -111,11 +111,7 @@ class DiscreteLagrangeDAlembert(Integrator):
 
         v = system.velocity(b, p_plus)
         guess = jnp.concatenate([space.initial_guess(b, v, h), jnp.zeros(m, dtype=p_plus.dtype)])
-        # the terms of the residual: momenta in the first n rows, μ(vel − Y) in the last m
-        scale = jnp.concatenate([
-            jnp.full(n, jnp.max(jnp.abs(p_plus))),
-            jnp.max(jnp.abs(mu_k)) * (jnp.max(jnp.abs(v)) + jnp.max(jnp.abs(system.Y(b)))) * jnp.ones(m),
-        ])
+        scale = momentum_constraint_scale(n, p_plus, mu_k, v, system.Y(b))
         w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
                              floor_scale=scale)
         z, lam = w[:n], w[n:]

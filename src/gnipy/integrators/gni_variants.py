@@ -55,7 +55,7 @@ import jax.numpy as jnp
 from ..discrete_lagrangians import DiscreteLagrangian, Trapezoid
 from ..linalg import solve_spd
 from ..projectors import reported_momentum
-from .base import Integrator, solve_step
+from .base import Integrator, momentum_constraint_scale, solve_step
 
 __all__ = ["SymmetricImpulseGNI", "SymmetricImpulseState"]
 
@@ -137,11 +137,7 @@ class SymmetricImpulseGNI(Integrator):
         # α = 0 as the first guess: measured cheaper than the continuous multiplier λ(b, v̄), whose
         # evaluation costs more than the iteration it saves
         guess = jnp.concatenate([space.initial_guess(b, v_bar, h), jnp.zeros(m, dtype=p_bar.dtype)])
-        # the terms of the residual: momenta in the first N rows, μ(v − Y) in the last m
-        scale = jnp.concatenate([
-            jnp.full(n, jnp.max(jnp.abs(p_bar))),
-            jnp.max(jnp.abs(mu)) * (jnp.max(jnp.abs(v_bar)) + jnp.max(jnp.abs(system.Y(b)))) * jnp.ones(m),
-        ])
+        scale = momentum_constraint_scale(n, p_bar, mu, v_bar, system.Y(b))
         w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
                              floor_scale=scale)
         z, alpha = w[:n], w[n:]
