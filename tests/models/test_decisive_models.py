@@ -39,22 +39,8 @@ def _values(spec, params, sol, name):
 
 
 # --------------------------------------------------------------------------------------------
-# Registration, defaults, parameters
+# Parameters (registration: tests/models/test_models.py)
 # --------------------------------------------------------------------------------------------
-@pytest.mark.parametrize("name, coords", [("contact-oscillator-mp", ("x", "y", "z")),
-                                          ("contact-oscillator-gauge", ("x", "y", "z", "w")),
-                                          ("nonholonomic-particle-gauge", ("x", "y", "z", "w"))])
-def test_registered(name, coords):
-    assert name in gnipy.model_names()
-    spec = gnipy.get_model(name)
-    sys_ = spec.system()
-    assert spec.coordinates == coords and sys_.coordinates == coords and sys_.name == name
-    assert sys_.parameters == dict(spec.params)
-    assert spec.notes and spec.invariants and spec.description
-    q0, v0 = spec.initial_condition(spec.params)
-    assert sys_.defaults == (tuple(q0), tuple(v0)) == (spec.q0, spec.v0)
-
-
 OVERRIDES = {
     "contact-oscillator-mp": {"epsilon": 0.1},
     "contact-oscillator-gauge": {"epsilon": 0.3, "c": -0.5},

@@ -71,6 +71,9 @@ def references():
         ("knife-edge", ("x", "y", "phi")),
         ("chaplygin-sleigh", ("x", "y", "theta")),
         ("rotating-table-ball", ("x", "y", "theta1", "theta2", "theta3")),
+        ("contact-oscillator-mp", ("x", "y", "z")),
+        ("contact-oscillator-gauge", ("x", "y", "z", "w")),
+        ("nonholonomic-particle-gauge", ("x", "y", "z", "w")),
     ],
 )
 def test_registered_with_coordinates(name, coords):
@@ -79,7 +82,9 @@ def test_registered_with_coordinates(name, coords):
     sys_ = spec.system()
     assert spec.coordinates == coords and sys_.coordinates == coords and sys_.name == name
     assert sys_.parameters == dict(spec.params)
-    assert spec.notes and spec.invariants
+    assert spec.notes and spec.invariants and spec.description
+    q0, v0 = spec.initial_condition(spec.params)
+    assert sys_.defaults == (tuple(q0), tuple(v0)) == (spec.q0, spec.v0)
 
 
 OVERRIDES = {
