@@ -16,14 +16,14 @@ LAYERS = {
     "version": 0,
     # core: groups and retractions; the system, spaces, projectors, continuous equations, model table
     "lie_groups": 1, "retractions": 1,
-    "system": 2, "system_checks": 2, "spaces": 2, "projectors": 2, "equations": 2, "registry": 2,
+    "system": 2, "system_checks": 2, "forcing": 2, "spaces": 2, "projectors": 2, "equations": 2, "registry": 2,
     "discrete_lagrangians": 3,
     "integrators": 4, "methods": 4,
     # driver: one loop, saving, the Solution, diagnostics, reference run, batches, streamed runs
     "saveat": 5, "stepping": 5, "preparation": 5, "simulate": 5, "transformed": 5, "ensembles": 5,
     "solution": 5, "diagnostics": 5, "reference": 5, "streaming": 5, "io": 5,
     "models": 6,
-    "analysis": 7,
+    "analysis": 7, "control": 7,
     "plots": 8, "sweep": 8, "experiments": 9,
     # the public API (the package's __init__, a facade over all of the above), then its clients
     "__init__": 9, "cli": 10, "__main__": 10,

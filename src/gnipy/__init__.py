@@ -41,6 +41,13 @@ from .reference import ContinuousReference  # noqa: E402
 from .retractions import Cayley, Exp, Retraction, get_retraction  # noqa: E402
 from .ensembles import model_systems, stack_systems  # noqa: E402
 from .simulate import simulate  # noqa: E402
+from .control import (  # noqa: E402
+    ControlResult,
+    FitResult,
+    Observations,
+    fit,
+    solve_optimal_control,
+)
 from .streaming import simulate_to_file  # noqa: E402
 from .sweep import open_sweep, run_sweep  # noqa: E402
 from .io import read_netcdf, verify_netcdf, write_netcdf  # noqa: E402
@@ -76,6 +83,11 @@ __all__ = [
     "Composition",
     "ContinuousReference",
     "simulate",
+    "fit",
+    "FitResult",
+    "Observations",
+    "solve_optimal_control",
+    "ControlResult",
     "model_systems",
     "simulate_to_file",
     "run_sweep",

@@ -75,7 +75,7 @@ HIDDEN_FLOOR = 1e-8
 ENERGY_BAND = 0.5
 
 
-def node_diagnostics(system, b, v, p, hidden, h):
+def node_diagnostics(system, b, v, p, hidden, h, t=None):
     """At one node: `(hidden_ratio, expected_ratio, energy_plus)`.
 
     Arguments:
@@ -83,6 +83,7 @@ def node_diagnostics(system, b, v, p, hidden, h):
         b, v, p: the reported base point, velocity $\\bar v$ and momentum $\\bar p$.
         hidden: $p^+ - \\bar p$ (see :meth:`gnipy.integrators.base.Integrator.hidden_momentum`).
         h: the step size.
+        t: the node's time (a forced system's force, and so λ, at the node's time and input).
 
     Returns:
         $r = \\|p^+ - \\bar p\\|/\\|\\bar p\\|$ and $e = \\frac{|h|}2\\|\\mu^T\\lambda\\|/\\|\\bar p\\|$ (norms
@@ -93,7 +94,7 @@ def node_diagnostics(system, b, v, p, hidden, h):
     from .equations import lagrange_dalembert_acceleration
 
     G = system.metric(b)
-    _, lam = lagrange_dalembert_acceleration(system, b, v)
+    _, lam = lagrange_dalembert_acceleration(system, b, v, t)
     impulse = system.mu(b).T @ lam
     p_plus = p + hidden
     X = solve_spd(G, jnp.stack([p, hidden, impulse, p_plus], axis=1))
@@ -362,6 +363,8 @@ def conserved_quantity(system, b0, *, gni_family: bool, invariants=(), conserves
     (`method.conserves_energy`, the discrete-gradient method).
     """
     names = tuple(invariants)
+    if system.is_forced:
+        return "external forces act: the energy is not conserved (the force F(q, v, u, t) does work)"
     if not energy_is_invariant(system, b0):
         if "jacobi" in names:
             return "affine constraints: neither energy is conserved; the Jacobi integral is (gnipy.get_model(...).invariants['jacobi'])"
@@ -399,7 +402,9 @@ def energy_theorem_applies(system, b0) -> bool:
 def energy_is_invariant(system, b0) -> bool:
     """Whether the energy is a constant of the motion: the constraints are linear, i.e. there is no
     affine part or it vanishes (e.g. a model's turning table at $\\Omega = 0$), checked at b0 and
-    three nearby points (host side)."""
+    three nearby points (host side); never for a forced system (the force does work)."""
+    if system.is_forced:
+        return False
     if not system.is_affine:
         return True
     return not np.any(np.asarray(_sampled_values(system, b0)[2]) != 0.0)

@@ -37,6 +37,9 @@ class DiscreteLagrangian(eqx.Module):
     #: Symmetric: $l_d(b_1, -z, -h) = -l_d(b_0, z, h)$ (with a retraction $\tau(-\sigma) = \tau(\sigma)^{-1}$
     #: on $\mathbb{R}^n \times G$), so that the GNI built on it is time-reversible.
     symmetric: ClassVar[bool] = False
+    #: The quadrature of a force's virtual work on a step (a rule of :data:`gnipy.forcing.FORCE_RULES`):
+    #: the discrete forces $f^\mp_d$ of the forced methods.
+    force_rule: ClassVar[str] = "trapezoid"
 
     def __call__(self, system, b0, z, h):
         raise NotImplementedError
@@ -47,6 +50,7 @@ class EulerA(DiscreteLagrangian):
 
     explicit_if_flat: ClassVar[bool] = True
     name: ClassVar[str] = "euler-a"
+    force_rule: ClassVar[str] = "left"  # f⁻ = hF(q_k), f⁺ = 0
     order: ClassVar[int | None] = 1  # Thm 5.1
 
     def __call__(self, system, b0, z, h):
@@ -59,6 +63,7 @@ class EulerB(DiscreteLagrangian):
 
     explicit_if_flat: ClassVar[bool] = True
     name: ClassVar[str] = "euler-b"
+    force_rule: ClassVar[str] = "right"  # f⁻ = 0, f⁺ = hF(q_{k+1})
     order: ClassVar[int | None] = 1  # Thm 5.1
 
     def __call__(self, system, b0, z, h):
@@ -86,6 +91,7 @@ class Midpoint(DiscreteLagrangian):
     """Midpoint: $l_d = h\\, l((q_k + q_{k+1})/2, (q_{k+1} - q_k)/h)$."""
 
     name: ClassVar[str] = "midpoint"
+    force_rule: ClassVar[str] = "midpoint"  # f⁻ = f⁺ = (h/2)F(q_{k+1/2})
     order: ClassVar[int | None] = 2
     symmetric: ClassVar[bool] = True
 

@@ -10,6 +10,7 @@ where $\\partial_b l = (\\partial_x l, \\nabla^L_R l)$. Differentiating the cons
 motion, $\\mu\\dot v = \\mu\\,D_v Y - (D_v\\mu)(v - Y) =: c$, so
 $\\lambda = C^{-1}(c - \\mu\\mathbb{G}^{-1}F)$ with $C = \\mu\\mathbb{G}^{-1}\\mu^T$ (paper (H) in
 Lagrangian form; on SO(3), $\\mathrm{ad}^*_\\Omega M = M\\times\\Omega$ gives Euler's equations).
+A generalized force $F_{ext}(b, v, u, t)$ of the system (:mod:`gnipy.forcing`) adds to $F$.
 The reference solver :class:`gnipy.ContinuousReference` (:mod:`gnipy.reference`) integrates them.
 """
 
@@ -27,14 +28,19 @@ def _along(f, space, b, v):
     return jax.jvp(lambda s: f(space.move(b, s * v)), (zero,), (jnp.ones_like(zero),))
 
 
-def lagrange_dalembert_acceleration(system, b, v):
-    """The constrained acceleration $\\dot v$ and the multipliers λ at `(b, v)`."""
+def lagrange_dalembert_acceleration(system, b, v, t=None):
+    """The constrained acceleration $\\dot v$ and the multipliers λ at `(b, v)`.
+
+    A forced system's force enters at time `t` with the input held over the step containing it
+    (None: at the start of the step the system's drive is at, with that step's input)."""
     space = system.space
     G = system.metric(b)
     p = system.momentum(b, v)
     dl_db = jax.grad(lambda w: system.L(space.move(b, w), v))(jnp.zeros_like(v))
     _, dp = _along(lambda c: system.momentum(c, v), space, b, v)
     F = dl_db - dp + space.lie_correction(v, p)
+    if system.force is not None:
+        F = F + (system.external_force(b, v) if t is None else system.external_force_continuous(b, v, t))
     mu, dmu = _along(system.mu, space, b, v)
     Y, dY = _along(system.Y, space, b, v)
     c = mu @ dY - dmu @ (v - Y)

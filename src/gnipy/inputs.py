@@ -5,6 +5,8 @@ concrete value of a possibly traced number.
 
 from __future__ import annotations
 
+import math
+
 import jax
 import numpy as np
 
@@ -29,6 +31,17 @@ def _number(x) -> float:
     differentiated) its value where known now, else NaN (the arrays of the functions carry it)."""
     c = concrete_value(x)
     return float("nan") if c is None else float(c)
+
+
+def finite_number(name: str, x) -> float:
+    """`float(x)`; :class:`InputError` naming `name` when `x` is not a number or not finite."""
+    try:
+        value = float(x)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"{name}: expected a number, got {x!r}") from e
+    if not math.isfinite(value):
+        raise InputError(f"{name}: must be finite, got {x!r}")
+    return value
 
 
 def _fmt(x: float) -> str:

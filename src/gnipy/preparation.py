@@ -147,7 +147,7 @@ class Prepared:
         return program(self._leaves, start, np.float64(h), np.asarray(lengths, np.int32), np.int32(tail),
                        np.float64(h_last), np.int32(progress_stride), np.asarray(times, np.float64))
 
-    def node_diagnostics(self, padded, h: float, T: int):
+    def node_diagnostics(self, padded, h: float, T: int, times=None):
         """:func:`gnipy.diagnostics.node_diagnostics` at the first `T` of the padded saved
         nodes: `(hidden_ratio, expected_ratio, energy_plus)` as arrays (T,). One program per
         system structure and padded length, shared by every method."""
@@ -159,16 +159,23 @@ class Prepared:
             rebuild = self._sys_rebuild
 
             def make():
-                def diagnose(leaves, b, v, p, hidden, h):
+                def diagnose(leaves, b, v, p, hidden, h, t):
                     system = rebuild(leaves)
-                    return jax.vmap(lambda bb, vv, pp, xx: node_diagnostics(system, bb, vv, pp, xx, h))(
-                        b, v, p, hidden)
+                    if system.force is None:
+                        return jax.vmap(lambda bb, vv, pp, xx: node_diagnostics(system, bb, vv, pp, xx, h))(
+                            b, v, p, hidden)
+                    # a forced system: λ at each node's time and input
+                    return jax.vmap(lambda bb, vv, pp, xx, tt: node_diagnostics(system, bb, vv, pp, xx, h, tt))(
+                        b, v, p, hidden, t)
 
                 return diagnose
 
             program = _program(None if self._sys_key is None else ("diagnostics", self._sys_key), make)
             self._runs["diagnostics"] = program
-        out = program(self._sys_leaves, *padded, np.float64(h))
+        n_pad = int(np.shape(padded[1])[0])
+        t = np.zeros(n_pad) if times is None else np.pad(np.asarray(times, np.float64)[:n_pad],
+                                                          (0, max(0, n_pad - len(times))), mode="edge")
+        out = program(self._sys_leaves, *padded, np.float64(h), t)
         # device arrays, not waited for: the run's caller goes on while they are computed
         return out if out[0].shape[0] == T else _first(out, T)
 

@@ -80,16 +80,22 @@ def _solve(ref, system, b0, v0, times):
 
     def rhs(t, y, args):
         b, v = space.unpack(y[:-N]), y[-N:]
-        a, _ = lagrange_dalembert_acceleration(system, b, v)
+        a, _ = lagrange_dalembert_acceleration(system, b, v, t)
         return jnp.concatenate([space.pack_velocity(b, v), a])
 
     # Land a step on every save time: Dopri8's dense-output interpolant is far less accurate than
     # its steps (errors ~3e-10 at save points on the contact oscillator with rtol = atol = 1e-12).
+    # Inputs held over steps jump at the grid times t0 + k h: the steps end there too (the
+    # solver restarts its error control across a jump instead of stepping over it)
+    jumps = None
+    drive = system.drive
+    if system.force is not None and drive.values is not None and drive.values.shape[0] > 1:
+        jumps = drive.t0 + drive.h * jnp.arange(1, drive.values.shape[0], dtype=jnp.float64)
     controller = diffrax.PIDController(rtol=ref.rtol, atol=ref.atol)
     if hasattr(diffrax, "ClipStepSizeController"):  # diffrax >= 0.7
-        controller = diffrax.ClipStepSizeController(controller, step_ts=times)
+        controller = diffrax.ClipStepSizeController(controller, step_ts=times, jump_ts=jumps)
     else:
-        controller = diffrax.PIDController(rtol=ref.rtol, atol=ref.atol, step_ts=times)
+        controller = diffrax.PIDController(rtol=ref.rtol, atol=ref.atol, step_ts=times, jump_ts=jumps)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(rhs),
         diffrax.Dopri8(),

@@ -139,6 +139,20 @@ VARIABLES: Mapping[str, Variable] = _variables(
     Variable("failed_step", (), "first failed step or -1", dtype="int32"),
     Variable("failed_time", (), "time at the start of the failed step, or NaN", TIME_UNITS, "float64"),
     Variable("failed_residual", (), "residual of the failed step's solve, or NaN", dtype="float64"),
+    # the inputs of a controlled run (gni control, gnipy.control), one per step, held over the step
+    Variable("control_step", ("control_step",), "step index k of the inputs", dtype="int64"),
+    Variable("control_time", ("control_step",), "time t_k at which the step's input starts", TIME_UNITS,
+             "float64"),
+    Variable("input", ("input",), "name of the input"),
+    Variable("u", ("control_step", "input"), "input u_k, held over the step [t_k, t_k + h)", dtype="float64",
+             components="input"),
+    # the estimates of a fit (gni fit, gnipy.fit): parameters, then q0.<name>, v0.<name>
+    Variable("quantity", ("quantity",), "name of the estimated quantity"),
+    Variable("quantity_", ("quantity_",), "name of the estimated quantity (second axis of the covariance)"),
+    Variable("estimate", ("quantity",), "estimate", dtype="float64"),
+    Variable("standard_error", ("quantity",), "standard error of the estimate (inf: not identifiable)",
+             dtype="float64"),
+    Variable("covariance", ("quantity", "quantity_"), "covariance of the estimates", dtype="float64"),
     # the exact solution (gni demo)
     Variable("q_exact", (*_T, "coordinate"), "exact configuration", dtype="float64"),
     Variable("v_exact", (*_T, "velocity"), "exact velocity", dtype="float64"),

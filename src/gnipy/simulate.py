@@ -169,6 +169,7 @@ def simulate(
     project_v0: bool = False,
     throw: bool = True,
     progress=False,
+    controls=None,
 ) -> Solution:
     """Integrate a nonholonomic system, or an ensemble of them.
 
@@ -206,6 +207,13 @@ def simulate(
             failure's member, step, time and residual).
         progress: `True` shows a progress bar (rich) updated as the steps advance; a callable is
             called as `progress(steps_done, steps_total)` instead.
+        controls: the inputs u of a forced system with inputs (`System(..., force=F, inputs=m)`,
+            :mod:`gnipy.forcing`): an array (steps, m) of per-step values, held over each step
+            (zero-order hold; (steps,) when m = 1), or a function `u(t)` -> (m,). Differentiable
+            like the other arguments (the gradient of a cost with respect to the controls is how
+            :func:`gnipy.control.solve_optimal_control` steers). A forced system runs forward in
+            time (h > 0); a batch of initial conditions shares its controls, and a sequence of
+            forced systems (a parameter batch) is refused.
 
     Returns:
         A :class:`~gnipy.Solution` (`sol.success`, `sol.result`, `sol.message` say how it ended). For a
@@ -261,10 +269,23 @@ def simulate(
         raise InputError(f"saveat: expected a gnipy.SaveAt, got {type(saveat).__name__}")
     if progress is not False and progress is not None and progress is not True and not callable(progress):
         raise InputError(f"progress: expected True, False or a callable(steps_done, steps_total), got {progress!r}")
+    if systems is None and system.is_forced:
+        system = _drive(system, controls, h, t0, steps)
+    elif controls is not None:
+        raise InputError(
+            "controls: the system has no force to drive (give System(..., force=F, inputs=m) or system.with_force(F, m))"
+            if systems is None else "controls: batches of forced systems are not supported; run the members one at a time")
+    elif systems is not None and any(s.is_forced for s in systems):
+        raise InputError("system: batches of forced systems are not supported; run the members one at a time")
 
     traced = _traced(system if systems is None else systems, q0, v0, R0, h, t0, state0)
     if traced:
+        from .inputs import concrete_value
         from .transformed import simulate_traced
+
+        if system.is_forced and steps is not None and not _traced(steps):
+            h_c = concrete_value(h)  # the checks of an untransformed call, where the values are known
+            _check_forced_run(system, 1.0 if h_c is None else float(h_c), _whole_steps(steps))
 
         method = backward(method, h, system)
         return simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, saveat, t0, state0,
@@ -272,6 +293,8 @@ def simulate(
 
     t0 = _number("t0", t0, positive=False)
     h, n, partial = resolve_run(h, steps, t_final, t0, backward=True)
+    if system.is_forced:
+        _check_forced_run(system, h, n + (1 if partial else 0))
     method = backward(method, h, system)
     if n > MAX_STEPS:
         raise InputError(
@@ -324,7 +347,7 @@ def simulate(
             jax.block_until_ready(out)
     meta |= _diagnostic_meta(system, prep.core, prep.b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
                              cached=prep.cache, prepared=(prep, out.get("padded")),
-                             conserves_energy=bool(getattr(method, "conserves_energy", False)))
+                             conserves_energy=bool(getattr(method, "conserves_energy", False)), times=times)
     fail_k = int(out["fail_k"])
     q = out["q"]
     common = dict(iterations=out["iterations"], R=out["R"], final_state=out["final_state"], states=out["states"],
@@ -348,6 +371,54 @@ def simulate(
     if throw:
         raise SolverFailure(msg, step=fail_k, time=t_fail, residual=fail_res, solution=partial_sol)
     return partial_sol
+
+
+def _drive(system, controls, h, t0, steps):
+    """The forced `system` with its inputs attached (a :class:`gnipy.forcing.Drive` on the grid
+    t0 + k h); the controls' shape checked where it is concrete."""
+    from .forcing import Drive
+
+    m = system.inputs
+    values = signal = None
+    if controls is None:
+        if m:
+            raise InputError(f"controls: the system has {m} input{'s' if m > 1 else ''} u; give controls= "
+                             f"(an array (steps, {m}) of per-step values, or a function u(t))")
+    elif callable(controls) and not hasattr(controls, "shape"):
+        if not m:
+            raise InputError("controls: the system's force takes no inputs (inputs=0)")
+        signal = controls
+    else:
+        if not m:
+            raise InputError("controls: the system's force takes no inputs (inputs=0)")
+        if not _traced(controls):
+            arr = np.asarray(controls)
+            if arr.dtype == object or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+                raise InputError(f"controls: expected a real array (steps, {m}) or a function u(t), got {arr.dtype}")
+            if arr.ndim == 1 and m == 1:
+                arr = arr[:, None]
+            if arr.ndim != 2 or arr.shape[1] != m or arr.shape[0] < 1:
+                raise InputError(f"controls: expected shape (steps, {m}), got {np.shape(controls)}")
+            if not np.all(np.isfinite(arr)):
+                raise InputError("controls: contains NaN or infinite values")
+            if steps is not None and not _traced(steps) and arr.shape[0] < int(steps):
+                raise InputError(f"controls: {arr.shape[0]} per-step values for {int(steps)} steps")
+            values = arr.astype(np.float64)
+        else:
+            values = jnp.asarray(controls, jnp.float64)
+            if values.ndim == 1 and m == 1:
+                values = values[:, None]
+            if values.ndim != 2 or values.shape[1] != m:
+                raise InputError(f"controls: expected shape (steps, {m}), got {tuple(values.shape)}")
+    return system.driven(Drive.make(values, signal, t0=t0, h=h, inputs=m))
+
+
+def _check_forced_run(system, h, total_steps):
+    if h < 0:
+        raise InputError("h: a forced system runs forward in time (h > 0); its force is not reversible in general")
+    values = system.drive.values
+    if values is not None and values.shape[0] < total_steps:
+        raise InputError(f"controls: {values.shape[0]} per-step values for {total_steps} steps")
 
 
 def _method(system, method):
@@ -405,7 +476,7 @@ _DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
 
 
 def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False, batch: bool = False,
-                     cached: dict | None = None, prepared=None, conserves_energy: bool = False) -> dict:
+                     cached: dict | None = None, prepared=None, conserves_energy: bool = False, times=None) -> dict:
     """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
     the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved (kept in
     `cached`, per system and start, when given)."""
@@ -424,7 +495,7 @@ def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False
         if cached is not None:
             cached[key] = dict(out)
     if gni_family and prepared is not None:  # a single run: its nodes come padded from the run's program
-        diag = prepared[0].node_diagnostics(prepared[1], h, int(np.shape(nodes[1])[0]))
+        diag = prepared[0].node_diagnostics(prepared[1], h, int(np.shape(nodes[1])[0]), times=times)
         out |= dict(zip(_DIAGNOSTIC_ARRAYS, diag))
     elif gni_family:
         diag = saved_node_diagnostics(core, *nodes, h, batched_system=batched_system, batch=batch)

@@ -74,7 +74,7 @@ class progress_reporter:
 def _stepper(method, system):
     def one_step(carry, h):
         state, k, fail_k, fail_res, it_tot, it_max = carry
-        new, info = method.step(system, state, h)
+        new, info = method.step(system.at_step(k), state, h)  # a forced system's input and time at step k
         ok = info.ok & _tree_finite(new) & (fail_k < 0)
         newly_failed = (~ok) & (fail_k < 0)
         state = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, state)

@@ -5,7 +5,8 @@ $Q = \\mathbb{R}^n \\times G$ with velocities $v = (\\dot x, \\xi)$ in left triv
 
 - a Lagrangian of mechanical type $l(b, v) = \\tfrac12 v^T \\mathbb{G}(b) v - V(b)$,
 - constraint one-forms $\\mu(b)$ ($m \\times N$, full row rank),
-- an optional affine vector field $Y(b)$; the constraints are $\\mu(b)(v - Y(b)) = 0$.
+- an optional affine vector field $Y(b)$; the constraints are $\\mu(b)(v - Y(b)) = 0$;
+- an optional generalized force $F(b, v, u, t)$ with inputs u (:mod:`gnipy.forcing`).
 
 On $\\mathbb{R}^n \\times G$ the system is *reduced* (paper §7) when l, μ, Y do not depend on the
 orientation R (the user's functions take `(x, v)`, `(x)`), and of *Lie groupoid* type (paper §9)
@@ -65,6 +66,12 @@ class System(eqx.Module):
         name: a short name used in reports and files.
         params: parameters of the system, for provenance (a dict of floats).
         defaults: optional default initial condition `(q0, v0)` or `(q0, v0, R0)`.
+        force: optional generalized force `F(q, v, u, t)` / `F(x, v, u, t)` / `F(x, R, v, u, t)`
+            -> (N,), a covector in the velocity coordinates (on $\\mathbb{R}^n\\times G$ its group
+            part pairs with ξ: a body torque for `reconstruction="left"`, a space torque for
+            `"right"`); `u` the inputs (a vector of length `inputs`, empty when there are none),
+            `t` the time. See :mod:`gnipy.forcing` for how the methods discretize it.
+        inputs: the number m of inputs u (given to :func:`gnipy.simulate` as `controls=`).
 
     Raises:
         InputError: on inconsistent dimensions or names.
@@ -81,6 +88,9 @@ class System(eqx.Module):
     params: tuple[tuple[str, float], ...] = eqx.field(static=True)
     defaults: tuple | None = eqx.field(static=True)
     orientation_note: str = eqx.field(static=True)
+    force: Callable[..., Any] | None
+    drive: Any
+    inputs: int = eqx.field(static=True)
 
     def __init__(
         self,
@@ -99,6 +109,8 @@ class System(eqx.Module):
         params: dict[str, float] | None = None,
         defaults: tuple | None = None,
         orientation_note: str | None = None,
+        force: Callable[..., Any] | None = None,
+        inputs: int = 0,
     ):
         if not callable(lagrangian):
             raise InputError(f"lagrangian: expected a callable l(q, v), got {type(lagrangian).__name__}")
@@ -170,6 +182,17 @@ class System(eqx.Module):
                              else tuple(float(x) for x in np.ravel(d)) for d in defaults)
         self.defaults = defaults
         self.orientation_note = "" if orientation_note is None else str(orientation_note)
+        if force is not None and not callable(force):
+            raise InputError(f"force: expected a callable F(q, v, u, t) or None, got {type(force).__name__}")
+        if isinstance(inputs, bool) or int(inputs) != inputs or inputs < 0:
+            raise InputError(f"inputs: expected a non-negative integer, got {inputs!r}")
+        if inputs and force is None:
+            raise InputError(f"inputs: {int(inputs)} inputs but no force=; the inputs act through F(q, v, u, t)")
+        from .forcing import Drive
+
+        self.force = force
+        self.inputs = int(inputs)
+        self.drive = None if force is None else Drive.make(inputs=self.inputs)
 
     # ----------------------------------------------------------------------------------------
     # Evaluating the user's functions at a base point b (q on R^n, Point(x, R) on R^n x G)
@@ -277,6 +300,69 @@ class System(eqx.Module):
     def is_affine(self) -> bool:
         """Whether the constraints have an affine part."""
         return self.affine is not None
+
+    # ----------------------------------------------------------------------------------------
+    # Forces and inputs (gnipy.forcing)
+    # ----------------------------------------------------------------------------------------
+    @property
+    def is_forced(self) -> bool:
+        """Whether the system carries a generalized force."""
+        return self.force is not None
+
+    def external_force(self, b, v, t=None):
+        """The generalized force $F(b, v, u(t), t)$ (zero without a force); `t` defaults to the
+        start of the step being taken, the input is the drive's (:class:`gnipy.forcing.Drive`)."""
+        if self.force is None:
+            return jnp.zeros_like(v)
+        t = self.drive.t if t is None else t
+        u = self.drive.u(t)
+        return jnp.asarray(self.force(*self._args(b), v, u, t), dtype=v.dtype).reshape(v.shape)
+
+    def external_force_continuous(self, b, v, t):
+        """$F(b, v, u(t), t)$ with the input held over the step that contains `t` (the
+        continuous equations, :meth:`gnipy.forcing.Drive.u_continuous`)."""
+        if self.force is None:
+            return jnp.zeros_like(v)
+        u = self.drive.u_continuous(t)
+        return jnp.asarray(self.force(*self._args(b), v, u, t), dtype=v.dtype).reshape(v.shape)
+
+    def with_force(self, force: Callable[..., Any], inputs: int = 0) -> "System":
+        """A copy of this system with the generalized force `force` and `inputs` inputs (see the
+        constructor), e.g. a torque on a zoo model: `make_system("chaplygin-sleigh").with_force(
+        lambda q, v, u, t: jnp.array([0.0, 0.0, u[0]]), inputs=1)`."""
+        import dataclasses
+
+        if not callable(force):
+            raise InputError(f"force: expected a callable F(q, v, u, t), got {type(force).__name__}")
+        if isinstance(inputs, bool) or int(inputs) != inputs or inputs < 0:
+            raise InputError(f"inputs: expected a non-negative integer, got {inputs!r}")
+        from .forcing import Drive
+
+        new = object.__new__(type(self))
+        for f in dataclasses.fields(self):
+            object.__setattr__(new, f.name, getattr(self, f.name))
+        object.__setattr__(new, "force", force)
+        object.__setattr__(new, "inputs", int(inputs))
+        object.__setattr__(new, "drive", Drive.make(inputs=int(inputs)))
+        return new
+
+    def driven(self, drive) -> "System":
+        """A copy of this system with the :class:`gnipy.forcing.Drive` `drive` (its inputs)."""
+        if self.force is None:
+            raise InputError("controls: the system has no force (System(..., force=F) or system.with_force(F))")
+        return eqx.tree_at(lambda s: s.drive, self, drive)
+
+    def at_step(self, k) -> "System":
+        """The system during step k (its drive's step and time set); itself when unforced."""
+        if self.force is None:
+            return self
+        return eqx.tree_at(lambda s: s.drive, self, self.drive.at_step(k))
+
+    def shifted(self, dt) -> "System":
+        """The system with its step's start time moved by `dt` (sub-steps); itself when unforced."""
+        if self.force is None:
+            return self
+        return eqx.tree_at(lambda s: s.drive, self, self.drive.shifted(dt))
 
     def without_metadata(self) -> "System":
         """A copy without the provenance fields `params`, `defaults` and `orientation_note`.
@@ -390,6 +476,8 @@ class System(eqx.Module):
             raise InputError(f"affine: Y(q) must have shape ({N},), got {Y.shape}")
         if not np.all(np.isfinite(Y)):
             raise InputError("affine: Y(q0) is not finite")
+        if self.force is not None:
+            self._check_force(b0, np.zeros(N) if v0 is None else v0)
         if v0 is None:
             return b0, None
         res = mu @ (v0 - Y)
@@ -402,6 +490,18 @@ class System(eqx.Module):
                 )
             v0 = np.asarray(_project_velocity(self.without_metadata(), b0, jnp.asarray(v0)))
         return b0, v0
+
+    def _check_force(self, b0, v0):
+        N = self.dim
+        try:
+            F = np.asarray(self.force(*self._args(b0), jnp.asarray(v0, jnp.float64),
+                                      jnp.zeros(self.inputs), jnp.asarray(0.0)))
+        except Exception as e:  # the user's function failed: say where
+            raise InputError(f"force: evaluating F(q, v, u, t) failed at q0 (u = 0, t = 0): {e}") from e
+        if F.size != N:
+            raise InputError(f"force: F(q, v, u, t) must return {N} components (one per velocity), got shape {F.shape}")
+        if not np.all(np.isfinite(F)):
+            raise InputError("force: F(q0, v0, 0, 0) is not finite")
 
     _SAMPLES = 3
 

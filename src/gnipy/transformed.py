@@ -61,7 +61,7 @@ def simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, save
         raise InputError(f"t_final: not a whole number of steps of h, and {method.name} cannot shorten its last step")
     plan = schedule(saveat, n, partial, h=hv, t0=t0_num)
     if state0 is None:
-        if (q0 is None or v0 is None) and _traced(system):
+        if (q0 is None or v0 is None) and _traced(system.lagrangian, system.constraints, system.affine, system.force):
             # the defaults were computed from the parameters' values: their derivative is not in them
             raise InputError(
                 "q0/v0: the system's parameters are traced (differentiated or inside jax.jit), and its default "

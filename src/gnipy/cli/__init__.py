@@ -8,6 +8,8 @@ listings.
     gni convergence MODEL --methods M1,M2 --h-max A --h-min B --count N [--t-final T]
             [--set NAME=VALUE ...] [--x0 ...] [--v0 ...] [--R0 ...] [--error state|q|v] --out DIR
     gni sweep MODEL --grid NAME=START:STOP:COUNT ... --h H (--steps N | --t-final T) --out DIR.zarr
+    gni control (PROBLEM.toml | --example NAME) [--print] --out FILE.nc [--plot FILE.png]
+    gni fit PROBLEM.toml --out FILE.nc [--plot FILE.png]
     gni info FILE.nc
     gni verify PATH
     gni reproduce [--out DIR] [--quick]
@@ -43,13 +45,13 @@ The package holds parsing and printing only; what the commands compute lives in 
   :mod:`~gnipy.cli.resources`: options, configuration files, output paths, bounds;
 - one module per command group: :mod:`~gnipy.cli.run` (`run`, with
   :mod:`~gnipy.cli.summary`), :mod:`~gnipy.cli.demo`, :mod:`~gnipy.cli.convergence`, :mod:`~gnipy.cli.sweep`,
-  :mod:`~gnipy.cli.info` (`info`, `verify`), :mod:`~gnipy.cli.reproduce`,
+  :mod:`~gnipy.cli.control`, :mod:`~gnipy.cli.fit`, :mod:`~gnipy.cli.info` (`info`, `verify`), :mod:`~gnipy.cli.reproduce`,
   :mod:`~gnipy.cli.atlas`, :mod:`~gnipy.cli.listings` (`models`, `methods`).
 """
 
 from .app import app, main
 
 # the commands register on `app` when their modules are imported, in the order `gni --help` lists them
-from . import run, convergence, sweep, info, demo, listings, reproduce, atlas  # noqa: E402, F401  isort: skip
+from . import run, convergence, sweep, control, fit, info, demo, listings, reproduce, atlas  # noqa: E402, F401  isort: skip
 
 __all__ = ["app", "main"]

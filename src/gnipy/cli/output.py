@@ -10,7 +10,7 @@ import typer
 
 from ..text import safe
 
-__all__ = ["EXIT_FAILURE", "EXIT_USAGE", "cell", "console", "fail", "safe", "table", "warn"]
+__all__ = ["EXIT_FAILURE", "EXIT_USAGE", "cell", "console", "fail", "report_result", "safe", "table", "warn"]
 
 #: Exit code of bad input (the message names the option).
 EXIT_USAGE = 2
@@ -44,6 +44,19 @@ def console(stderr: bool = False):
     from rich.console import Console
 
     return Console(highlight=False, soft_wrap=True, stderr=stderr, markup=False, emoji=False)
+
+
+def report_result(command: str, name: str, result, written: str, seconds: float) -> None:
+    """Print the report of `gni control` / `gni fit`: the problem, the result's `summary()` and
+    the files written; exit with :data:`EXIT_FAILURE` when the result did not succeed (the files
+    are written all the same)."""
+    con = console()
+    con.print(safe(f"{command}: {name}"))
+    for line in result.summary().splitlines():
+        con.print(safe(line))
+    con.print(safe(f"wrote {written} in {seconds:.1f} s"))
+    if not result.success:
+        raise typer.Exit(EXIT_FAILURE)
 
 
 def warn(text: str) -> None:

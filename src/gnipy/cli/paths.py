@@ -53,6 +53,18 @@ def same_file(a: Path, b: Path) -> bool:
         return False
 
 
+def check_out_and_plot(out: Path | None, plot: Path | None, overwrite: bool = False) -> None:
+    """The checks of a command's `--out` file (required) and optional `--plot` figure: both
+    writable (:func:`check_output`, :func:`check_plot`) and not the same file."""
+    if out is None:
+        raise UsageError("--out", "missing: give --out FILE.nc")
+    check_output(out, "--out", overwrite)
+    if plot is not None:
+        check_plot(plot, overwrite)
+        if same_file(out, plot):
+            raise UsageError("--plot", f"{str(plot)!r} is also --out: choose another path for the figure")
+
+
 def check_output_dir(path: Path, names=(), overwrite: bool = False) -> bool:
     """`--out DIR` (`gni convergence`): an existing directory, or one that can be created, in which
     the files `names` may be written. Returns whether gnipy may replace existing files of those names:

@@ -277,13 +277,15 @@ def run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, s
     streamed_report(spec, params, method, h, result, time.perf_counter() - t0, out)
 
 
-def write_plot(sol, path: Path, overwrite: bool = False) -> None:
-    """The three-panel figure of a run (configuration path, energy error, constraint residual),
-    written atomically."""
-    from gnipy.plots import plot_solution
+def write_plot(sol, path: Path, overwrite: bool = False, plot=None, **kwargs) -> None:
+    """The figure of a run, written atomically after its result file: by default the three panels
+    of :func:`gnipy.plots.plot_solution` (configuration path, energy error, constraint residual),
+    else `plot(sol, path, overwrite=..., **kwargs)` (e.g. `gnipy.plots.plot_control`)."""
+    if plot is None:
+        from gnipy.plots import plot_solution as plot
 
     try:
         with writing("--plot", path):
-            plot_solution(sol, path, overwrite=overwrite)
+            plot(sol, path, overwrite=overwrite, **kwargs)
     except WriteFailure as e:
         raise WriteFailure(f"{e} (the result file was written; the figure was not)") from None

@@ -6,6 +6,11 @@
 - :class:`McLachlanPerlmutter` (`"mp"`): the reversible scheme (4.18) of McLachlan–Perlmutter (2006),
   for a constant metric.
 
+Forces (:mod:`gnipy.forcing`): DLA takes them in the forced discrete Legendre transforms, as the
+GNI ($FL^- - f^- = p^-$, $p^+_{k+1} = FL^+ + f^+$, the quadrature of its $l_d$); McLachlan–Perlmutter
+adds the impulse $f^- + f^+$ of the midpoint rule, $hF\big(\tfrac12(q_0 + q_1), (q_1 - q_0)/h, u,
+t + \tfrac h2\big)$, to its kick, which keeps it symmetric and of order 2.
+
 Both are implicit: each step is one Newton solve through :func:`~gnipy.integrators.base.solve_step`
 (optimistix, `throw=False`, the result promoted into :class:`~gnipy.StepInfo`), so a failed step is
 reported by :func:`~gnipy.simulate` like any other method's.
@@ -21,6 +26,7 @@ import jax.numpy as jnp
 
 from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
 from ..discrete_lagrangians import DiscreteLagrangian, Midpoint
+from ..forcing import discrete_forces
 from ..spaces import compensated_add
 from .base import Integrator, momentum_constraint_scale, require_constant_metric, solve_step
 
@@ -102,9 +108,14 @@ class DiscreteLagrangeDAlembert(Integrator):
         def ld(b0, z):
             return self.discrete_lagrangian(system, b0, z, h)
 
+        forced = system.force is not None
+        rule = self.discrete_lagrangian.force_rule
+
         def residual(w):
             z, lam = w[:n], w[n:]
             momentum = space.legendre_minus(ld, b, z) - (p_plus - mu_k.T @ lam)  # p⁺ − p⁻ = μ(q_k)ᵀλ
+            if forced:  # the forced transform (gnipy.forcing): FL⁻ − f⁻ = p⁻
+                momentum = momentum - discrete_forces(system, b, z, h, rule)[0]
             _, b_mid, vel = space.step_points(b, z, h)
             constraint = system.mu(b_mid) @ (vel - system.Y(b_mid))  # discrete constraint at q_{k+½}
             return jnp.concatenate([momentum, constraint])
@@ -117,6 +128,9 @@ class DiscreteLagrangeDAlembert(Integrator):
         z, lam = w[:n], w[n:]
         b1, x_err = space.advance_compensated(b, x_err, z)
         p1 = p_plus - mu_k.T @ lam + space.legendre_jump(ld, b, z)  # FL⁺ = p⁻ + (FL⁺ − FL⁻)
+        if forced:  # p⁺_{k+1} = FL⁺ + f⁺ = p⁻ + f⁻ + (FL⁺ − FL⁻) + f⁺
+            f_minus, f_plus = discrete_forces(system, b, z, h, rule)
+            p1 = p1 + (f_minus + f_plus)
         return DLAState(b1, p1, x_err), info
 
     def observe(self, system, state, h):
@@ -147,6 +161,11 @@ class McLachlanPerlmutter(Integrator):
     exactly at every node. For linear constraints ($Y = 0$) the map is reversible:
     $(q_1, -v_1) \\mapsto (q_0, -v_0)$ with the same $\\lambda$, hence symmetric and of order 2.
     Reports $v$ and $p = Mv$.
+
+    With a force $F(q, v, u, t)$ the kick gains the impulse $f^- + f^+ = hF\\big(\\tfrac12(q_0 + q_1),
+    \\tfrac12(v_0 + v_1), u, t + \\tfrac h2\\big)$ (:func:`gnipy.forcing.discrete_forces`, midpoint rule),
+    symmetric under $(q_0, v_0, t) \\leftrightarrow (q_1, v_1, t + h)$, $h \\to -h$: the step stays of
+    order 2, and is one Newton solve on $(v_1, \\lambda)$.
 
     Arguments:
         root_finder: optimistix root finder (default Newton, tolerances 1e-12).
@@ -181,6 +200,9 @@ class McLachlanPerlmutter(Integrator):
         force = -system.potential_gradient(q_half)
         m = mu_half.shape[0]
 
+        if system.force is not None:
+            return self._forced_step(system, state, h, q_half, M, mu_half, force)
+
         def velocity(lam):
             return v0 + h * solve_spd(M, force + mu_half.T @ lam)
 
@@ -198,6 +220,36 @@ class McLachlanPerlmutter(Integrator):
         )
         v1 = velocity(lam)
         # q_1 = q_{1/2} + (h/2)v_1 = q_0 + (h/2)(v_0 + v_1), summed onto q_0 with compensation
+        q1, q_err = compensated_add(q0, 0.5 * h * (v0 + v1), q_err)
+        return MPState(q1, v1, q_err), info
+
+    def _forced_step(self, system, state, h, q_half, M, mu_half, force):
+        """The step with the discrete force (module docstring): Newton on $(v_1, \\lambda)$, since the
+        impulse $f^- + f^+$ of the midpoint rule depends on $v_1$ through the step's velocity
+        $(q_1 - q_0)/h = \\tfrac12(v_0 + v_1)$:
+        $M(v_1 - v_0) = h(-V_q(q_{1/2}) + \\mu(q_{1/2})^T\\lambda) + f^- + f^+$."""
+        q0, v0, q_err = state
+        n, m = v0.shape[0], mu_half.shape[0]
+
+        def impulse(v1):
+            f_minus, f_plus = discrete_forces(system, q0, 0.5 * h * (v0 + v1), h, "midpoint")
+            return f_minus + f_plus
+
+        def residual(w):
+            v1, lam = w[:n], w[n:]
+            q1 = q_half + 0.5 * h * v1
+            return jnp.concatenate([
+                M @ (v1 - v0) - h * (force + mu_half.T @ lam) - impulse(v1),
+                system.mu(q1) @ (v1 - system.Y(q1)),
+            ])
+
+        f0 = system.external_force(q_half, v0, system.drive.t + 0.5 * h)
+        guess = jnp.concatenate([v0 + h * solve_spd(M, force + f0), jnp.zeros(m, dtype=v0.dtype)])
+        p_size = jnp.abs(M @ v0) + jnp.abs(h) * (jnp.abs(force) + jnp.abs(f0))
+        scale = momentum_constraint_scale(n, p_size, mu_half, v0, system.Y(q_half))
+        w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
+                             floor_scale=scale)
+        v1 = w[:n]
         q1, q_err = compensated_add(q0, 0.5 * h * (v0 + v1), q_err)
         return MPState(q1, v1, q_err), info
 

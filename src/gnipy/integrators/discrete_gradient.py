@@ -50,6 +50,14 @@ affine constraints it is $\\Delta H = (\\tilde\\mu Y_{1/2})\\cdot\\lambda$ (λ i
 discrete counterpart of $\\dot H = \\lambda\\cdot\\mu Y$ (the constraint forces do work): nothing
 is claimed.
 
+**Forces** (:mod:`gnipy.forcing`). A force $F(b, v, u, t)$ adds its impulse by the midpoint rule,
+$f^- + f^+ = hF(b_{1/2}, z/h, u, t + \\tfrac h2)$ with z the step's increment ($\\Delta x$, and
+$\\sigma = hu_\\xi$ on the group; :func:`gnipy.forcing.discrete_forces`), to $\\Delta p$. The balance
+above becomes $H_1 - H_0 = (f^- + f^+)\\cdot u + (\\tilde\\mu u)\\cdot\\lambda$: with linear constraints
+the energy changes by exactly the discrete work of the force, $(f^- + f^+)\\cdot z/h$ (to round-off;
+tested), the discrete counterpart of $\\dot H = F\\cdot v$. The step stays symmetric (the midpoint
+rule is), hence of order 2.
+
 **Symmetry.** Every quantity is a function of the midpoints, symmetric in the two nodes, or odd in
 $(\\Delta x, \\Delta p)$ together with h: exchanging the nodes and $h \\to -h$ maps the equations
 to themselves with the same λ (and $\\tilde\\mu$ is even in d). The constraint is imposed at the
@@ -108,6 +116,7 @@ import jax
 import jax.numpy as jnp
 
 from ..errors import MethodError
+from ..forcing import discrete_forces
 from ..linalg import solve_spd
 from ..spaces import Point, compensated_add
 from .base import Integrator, solve_step
@@ -200,6 +209,10 @@ class DiscreteGradient(Integrator):
         G0 = system.metric(b0)
         V0 = system.potential(b0)
         (k00,) = inv_metric(G0, p0)
+        forced = system.force is not None
+
+        def _increment(dx, u):  # the step's unknowns z of the space (Δx, and σ = h u_ξ on the group)
+            return dx if group is None else jnp.concatenate([dx, h * u[n:]])
 
         def parts(w):
             dx, dp, lam = w[:n], w[n:n + N], w[n + N:]
@@ -235,9 +248,14 @@ class DiscreteGradient(Integrator):
             d = u - system.Y(bm)
             Gd = G_bar @ d
             mu_tilde = mu_m - jnp.outer(_safe_quotient(mu_m @ d, d @ Gd), Gd)  # μ̃ d = 0
+            if forced:  # the impulse of the midpoint rule, f⁻ + f⁺ = hF(b_{1/2}, z/h): it does the work u·(f⁻ + f⁺)
+                f_minus, f_plus = discrete_forces(system, b0, _increment(dx, u), h, "midpoint")
+                momentum = dp - h * force - (f_minus + f_plus) - mu_tilde.T @ lam
+            else:
+                momentum = dp - h * force - mu_tilde.T @ lam
             residual = jnp.concatenate([
                 dx - h * u[:n],
-                dp - h * force - mu_tilde.T @ lam,
+                momentum,
                 system.mu(b1) @ (k11 - system.Y(b1)),
             ])
             return residual, u
@@ -250,6 +268,8 @@ class DiscreteGradient(Integrator):
         f0 = dL_dx(x0, k00)  # −∂H/∂x = ∂l/∂x at v = Kp
         if group is not None:
             f0 = jnp.concatenate([f0, group.ad_star(k00[n:], p0[n:])])
+        if forced:
+            f0 = f0 + system.external_force(b0, k00, system.drive.t + 0.5 * h)
 
         def along(x):
             (kp,) = inv_metric(system.metric(at(x)), p0)

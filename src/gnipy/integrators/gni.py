@@ -23,6 +23,7 @@ import jax
 import jax.numpy as jnp
 
 from ..discrete_lagrangians import CustomDiscreteLagrangian, DiscreteLagrangian, Trapezoid
+from ..forcing import discrete_forces
 from ..projectors import reflect_and_report
 from .base import Integrator, solve_step
 
@@ -100,8 +101,9 @@ class GNI(Integrator):
         else:
             # on R^n x G, FL⁻ contains dτ⁻¹_σ and is never affine in σ: Newton
             explicit = bool(
-                type(ld).explicit_if_flat and system.group is None and system.has_constant_metric(q0)
-            )
+                type(ld).explicit_if_flat and system.group is None and system.force is None
+                and system.has_constant_metric(q0)
+            )  # a force F(q, v, u, t) makes FL⁻ − f⁻ non-affine in general: Newton
         return dataclasses.replace(self, explicit=explicit)
 
     def init(self, system, q0, v0, h):
@@ -128,7 +130,12 @@ class GNI(Integrator):
         def ld(b0, z):
             return self.discrete_lagrangian(system, b0, z, h)
 
+        forced = system.force is not None
+        rule = self.discrete_lagrangian.force_rule
+
         def residual(z):
+            if forced:  # the forced transform (gnipy.forcing): FL⁻(z) − f⁻(z) = p⁻
+                return space.legendre_minus(ld, b, z) - discrete_forces(system, b, z, h, rule)[0] - p_minus
             return space.legendre_minus(ld, b, z) - p_minus
 
         guess = space.initial_guess(b, v_bar, h)
@@ -143,6 +150,9 @@ class GNI(Integrator):
         # p⁺_{k+1} = FL⁺ = p⁻_k + (FL⁺ − FL⁻) at the solution of FL⁻ = p⁻: the momentum is carried,
         # not rebuilt from the increment (gnipy.spaces: rebuilding rounds with a bias that adds up)
         p1 = p_minus + space.legendre_jump(ld, b, z)
+        if forced:  # p⁺_{k+1} = FL⁺ + f⁺ = p⁻ + f⁻ + (FL⁺ − FL⁻) + f⁺
+            f_minus, f_plus = discrete_forces(system, b, z, h, rule)
+            p1 = p1 + (f_minus + f_plus)
         return GNIState(b1, p1, x_err), info
 
     @property

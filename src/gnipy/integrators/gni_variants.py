@@ -21,6 +21,9 @@ $$FL^-(b_k, z) = \\bar p_k + \\tfrac h2\\mu(b_k)^T\\alpha, \\qquad
   \\bar p_{k+1} = FL^+(b_k, z) + \\tfrac h2\\mu(b_{k+1})^T\\alpha,$$
 $$\\mu(b_{k+1})\\big(\\mathbb{G}(b_{k+1})^{-1}\\bar p_{k+1} - Y(b_{k+1})\\big) = 0.$$
 
+With a force (:mod:`gnipy.forcing`) the transforms are the forced ones, $FL^- - f^-$ and
+$FL^+ + f^+$ (the quadrature of the $l_d$, :func:`gnipy.forcing.discrete_forces`), as in the GNI.
+
 It uses the GNI's discrete Lagrangian, Legendre transforms and reported momentum $\\bar p$. The
 difference is the departure impulse: instead of reflecting the previous arrival impulse, one
 multiplier $\\alpha_k$ acts at both ends of step k, as in RATTLE. The step is then a one-step map
@@ -53,6 +56,7 @@ import jax
 import jax.numpy as jnp
 
 from ..discrete_lagrangians import DiscreteLagrangian, Trapezoid
+from ..forcing import discrete_forces
 from ..linalg import solve_spd
 from ..projectors import reported_momentum
 from .base import Integrator, momentum_constraint_scale, solve_step
@@ -123,11 +127,21 @@ class SymmetricImpulseGNI(Integrator):
         def ld(b0, z):
             return self.discrete_lagrangian(system, b0, z, h)
 
+        forced = system.force is not None
+        rule = self.discrete_lagrangian.force_rule
+
         def residual(w):
             z, alpha = w[:n], w[n:]
             p_minus = p_bar + 0.5 * h * (mu.T @ alpha)
             b1 = space.advance(b, z)
             mu1 = system.mu(b1)
+            if forced:  # the forced transforms (gnipy.forcing): FL⁻ − f⁻ = p⁻, p̄_{k+1} = FL⁺ + f⁺ + ...
+                f_minus, f_plus = discrete_forces(system, b, z, h, rule)
+                p1 = p_minus + (f_minus + f_plus) + space.legendre_jump(ld, b, z) + 0.5 * h * (mu1.T @ alpha)
+                return jnp.concatenate([
+                    space.legendre_minus(ld, b, z) - f_minus - p_minus,
+                    mu1 @ (system.velocity(b1, p1) - system.Y(b1)),
+                ])
             p1 = p_minus + space.legendre_jump(ld, b, z) + 0.5 * h * (mu1.T @ alpha)
             return jnp.concatenate([
                 space.legendre_minus(ld, b, z) - p_minus,
@@ -142,8 +156,13 @@ class SymmetricImpulseGNI(Integrator):
                              floor_scale=scale)
         z, alpha = w[:n], w[n:]
         b1, x_err = space.advance_compensated(b, x_err, z)
-        p1 = (p_bar + 0.5 * h * (mu.T @ alpha) + space.legendre_jump(ld, b, z)
-              + 0.5 * h * (system.mu(b1).T @ alpha))
+        if forced:  # summed as in the residual, so that the constraint holds at the stored p̄_{k+1}
+            f_minus, f_plus = discrete_forces(system, b, z, h, rule)
+            p1 = (p_bar + 0.5 * h * (mu.T @ alpha) + (f_minus + f_plus) + space.legendre_jump(ld, b, z)
+                  + 0.5 * h * (system.mu(b1).T @ alpha))
+        else:
+            p1 = (p_bar + 0.5 * h * (mu.T @ alpha) + space.legendre_jump(ld, b, z)
+                  + 0.5 * h * (system.mu(b1).T @ alpha))
         return SymmetricImpulseState(b1, p1, x_err), info
 
     def observe(self, system, state, h):

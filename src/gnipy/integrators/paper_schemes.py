@@ -37,6 +37,13 @@ Starting from $p^+_0 = M v_0$ with $v_0$ on the constraints gives $\\tilde\\lamb
 $\\tilde p_0 = M v_0 - s (h/2) V_q(q_0)$. Every class reports (`observe`) the GNI's $\\bar p$ and
 $\\bar v = M^{-1}\\bar p$, so that solutions compare node by node.
 
+Forces (:mod:`gnipy.forcing`). Each map takes the discrete forces of its discrete Lagrangian
+(Euler A: $f^- = hF(q_k)$; Euler B: $f^+ = hF(q_{k+1})$; RATTLE: the trapezoid, $f^\\mp = \\tfrac h2F$
+at the nodes) in the forced transforms, as the GNI does, so that each stays the GNI with its
+$l_d$: $f^-$ joins the first kick and $f^+$ the second (:func:`_forced_kick_drift_kick`; the drift
+is then a Newton solve when $f^-$ depends on the step's velocity). The composition Euler A ∘ Euler B
+takes its second half step at $t + h/2$. SHAKE refuses forces (:meth:`Shake.check`).
+
 :class:`Shake` is the two-step form (Afin) on $(q_{k-1}, q_k, q_{k+1})$. :class:`EulerABComposition`
 re-reads $\\tilde p$ between its two half steps, because Euler A and Euler B relate $\\tilde p$ to
 $\\bar p$ differently (see its docstring: without that, the composition is only of order 1).
@@ -49,9 +56,10 @@ from typing import ClassVar, NamedTuple
 import jax
 import jax.numpy as jnp
 
+from ..forcing import FORCE_RULES, discrete_forces
 from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
 from ..spaces import compensated_add
-from .base import Integrator, StepInfo, require_constant_metric
+from .base import Integrator, MethodError, StepInfo, require_constant_metric, solve_step
 
 __all__ = [
     "TildeState",
@@ -72,6 +80,8 @@ __all__ = [
 _S_EULER_A = 1.0
 _S_EULER_B = -1.0
 _S_RATTLE = 0.0
+#: The force quadrature of each map (that of its discrete Lagrangian, :data:`gnipy.forcing.FORCE_RULES`).
+_FORCE_RULE = {_S_EULER_A: "left", _S_EULER_B: "right", _S_RATTLE: "trapezoid"}
 
 
 class TildeState(NamedTuple):
@@ -149,8 +159,10 @@ def _kick_drift_kick(system, state: TildeState, h, s: float) -> TildeState:
         s: +1 (Euler A), −1 (Euler B), 0 (RATTLE).
 
     Returns:
-        $(q_{k+1}, \\tilde p_{k+1}, \\tilde\\lambda_{k+1})$.
+        $(q_{k+1}, \\tilde p_{k+1}, \\tilde\\lambda_{k+1})$ (a forced system: :func:`_forced_kick_drift_kick`).
     """
+    if system.force is not None:
+        return _forced_kick_drift_kick(system, state, h, s)[0]
     q, p, lam, q_err, p_err = state
     M = system.metric(q)  # constant metric: the same at q_k and q_{k+1}
     p_half, p_err = _add(p, -0.5 * h * (system.potential_gradient(q) + system.mu(q).T @ lam), p_err)  # (EuAHama)
@@ -164,6 +176,57 @@ def _kick_drift_kick(system, state: TildeState, h, s: float) -> TildeState:
     lam1 = (2.0 / h) * solve_spd(C1, rhs)
     p1, p_err = _add(p_half, -0.5 * h * (Vq1 + mu1.T @ lam1), p_err)  # (EuAHamd)
     return TildeState(q1, p1, lam1, q_err, p_err)
+
+
+def _forced_kick_drift_kick(system, state: TildeState, h, s: float) -> tuple[TildeState, StepInfo]:
+    """:func:`_kick_drift_kick` with the discrete forces of the map's discrete Lagrangian
+    (:mod:`gnipy.forcing`; Euler A: $f^- = hF(q_k)$, Euler B: $f^+ = hF(q_{k+1})$, RATTLE: the
+    trapezoid), at the step's velocity $(q_{k+1} - q_k)/h$. The forced transforms
+    $FL^- - f^- = p^-$, $p^+_{k+1} = FL^+ + f^+$ add $f^-$ to the first kick and $f^+$ to the second:
+
+        p_{k+1/2} = p̃_k − (h/2)(V_q(q_k) + μ(q_k)ᵀλ̃_k) + f⁻,    q_{k+1} = q_k + h M⁻¹ p_{k+1/2},
+        p̃_{k+1}   = p_{k+1/2} + f⁺ − (h/2)(V_q(q_{k+1}) + μ(q_{k+1})ᵀλ̃_{k+1}),
+
+    the constraint fixing $\\tilde\\lambda_{k+1}$ as before. $f^-$ depends on $q_{k+1}$ through the step's
+    velocity: the drift is then one Newton solve for the increment (none for Euler B, whose
+    $f^- = 0$). Returns the state and the :class:`StepInfo` of the solve."""
+    q, p, lam, q_err, p_err = state
+    rule = _FORCE_RULE[s]
+    M = system.metric(q)
+    kick = -0.5 * h * (system.potential_gradient(q) + system.mu(q).T @ lam)
+    p_half0 = p + kick
+    if FORCE_RULES[rule][0]:  # f⁻ depends on the step: M z/h = p_{k+1/2} + f⁻(z)
+        def residual(z):
+            return M @ z / h - p_half0 - discrete_forces(system, q, z, h, rule)[0]
+
+        z, info = solve_step(residual, h * solve_spd(M, p_half0), explicit=False,
+                             floor_scale=jnp.max(jnp.abs(p_half0)))
+    else:
+        z = h * solve_spd(M, p_half0)
+        info = None
+    f_minus, f_plus = discrete_forces(system, q, z, h, rule)
+    p_half, p_err = _add(p, kick + f_minus, p_err)
+    q1, q_err = _add(q, z, q_err)
+    mu1 = system.mu(q1)
+    Vq1 = system.potential_gradient(q1)
+    Pi1 = system.Pi(q1)
+    C1 = mu1 @ solve_spd(M, mu1.T)
+    rhs = mu1 @ solve_spd(M, p_half + f_plus + (s - 1.0) * 0.5 * h * Vq1 - Pi1)
+    lam1 = (2.0 / h) * solve_spd(C1, rhs)
+    p1, p_err = _add(p_half, f_plus - 0.5 * h * (Vq1 + mu1.T @ lam1), p_err)
+    new = TildeState(q1, p1, lam1, q_err, p_err)
+    if info is None:
+        return new, _explicit_info(*new)
+    return new, StepInfo(info.ok & _finite(*new), info.iterations, info.residual)
+
+
+def _map_step(system, state, h, s: float):
+    """`(state, StepInfo)` of one step of the map with sign s (the classes' steps)."""
+    state = TildeState(*state)
+    if system.force is not None:
+        return _forced_kick_drift_kick(system, state, h, s)
+    new = _kick_drift_kick(system, state, h, s)
+    return new, _explicit_info(*new)
 
 
 def euler_a_map(system, state: TildeState, h) -> TildeState:
@@ -345,9 +408,8 @@ class NonholonomicEulerA(_TildeScheme):
     _s: ClassVar[float] = _S_EULER_A
 
     def step(self, system, state, h):
-        """One step of :func:`euler_a_map`; returns `(state, StepInfo)` (no iterations)."""
-        new = euler_a_map(system, state, h)
-        return new, _explicit_info(*new)
+        """One step of :func:`euler_a_map`; returns `(state, StepInfo)` (no iterations; a Newton solve with a force)."""
+        return _map_step(system, state, h, _S_EULER_A)
 
 
 class NonholonomicEulerB(_TildeScheme):
@@ -362,9 +424,8 @@ class NonholonomicEulerB(_TildeScheme):
     _s: ClassVar[float] = _S_EULER_B
 
     def step(self, system, state, h):
-        """One step of :func:`euler_b_map`; returns `(state, StepInfo)` (no iterations)."""
-        new = euler_b_map(system, state, h)
-        return new, _explicit_info(*new)
+        """One step of :func:`euler_b_map`; returns `(state, StepInfo)` (no iterations, also with a force: $f^- = 0$)."""
+        return _map_step(system, state, h, _S_EULER_B)
 
 
 class Rattle(_TildeScheme):
@@ -381,9 +442,8 @@ class Rattle(_TildeScheme):
     _s: ClassVar[float] = _S_RATTLE
 
     def step(self, system, state, h):
-        """One step of :func:`rattle_map`; returns `(state, StepInfo)` (no iterations)."""
-        new = rattle_map(system, state, h)
-        return new, _explicit_info(*new)
+        """One step of :func:`rattle_map`; returns `(state, StepInfo)` (no iterations; a Newton solve with a force)."""
+        return _map_step(system, state, h, _S_RATTLE)
 
 
 class EulerABComposition(_TildeScheme):
@@ -430,10 +490,17 @@ class EulerABComposition(_TildeScheme):
         q, p_tilde, lam, q_err, p_err = state
         # Euler A reads p̄ = p̃ + (h/4)V_q; Euler B reads p̄ = p̃_B − (h/4)V_q: p̃_B = p̃ + (h/2)V_q
         p_b, p_err = _add(p_tilde, half * system.potential_gradient(q), p_err)
-        mid = euler_b_map(system, TildeState(q, p_b, lam, q_err, p_err), half)
+        if system.force is not None:  # Euler B on [t, t + h/2], Euler A on [t + h/2, t + h]
+            mid, info_b = _forced_kick_drift_kick(system, TildeState(q, p_b, lam, q_err, p_err), half, _S_EULER_B)
+        else:
+            mid = euler_b_map(system, TildeState(q, p_b, lam, q_err, p_err), half)
         # and back at the middle node: p̃_A = p̃_B − (h/2)V_q
         p_a, p_err = _add(mid.p_tilde, -half * system.potential_gradient(mid.q), mid.p_err)
         mid = mid._replace(p_tilde=p_a, p_err=p_err)
+        if system.force is not None:
+            new, info_a = _forced_kick_drift_kick(system.shifted(half), mid, half, _S_EULER_A)
+            return new, StepInfo(info_a.ok & info_b.ok, info_a.iterations + info_b.iterations,
+                                 jnp.maximum(info_a.residual, info_b.residual))
         new = euler_a_map(system, mid, half)
         return new, _explicit_info(*new)
 
@@ -453,8 +520,16 @@ class Shake(Integrator):
     order: ClassVar[int | None] = 2
 
     def check(self, system, q0) -> None:
-        """Raise :class:`~gnipy.MethodError` unless the metric is constant (paper §5)."""
+        """Raise :class:`~gnipy.MethodError` unless the metric is constant (paper §5), and for a
+        forced system (its two-step state holds $q_{k+1}$ before the step that reaches it is
+        taken, so a step's force could not be that step's: use rattle or gni-trapezoid)."""
         require_constant_metric(self.name, system, q0)
+        if system.force is not None:
+            raise MethodError(
+                f"method {self.name!r} does not support forces: {system.name!r} has a force F(q, v, u, t), and "
+                "the two-step form (Afin) holds q_(k+1) before its step's force and input are known; use "
+                "rattle or gni-trapezoid (the same scheme with the forced trapezoid rule)"
+            )
 
     def init(self, system, q0, v0, h):
         """$(q_{-1}, q_0, q_1)$ with $q_{\\pm1} = q_0 \\pm h v_0 - (h^2/2)M^{-1}V_q(q_0)$.

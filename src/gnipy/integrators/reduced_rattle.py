@@ -105,7 +105,8 @@ class ReducedRattle(Integrator):
 
     Raises:
         MethodError: from :meth:`check`, for a system without a group part, one that depends on the
-            orientation (not reduced), or one with a non-constant metric.
+            orientation (not reduced), one with a non-constant metric, or one with a force
+            (:mod:`gnipy.forcing`; use `gni-trapezoid`).
     """
 
     root_finder: Any = None
@@ -130,6 +131,12 @@ class ReducedRattle(Integrator):
             raise MethodError(
                 f"method {self.name!r} is written for a constant metric (paper §7.2); the metric of "
                 f"{system.name!r} depends on the configuration: use a gni-* method"
+            )
+        if system.force is not None:
+            raise MethodError(
+                f"method {self.name!r} (reduced RATTLE) does not support forces: {system.name!r} has a force "
+                "F(q, v, u, t), and the implicit equation for xi_(k+1) looks one step ahead, into the next "
+                "step's force and input; use gni-trapezoid (the same scheme, with the forced trapezoid rule)"
             )
 
     # ------------------------------------------------------------------------------------------

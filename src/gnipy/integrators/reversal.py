@@ -6,7 +6,9 @@ $(q, v)$ or $(q, p)$; for the GNI's $(b, p^+)$ the reflection (Comb) $p^+ \mapst
 which turns the hidden impulse $\approx -\tfrac h2\mu^T\lambda$ of a step of h into that of a step of
 $-h$. (Stepping the GNI back with $-h$ from $(b, p^+)$ without it misses the start by $O(h^2)$
 per step, ~1e-4 over a short run; with it, a run of N steps forward and N back returns to the
-start to round-off.) States keep the orientation of forward runs, so a backward run can continue
+start to round-off.) Forced systems (:mod:`gnipy.forcing`) run forward only: :class:`Reversed`
+refuses them (:meth:`Reversed.check`), and a step of a traced h that turns out negative fails.
+States keep the orientation of forward runs, so a backward run can continue
 a forward one (`state0=sol.final_state`) and vice versa.
 """
 
@@ -18,7 +20,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .base import Integrator
+from .base import Integrator, MethodError
 
 __all__ = ["Reversed", "backward"]
 
@@ -59,6 +61,13 @@ class Reversed(Integrator):
         return jax.tree_util.tree_map(lambda a, b: jnp.where(back, b, a), state, flipped)
 
     def check(self, system, q0) -> None:
+        """The method's check; and a forced system is refused for a run backward (its force is not
+        reversible in general: :func:`gnipy.simulate` refuses h < 0 for it, this catches the other ways in)."""
+        if system.force is not None and not self.dynamic:
+            raise MethodError(
+                f"method {self.method.name!r} runs backward here (h < 0), and {system.name!r} has a force "
+                "F(q, v, u, t): forced systems run forward in time only (h > 0)"
+            )
         self.method.check(system, q0)
 
     def prepare(self, system, q0):
@@ -70,6 +79,8 @@ class Reversed(Integrator):
 
     def step(self, system, state, h):
         state, info = self.method.step(system, self._orient(system, state, h), h)
+        if system.force is not None:  # a traced h that turns out negative: the step fails (check's reason)
+            info = info._replace(ok=info.ok & (h > 0))
         return self._orient(system, state, h), info
 
     def change_step(self, system, state, h_old, h_new):

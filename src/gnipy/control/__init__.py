@@ -1,0 +1,31 @@
+"""Control and identification: systems driven by inputs, models fitted to data, and inputs chosen
+to steer them.
+
+- forces and inputs: a System's generalized force $F(b, v, u, t)$ (:mod:`gnipy.forcing`) enters a
+  simulation through :func:`gnipy.simulate`'s `controls=` (the driver's, not this package's);
+- :mod:`gnipy.control.identification`: :func:`fit` estimates model parameters and/or the
+  initial condition from observed trajectories (:class:`Observations`: arrays, a Solution, a
+  netCDF file; partial and noisy), by least squares through the differentiated simulation, with
+  standard errors from the Jacobian (:class:`FitResult`);
+- :mod:`gnipy.control.optimal_control`: :func:`solve_optimal_control` chooses per-step inputs that
+  steer a system to a terminal target at least cost, with the GNI's steps as the dynamics (direct
+  single shooting; :class:`ControlResult`);
+- :mod:`gnipy.control.problems`: optimal-control problems as TOML files (`gni control`), the
+  worked problems (:data:`WORKED_PROBLEMS`) and the result file.
+"""
+
+from .identification import FitResult, Observations, fit
+from .optimal_control import ControlResult, solve_optimal_control, terminal_residual
+from .problems import (
+    WORKED_PROBLEMS,
+    ControlProblem,
+    FitProblem,
+    load_fit_problem,
+    load_problem,
+    write_control_result,
+    write_fit_result,
+)
+
+__all__ = ["fit", "FitResult", "Observations", "solve_optimal_control", "ControlResult", "terminal_residual",
+           "ControlProblem", "load_problem", "write_control_result", "WORKED_PROBLEMS", "FitProblem",
+           "load_fit_problem", "write_fit_result"]

@@ -1,0 +1,186 @@
+"""Discrete optimal control on the GNI's steps (gnipy.control): the worked problems meet their
+targets when their controls are re-simulated independently with `simulate`, the returned point is
+a KKT point by an independent check (central differences), and bad problems are refused."""
+
+from __future__ import annotations
+
+import tomllib
+
+import numpy as np
+import pytest
+import xarray as xr
+from typer.testing import CliRunner
+
+import gnipy
+from gnipy import simulate
+from gnipy.control.optimal_control import solve_optimal_control
+from gnipy.control.problems import WORKED_PROBLEMS, load_problem, write_control_result
+
+
+@pytest.fixture(scope="module")
+def solved():
+    out = {}
+    for name in WORKED_PROBLEMS:
+        problem = load_problem(name)
+        # the continuous system is checked once (the ball), each check compiles the reference
+        out[name] = (problem, problem.solve(check_continuous=name == "ball-plate"))
+    return out
+
+
+def _resimulate(problem, controls):
+    return simulate(problem.system, problem.method, problem.q0, problem.v0, R0=problem.R0, h=problem.h,
+                    steps=problem.steps, controls=controls)
+
+
+@pytest.mark.parametrize("name", list(WORKED_PROBLEMS))
+def test_worked_problem_meets_its_target_when_resimulated(solved, name):
+    problem, result = solved[name]
+    assert result.success, result.message
+    sol = _resimulate(problem, np.asarray(result.controls))
+    assert sol.success
+    coords, vels = list(sol.coordinates), list(sol.velocities)
+    misses = []
+    for key, value in problem.target.items():
+        if key == "R":
+            misses.append(np.max(np.abs(np.asarray(sol.R[-1]) - np.asarray(value))))
+        elif key in coords:
+            misses.append(abs(float(sol.q[-1, coords.index(key)]) - value))
+        else:
+            misses.append(abs(float(sol.v[-1, vels.index(key)]) - value))
+    assert max(misses) <= 1e-8, dict(zip(problem.target, misses))
+    # the nonholonomic constraints hold along the controlled run
+    assert float(np.max(np.abs(sol.constraint_residual))) <= 1e-13
+
+
+def test_sleigh_steering_respects_its_torque_bound_and_uses_it(solved):
+    problem, result = solved["sleigh-steering"]
+    u = np.asarray(result.controls)
+    lo, hi = problem.bounds
+    assert np.all(u >= lo) and np.all(u <= hi)
+    # the bound is active: the unbounded optimum would need a larger torque
+    assert result.active_bounds > 0 and np.max(np.abs(u)) == hi
+    assert result.bound_multipliers_ok and result.kkt_residual <= 1e-6
+
+
+def test_ball_plate_turns_the_ball_by_a_quarter_about_the_vertical(solved):
+    problem, result = solved["ball-plate"]
+    # the continuous ball driven by the same held inputs ends near the target: within the GNI's
+    # error at h = 0.1 (a second-order method, errors of order h² times the motion's scale)
+    assert 0 < result.continuous_miss <= 0.05
+    sol = result.solution
+    R = np.asarray(sol.R[-1])
+    # back at the origin and at rest, yet turned: the holonomy of rolling (a closed path of the centre)
+    assert np.allclose(R, [[0, -1, 0], [1, 0, 0], [0, 0, 1]], atol=1e-8)
+    assert np.max(np.abs(np.asarray(sol.q[len(sol.q) // 2]))) > 0.1  # the centre went round a loop
+
+
+def test_ball_plate_solution_is_a_kkt_point_by_central_differences(solved):
+    """Independent check of optimality: the gradient of the cost by hand (effort h w u, smoothness
+    (s/h) DᵀD u with D the step differences), the target's Jacobian by central differences of
+    re-simulations; then ∇J + J_gᵀλ = 0 for a λ (no bounds)."""
+    problem, result = solved["ball-plate"]
+    U = np.asarray(result.controls)
+    K, m = U.shape
+    R_target = np.asarray(problem.target["R"])
+
+    def g(Uflat):
+        sol = _resimulate(problem, Uflat.reshape(K, m))
+        Rf = np.asarray(sol.R[-1])
+        rot = 0.5 * (R_target.T @ Rf - Rf.T @ R_target)  # ≈ hat(log) near the target
+        return np.concatenate([np.asarray(sol.q[-1]), np.asarray(sol.v[-1, :2]), [rot[2, 1], rot[0, 2], rot[1, 0]]])
+
+    x = U.ravel()
+    eps = 1e-6
+    Jg = np.stack([(g(x + eps * e) - g(x - eps * e)) / (2 * eps) for e in np.eye(x.size)], axis=1)
+    D = np.diff(np.eye(K), axis=0)  # (K-1, K): u_{k+1} - u_k
+    grad = (problem.h * problem.effort * U + problem.smoothness / problem.h * (D.T @ D @ U)).ravel()
+    lam = np.linalg.lstsq(Jg.T, -grad, rcond=None)[0]
+    assert np.max(np.abs(grad + Jg.T @ lam)) <= 1e-6 * max(1.0, np.max(np.abs(grad)))
+    # the derivative the solver used (reverse mode through the GNI's implicit steps on R² × SO(3))
+    # is the central differences' (at the target log(R_tᵀR) and the skew part agree to first order)
+    assert np.max(np.abs(result.target_jacobian - Jg)) <= 1e-7 * np.max(np.abs(Jg))
+
+
+def test_problem_errors_name_the_entry():
+    base = tomllib.loads(WORKED_PROBLEMS["sleigh-steering"])
+    cases = [
+        ({**base, "horizon": {"h": -1.0, "steps": 10}}, "horizon.h"),
+        ({**base, "horizon": {"h": 0.1, "steps": 0}}, "horizon.steps"),
+        ({**base, "inputs": {"torque": {"dphi": 1.0}}}, "unknown velocity 'dphi'"),
+        ({**base, "system": {"model": "no-such-model"}}, "system.model"),
+        ({**base, "target": {"z": 1.0}}, "target: unknown name 'z'"),
+        ({**base, "solver": {"bounds": [1.0, -1.0]}}, "bounds"),
+        ({**base, "extra": {}}, "unknown section"),
+        ({k: v for k, v in base.items() if k != "horizon"}, "[horizon]"),
+    ]
+    for data, words in cases:
+        with pytest.raises(gnipy.InputError, match=None) as info:
+            load_problem(data).solve() if "bounds" in words or "target" in words else load_problem(data)
+        assert words in str(info.value), (words, str(info.value))
+
+
+def test_unforced_system_and_bad_warm_start_are_refused():
+    sleigh = gnipy.make_system("chaplygin-sleigh")
+    with pytest.raises(gnipy.InputError, match="system: an optimal-control problem needs inputs"):
+        solve_optimal_control(sleigh, {"x": 1.0}, h=0.1, steps=10)
+    problem = load_problem("sleigh-steering")
+    with pytest.raises(gnipy.InputError, match="controls0"):
+        solve_optimal_control(problem.system, problem.target, h=0.1, steps=10, q0=problem.q0, v0=problem.v0,
+                              controls0=np.zeros((9, 1)))
+    with pytest.raises(gnipy.InputError, match="steps"):
+        solve_optimal_control(problem.system, problem.target, h=0.1, steps=0)
+
+
+def test_gni_control_cli_writes_the_run_and_its_inputs(tmp_path, solved):
+    from gnipy.cli import app
+
+    runner = CliRunner()
+    printed = runner.invoke(app, ["control", "--example", "sleigh-steering", "--print"])
+    assert printed.exit_code == 0
+    assert tomllib.loads(printed.output) == tomllib.loads(WORKED_PROBLEMS["sleigh-steering"])
+    # the problem from a file, on a coarser grid (h = 0.1: 40 steps)
+    text = WORKED_PROBLEMS["sleigh-steering"].replace("h = 0.05\nsteps = 80", "h = 0.1\nsteps = 40")
+    assert "steps = 40" in text
+    (tmp_path / "short.toml").write_text(text)
+    out, fig = tmp_path / "short.nc", tmp_path / "short.png"
+    res = runner.invoke(app, ["control", str(tmp_path / "short.toml"), "--out", str(out), "--plot", str(fig)])
+    assert res.exit_code == 0, res.output
+    assert "target residual" in res.output and fig.stat().st_size > 0
+    ds = xr.open_dataset(out)
+    assert ds.attrs["control_success"] == 1 and ds["u"].shape == (40, 1)
+    assert list(ds["input"].values) == ["torque"]
+    problem = load_problem(text)
+    sol = _resimulate(problem, ds["u"].values)
+    assert np.max(np.abs(np.asarray(sol.q[-1]) - [1.0, 0.5, 0.0])) <= 1e-8
+    assert np.array_equal(np.asarray(sol.q), ds["q"].values)
+    ds.close()
+    # no --out, unknown example: usage errors naming the option
+    assert runner.invoke(app, ["control", "--example", "nope", "--out", str(out)]).exit_code == 2
+    assert "--out" in runner.invoke(app, ["control", "--example", "ball-plate"]).output
+
+
+def test_control_result_file_round_trip(tmp_path, solved):
+    problem, result = solved["ball-plate"]
+    path = tmp_path / "ball.nc"
+    write_control_result(result, problem, path)
+    ok, _ = gnipy.verify_netcdf(path)
+    assert ok
+    with xr.open_dataset(path) as ds:
+        assert np.array_equal(ds["u"].values, np.asarray(result.controls))
+        assert list(ds["input"].values) == ["ax", "ay"]
+        assert float(ds.attrs["control_target_residual"]) == result.target_residual
+        assert "ball-plate" in ds.attrs["control_problem_file"]
+
+
+def test_multiple_shooting_finds_the_single_shooting_optimum(solved):
+    """Two segments (the state at the boundary an unknown, its defect a constraint) reach the same
+    discrete optimum as single shooting: the same cost and controls, the target met."""
+    problem, one = solved["sleigh-steering"]
+    kw = dict(h=problem.h, steps=problem.steps, q0=problem.q0, v0=problem.v0, controls0=problem.controls0,
+              bounds=problem.bounds, check_continuous=False)
+    two = solve_optimal_control(problem.system, problem.target, segments=2, **kw)
+    assert one.success and two.success, (one.message, two.message)
+    assert abs(one.cost - two.cost) <= 1e-8 * one.cost
+    assert np.max(np.abs(one.controls - two.controls)) <= 1e-5
+    with pytest.raises(gnipy.InputError, match="segments"):
+        solve_optimal_control(problem.system, problem.target, segments=0, **kw)
