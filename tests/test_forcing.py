@@ -290,3 +290,56 @@ def test_gradient_with_respect_to_the_controls(sleigh):
         dU[k, 0] = eps
         fd = (float(cost(U0 + dU)) - float(cost(U0 - dU))) / (2 * eps)
         assert abs(g[k, 0] - fd) <= 1e-6 * np.max(np.abs(g)) + 1e-9, (k, g[k, 0], fd)
+
+
+def test_held_pushes_from_a_later_start_with_a_shortened_last_step_are_exact():
+    """The knife edge pushed along its blade by held forces c_k (step k, from t0 = 1.7), to a final
+    time 8.3 steps later: the last step is shortened and keeps c_8. Along the blade the speed is
+    piecewise linear and the position piecewise quadratic, exactly; the forced trapezoid (velocity
+    Verlet here) follows them at every node. Continuing the run from its state at step 4 with the
+    remaining inputs gives the same nodes."""
+    m, phi0, s0, h, t0 = 1.0, 0.4, 0.3, 0.25, 1.7
+    c = np.array([0.7, -0.3, 1.1, 0.0, 0.5, -0.8, 0.2, 0.9, -0.4])
+    sysf = make_system("knife-edge", alpha=0.0, m=m).with_force(
+        lambda q, v, u, t: u[0] * jnp.array([jnp.cos(q[2]), jnp.sin(q[2]), 0.0]), inputs=1)
+    q0 = np.array([0.1, -0.2, phi0])
+    v0 = s0 * np.array([np.cos(phi0), np.sin(phi0), 0.0])
+    t_final = t0 + 8.3 * h
+    sol = simulate(sysf, "gni-trapezoid", q0, v0, h=h, t_final=t_final, t0=t0, controls=c)
+    lengths = np.array([h] * 8 + [0.3 * h])  # the steps' durations
+    speed = s0 + np.concatenate([[0.0], np.cumsum(c * lengths / m)])
+    dist = np.concatenate([[0.0], np.cumsum(speed[:-1] * lengths + 0.5 * c / m * lengths**2)])
+    q = np.stack([q0[0] + np.cos(phi0) * dist, q0[1] + np.sin(phi0) * dist, np.full(10, phi0)], axis=1)
+    assert np.allclose(np.asarray(sol.t), t0 + np.concatenate([[0.0], np.cumsum(lengths)]), atol=1e-15)
+    assert np.max(np.abs(np.asarray(sol.q) - q)) < 1e-14
+    assert np.max(np.abs(np.asarray(sol.v)[:, 0] - np.cos(phi0) * speed)) < 1e-14
+    first = simulate(sysf, "gni-trapezoid", q0, v0, h=h, steps=4, t0=t0, controls=c[:4])
+    rest = simulate(sysf, "gni-trapezoid", h=h, t_final=t_final, t0=float(first.t[-1]), controls=c[4:],
+                    state0=first.final_state)
+    assert np.max(np.abs(np.asarray(rest.q) - np.asarray(sol.q)[4:])) < 1e-15
+
+
+def test_a_batch_member_has_its_single_runs_diagnostics(sleigh):
+    """A batch of initial conditions of one forced system: each member's hidden-momentum diagnostics
+    (λ at each node's time and input) are those of its single run."""
+    q0, v0 = (np.asarray(x) for x in sleigh.defaults)
+    single = simulate(sleigh, "gni-trapezoid", q0, v0, h=0.05, steps=40, controls=signal)
+    batch = simulate(sleigh, "gni-trapezoid", np.stack([q0, q0]), np.stack([v0, 0.5 * v0]), h=0.05, steps=40,
+                     controls=signal, project_v0=True)
+    member = batch.member(0)
+    assert np.max(np.abs(np.asarray(member.q) - np.asarray(single.q))) <= 1e-15
+    assert np.max(np.abs(np.asarray(member.hidden_expected) - np.asarray(single.hidden_expected))) <= 1e-14
+    assert np.ptp(np.asarray(single.hidden_expected)) > 1e-3  # it changes with the input along the run
+
+
+def test_controls_are_checked_under_a_transformation_and_before_anything_else(sleigh):
+    q0, v0 = (np.asarray(x) for x in sleigh.defaults)
+
+    def cost(U):
+        return simulate(sleigh, "gni-trapezoid", q0, v0, h=0.05, t_final=0.4, controls=U).q[-1, 0]
+
+    with pytest.raises(InputError, match=r"^controls: 3 per-step values for 8 steps"):
+        jax.grad(cost)(jnp.ones((3, 1)))
+    for kw, name in [(dict(h=None, steps=4), "h"), (dict(h="x", steps=4), "h"), (dict(h=0.05, steps="a"), "steps")]:
+        with pytest.raises(InputError, match=rf"^{name}:"):
+            simulate(sleigh, "gni-trapezoid", q0, v0, controls=np.ones((4, 1)), **kw)

@@ -109,7 +109,8 @@ def node_diagnostics(system, b, v, p, hidden, h, t=None):
     return ratio(norm_hidden), ratio(0.5 * jnp.abs(h) * norm_impulse), energy_plus
 
 
-def saved_node_diagnostics(system, b, v, p, hidden, h, *, batched_system: bool = False, batch: bool = False):
+def saved_node_diagnostics(system, b, v, p, hidden, h, *, batched_system: bool = False, batch: bool = False,
+                           times=None):
     """:func:`node_diagnostics` at every saved node: `(hidden_ratio, expected_ratio, energy_plus)`,
     each (T,) or, for a batch, (B, T).
 
@@ -123,6 +124,8 @@ def saved_node_diagnostics(system, b, v, p, hidden, h, *, batched_system: bool =
         h: the step size.
         batched_system: `system` is a stack of member systems.
         batch: the arrays have a leading member axis.
+        times: the saved nodes' times (T,), for a forced system's λ at each node's time and
+            input (None: at the drive's step; unforced systems do not need them).
     """
     import jax
 
@@ -137,17 +140,20 @@ def saved_node_diagnostics(system, b, v, p, hidden, h, *, batched_system: bool =
         return np.pad(a, widths, mode="edge")
 
     b, v, p, hidden = jax.tree_util.tree_map(pad, (b, v, p, hidden))
-    out = _saved_node_diagnostics(system, batched_system, batch, b, v, p, hidden, np.float64(h))
+    t = None if times is None else np.pad(np.asarray(times, np.float64)[:T], (0, padded - T), mode="edge")
+    out = _saved_node_diagnostics(system, batched_system, batch, b, v, p, hidden, np.float64(h), t)
     return tuple(np.asarray(x)[:, :T] if batch else np.asarray(x)[:T] for x in out)
 
 
 @jit
-def _saved_node_diagnostics(system, batched_system, batch, b, v, p, hidden, h):
+def _saved_node_diagnostics(system, batched_system, batch, b, v, p, hidden, h, t=None):
     import equinox as eqx
     import jax
 
     def nodes(s, b_, v_, p_, x_):
-        return jax.vmap(lambda bb, vv, pp, xx: node_diagnostics(s, bb, vv, pp, xx, h))(b_, v_, p_, x_)
+        if t is None:
+            return jax.vmap(lambda bb, vv, pp, xx: node_diagnostics(s, bb, vv, pp, xx, h))(b_, v_, p_, x_)
+        return jax.vmap(lambda bb, vv, pp, xx, tt: node_diagnostics(s, bb, vv, pp, xx, h, tt))(b_, v_, p_, x_, t)
 
     if not batch:
         return nodes(system, b, v, p, hidden)

@@ -393,7 +393,7 @@ def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, 
         jax.block_until_ready(out)
     batch_diag = _diagnostic_meta(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
                                   batched_system=sys_batched, batch=True,
-                                  conserves_energy=bool(getattr(method, "conserves_energy", False)))
+                                  conserves_energy=bool(getattr(method, "conserves_energy", False)), times=times)
     space = system.space
     q, R = space.coordinates(out["b"]), space.orientation(out["b"])
     v, p, energy, residual = out["v"], out["p"], out["energy"], out["residual"]

@@ -111,8 +111,11 @@ class Drive(eqx.Module):
         contains t, or `signal(t)`."""
         if self.signal is not None or self.values is None:
             return self.u(t)
+        # the step whose start t0 + k h is the last at or before t, on the grid of the reference's
+        # jump times (a floor of (t - t0)/h rounds a node's own time into the step before it)
         K = self.values.shape[0]
-        k = jnp.floor((t - self.t0) / self.h).astype(jnp.int32)
+        starts = self.t0 + self.h * jnp.arange(1, K, dtype=self.t0.dtype)
+        k = jnp.searchsorted(starts, t, side="right")
         return self.values[jnp.clip(k, 0, K - 1)]
 
 

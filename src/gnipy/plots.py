@@ -450,15 +450,16 @@ def plot_fit(result, path=None, *, title: str | None = None, overwrite: bool = F
         ax.grid(True, alpha=0.3)
     ax = axes[-1]
     res = np.asarray(result.residuals, dtype=float)
-    scale = None
-    if result.sigma_known and obs.sigma is not None:
-        scale = np.broadcast_to(np.asarray(obs.sigma, dtype=float), res.shape)
+    weighted = None
+    if result.sigma_known:  # sigma given to fit() or held by the observations: the weighted residuals
+        w = np.asarray(result.weighted_residuals(), dtype=float)
+        if w.size == res.size:
+            weighted = np.where(np.isnan(res), np.nan, w.reshape(res.shape))
     for j, name in enumerate(names):
-        r = res[:, j] if scale is None else res[:, j] / scale[:, j]
-        ax.plot(t_obs, r, ".", ms=4, label=name)
+        ax.plot(t_obs, res[:, j] if weighted is None else weighted[:, j], ".", ms=4, label=name)
     ax.axhline(0.0, color="k", lw=0.8)
     ax.set_xlabel("t")
-    ax.set_title("residuals (model − observed)" + (" / sigma" if scale is not None else ""), fontsize="medium")
+    ax.set_title("residuals (model − observed)" + (" / sigma" if weighted is not None else ""), fontsize="medium")
     ax.legend(loc="best", fontsize="small")
     ax.grid(True, alpha=0.3)
     if title is None:

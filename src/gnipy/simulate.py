@@ -270,7 +270,8 @@ def simulate(
     if progress is not False and progress is not None and progress is not True and not callable(progress):
         raise InputError(f"progress: expected True, False or a callable(steps_done, steps_total), got {progress!r}")
     if systems is None and system.is_forced:
-        system = _drive(system, controls, h, t0, steps)
+        if controls is None and system.inputs:
+            _drive(system, controls, 1.0, 0.0, None)  # the error that names `controls`
     elif controls is not None:
         raise InputError(
             "controls: the system has no force to drive (give System(..., force=F, inputs=m) or system.with_force(F, m))"
@@ -278,14 +279,19 @@ def simulate(
     elif systems is not None and any(s.is_forced for s in systems):
         raise InputError("system: batches of forced systems are not supported; run the members one at a time")
 
-    traced = _traced(system if systems is None else systems, q0, v0, R0, h, t0, state0)
+    traced = _traced(system if systems is None else systems, q0, v0, R0, h, t0, state0,
+                     None if callable(controls) else controls)
     if traced:
         from .inputs import concrete_value
         from .transformed import simulate_traced
 
-        if system.is_forced and steps is not None and not _traced(steps):
-            h_c = concrete_value(h)  # the checks of an untransformed call, where the values are known
-            _check_forced_run(system, 1.0 if h_c is None else float(h_c), _whole_steps(steps))
+        if system.is_forced:
+            system = _drive(system, controls, h, t0, steps)
+            # the checks of an untransformed call, where the values are known at trace time
+            h_c, t0_c = concrete_value(h), concrete_value(t0)
+            if h_c is not None and t0_c is not None:
+                _, n_c, part_c = resolve_run(h_c, steps, t_final, float(t0_c), backward=True)
+                _check_forced_run(system, float(h_c), n_c + (1 if part_c else 0))
 
         method = backward(method, h, system)
         return simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, saveat, t0, state0,
@@ -294,6 +300,7 @@ def simulate(
     t0 = _number("t0", t0, positive=False)
     h, n, partial = resolve_run(h, steps, t_final, t0, backward=True)
     if system.is_forced:
+        system = _drive(system, controls, h, t0, None)
         _check_forced_run(system, h, n + (1 if partial else 0))
     method = backward(method, h, system)
     if n > MAX_STEPS:
@@ -375,7 +382,8 @@ def simulate(
 
 def _drive(system, controls, h, t0, steps):
     """The forced `system` with its inputs attached (a :class:`gnipy.forcing.Drive` on the grid
-    t0 + k h); the controls' shape checked where it is concrete."""
+    t0 + k h); the controls' shape checked where it is concrete (their number against the steps:
+    :func:`_check_forced_run`)."""
     from .forcing import Drive
 
     m = system.inputs
@@ -401,8 +409,6 @@ def _drive(system, controls, h, t0, steps):
                 raise InputError(f"controls: expected shape (steps, {m}), got {np.shape(controls)}")
             if not np.all(np.isfinite(arr)):
                 raise InputError("controls: contains NaN or infinite values")
-            if steps is not None and not _traced(steps) and arr.shape[0] < int(steps):
-                raise InputError(f"controls: {arr.shape[0]} per-step values for {int(steps)} steps")
             values = arr.astype(np.float64)
         else:
             values = jnp.asarray(controls, jnp.float64)
@@ -498,7 +504,8 @@ def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False
         diag = prepared[0].node_diagnostics(prepared[1], h, int(np.shape(nodes[1])[0]), times=times)
         out |= dict(zip(_DIAGNOSTIC_ARRAYS, diag))
     elif gni_family:
-        diag = saved_node_diagnostics(core, *nodes, h, batched_system=batched_system, batch=batch)
+        diag = saved_node_diagnostics(core, *nodes, h, batched_system=batched_system, batch=batch,
+                                      times=times if system.is_forced else None)
         out |= dict(zip(_DIAGNOSTIC_ARRAYS, diag))
     return out
 

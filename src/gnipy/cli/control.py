@@ -46,7 +46,7 @@ def control(
 
     The problem (a TOML file, or a worked problem with --example) names a model, how the inputs act
     on it, the start, the horizon (h, steps), the target and the solver's options. The solution
-    (direct single shooting with SQP on exact gradients, then Gauss-Newton polish; gnipy.control)
+    (direct shooting with SQP on exact gradients, then Gauss-Newton polish; gnipy.control)
     is written to --out: the run's nodes as `gni run` writes them, the inputs u(control_step,
     input) and the solver's figures (cost, target and KKT residuals, iterations) as attributes.
     It exits with code 1 when the solver does not converge (the file is written all the same).

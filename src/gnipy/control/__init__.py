@@ -9,7 +9,7 @@ to steer them.
   standard errors from the Jacobian (:class:`FitResult`);
 - :mod:`gnipy.control.optimal_control`: :func:`solve_optimal_control` chooses per-step inputs that
   steer a system to a terminal target at least cost, with the GNI's steps as the dynamics (direct
-  single shooting; :class:`ControlResult`);
+  single or multiple shooting; :class:`ControlResult`);
 - :mod:`gnipy.control.problems`: optimal-control problems as TOML files (`gni control`), the
   worked problems (:data:`WORKED_PROBLEMS`) and the result file.
 """

@@ -205,6 +205,7 @@ def load_problem(source, *, name: str = "problem") -> ControlProblem:
     from ..registry import get_model
 
     system_sec = _section(data, "system")
+    _known_keys(data, {"system": {"model", "params"}, "start": {"q0", "v0", "R0"}, "horizon": {"h", "steps"}})
     model = system_sec.get("model")
     if not isinstance(model, str):
         raise InputError("system.model: expected a model name (see `gni models`)")
@@ -276,6 +277,15 @@ def _read(source, name: str, also: str = "") -> tuple[dict, str, Path, str]:
         return dict(source), text, base, name
     raise InputError(f"problem: expected a path, TOML text, a mapping{' or ' + also if also else ''}, "
                      f"got {type(source).__name__}")
+
+
+def _known_keys(data, known: dict[str, set[str]]) -> None:
+    """Refuse keys a section does not have (a misspelt key would otherwise be a default)."""
+    for section, keys in known.items():
+        unknown = set(data.get(section) or {}) - keys
+        if unknown:
+            raise InputError(f"{section}: unknown key(s) {', '.join(sorted(unknown))}; expected "
+                             f"{', '.join(sorted(keys))}")
 
 
 def _section(data, key) -> Mapping:
@@ -351,7 +361,7 @@ def write_control_result(result, problem: ControlProblem | None, path, *, overwr
         "control_message": str(result.message),
         "control_wall_time_s": float(result.wall_time),
         "control_continuous_miss": float(result.continuous_miss),
-        "control_transcription": "direct single shooting on the method's steps (gnipy.control)",
+        "control_transcription": "direct shooting on the method's steps (gnipy.control)",
     }
     if problem is not None and problem.source:
         attrs["control_problem_file"] = problem.source
@@ -425,6 +435,7 @@ def load_fit_problem(source, *, name: str = "fit") -> FitProblem:
     from ..registry import get_model
 
     system_sec = _section(data, "system")
+    _known_keys(data, {"system": {"model", "params"}, "start": {"q0", "v0", "R0"}})
     model = system_sec.get("model")
     if not isinstance(model, str):
         raise InputError("system.model: expected a model name (see `gni models`)")

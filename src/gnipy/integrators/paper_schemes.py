@@ -41,7 +41,7 @@ Forces (:mod:`gnipy.forcing`). Each map takes the discrete forces of its discret
 (Euler A: $f^- = hF(q_k)$; Euler B: $f^+ = hF(q_{k+1})$; RATTLE: the trapezoid, $f^\\mp = \\tfrac h2F$
 at the nodes) in the forced transforms, as the GNI does, so that each stays the GNI with its
 $l_d$: $f^-$ joins the first kick and $f^+$ the second (:func:`_forced_kick_drift_kick`; the drift
-is then a Newton solve when $f^-$ depends on the step's velocity). The composition Euler A ∘ Euler B
+is then a Newton solve whenever $f^-$ has nodes, as it depends on the step). The composition Euler A ∘ Euler B
 takes its second half step at $t + h/2$. SHAKE refuses forces (:meth:`Shake.check`).
 
 :class:`Shake` is the two-step form (Afin) on $(q_{k-1}, q_k, q_{k+1})$. :class:`EulerABComposition`

@@ -124,6 +124,11 @@ def simulate_to_file(
     release_compiled_programs_if_needed()
     if not isinstance(system, System):
         raise InputError(f"system: expected a gnipy.System, got {type(system).__name__}")
+    if system.is_forced:
+        # a resumed run is matched to its interrupted one by the model's name and parameters, which
+        # do not describe a force, and the chunks take no controls: run it with gnipy.simulate
+        raise InputError("system: a forced system (System(..., force=F)) is not streamed to a file; run it with "
+                         "gnipy.simulate (controls=...) and write the Solution with gnipy.write_netcdf")
     if method is None:  # as simulate: the model's measured default
         from ..registry import default_method_for
 
