@@ -41,6 +41,10 @@ What is measured (all gnipy runs in float64, the step size is h = 0.01 unless sa
    (rtol 1e-13; its own accuracy is estimated by the rtol 1e-12 solution), then the loosest DOP853
    tolerance reaching the same final error (:func:`benchmarks.continuous.tuned_dop853`) and the
    wall times of both (gnipy without compilation; compilation reported separately).
+7. **native** -- the native CPU backend (`backend="native"`, issue 16) against the same GNI steps
+   written by hand in Numba (:mod:`benchmarks.numba_gni`), one trajectory and batched, and the
+   native build time in fresh processes (:mod:`benchmarks.native`). Sections 1-5 run the XLA
+   backend (`backend="xla"`) explicitly.
 6. **GPU** -- if JAX sees a GPU, sections 1 and 2 are run on it as well (the CPU rows are always
    run on the CPU device); the subprocess sections (3, 4) run on the CPU (``JAX_PLATFORMS=cpu``).
 
@@ -115,7 +119,7 @@ QUICK = Config(
     accuracy_T=(100.0,), accuracy_h=(0.01,), dop_reps=3, idle_sample_s=0.3,
 )
 
-SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy")
+SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy", "native")
 
 #: (case, method) of section 1; the case names are those of benchmarks.numpy_gni.
 PER_STEP_CASES = (
@@ -302,6 +306,7 @@ def machine_info() -> dict[str, str]:
         "jax / jaxlib": f"{version('jax')} / {version('jaxlib')}",
         "numpy / scipy": f"{version('numpy')} / {version('scipy')}",
         "gnipy / equinox / optimistix": f"{version('gnipy')} / {version('equinox')} / {version('optimistix')}",
+        "llvmlite / numba": f"{version('llvmlite')} / {version('numba')}",
         "gnipy checkout": git_revision(),
         "JAX backend": jax.default_backend(),
         "JAX devices": ", ".join(f"{d.platform}:{d.id} ({d.device_kind})" for d in jax.devices()),
@@ -478,7 +483,7 @@ def gnipy_runner(system, method, q0, v0, h=H):
     import gnipy
 
     def run(steps):
-        sol = gnipy.simulate(system, method, q0, v0, h=h, steps=steps, save_every=steps)
+        sol = gnipy.simulate(system, method, q0, v0, h=h, steps=steps, save_every=steps, backend="xla")
         jax.block_until_ready(sol.q)
         return sol
 
@@ -709,7 +714,7 @@ spec = json.loads(sys.argv[1])
 system, q0, v0 = build(spec["case"])
 
 def run():
-    sol = gnipy.simulate(system, spec["method"], q0, v0, h=spec["h"], steps=spec["steps"])
+    sol = gnipy.simulate(system, spec["method"], q0, v0, h=spec["h"], steps=spec["steps"], backend="xla")
     jax.block_until_ready(sol.q)
 
 t = time.perf_counter(); run(); first = time.perf_counter() - t
@@ -730,7 +735,7 @@ for name, method, B, S in spec["runs"]:
     Q, V = (q0, v0) if B == 1 else ensemble(name, system, q0, v0, B)
 
     def run(steps):
-        sol = gnipy.simulate(system, method, Q, V, h=spec["h"], steps=steps, save_every=steps)
+        sol = gnipy.simulate(system, method, Q, V, h=spec["h"], steps=steps, save_every=steps, backend="xla")
         jax.block_until_ready(sol.q)
         return sol
 
@@ -779,13 +784,13 @@ if spec["mode"] == "simulate":
     # compile first, with a short run that saves as many nodes (the same compiled program), to tell
     # the memory of the compilation from that of the run
     nodes = spec["steps"] // spec["stride"] + 1
-    sol = gnipy.simulate(system, spec["method"], q0, v0, h=spec["h"], steps=nodes - 1, save_every=1)
+    sol = gnipy.simulate(system, spec["method"], q0, v0, h=spec["h"], steps=nodes - 1, save_every=1, backend="xla")
     jax.block_until_ready(sol.q)
     out["compiled_peak_kib"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     del sol
     t = time.perf_counter()
     sol = gnipy.simulate(system, spec["method"], q0, v0, h=spec["h"], steps=spec["steps"],
-                         save_every=spec["stride"])
+                         save_every=spec["stride"], backend="xla")
     jax.block_until_ready(sol.q)
     out["nodes"] = int(sol.q.shape[0])
 else:
@@ -1067,6 +1072,9 @@ def targets(results: dict) -> list[list[str]]:
         rows.append([f"gnipy faster than DOP853 at matched accuracy: Chaplygin sphere T = {g(T)}, h = {g(h)}",
                      f"DOP853/gnipy = {g(r['ratio'])} (error {g(r['err'])})", met,
                      f"gnipy {g(r['ratio'])}× faster" if r["ratio"] >= 1 else f"gnipy {g(1 / r['ratio'])}× slower"])
+    from benchmarks.native import native_targets
+
+    rows += native_targets(results, _how_far, LABELS, g, mrate)
     return rows
 
 
@@ -1115,6 +1123,12 @@ def write_markdown(path: Path, rep: Report, info: dict, meta: dict, results: dic
             out.append("")
     out += ["## 6. GPU", "", gpu_note, ""]
     path.write_text("\n".join(out))
+
+
+def _bench_native(cfg, rep, results, load) -> None:
+    from benchmarks.native import bench_native
+
+    bench_native(cfg, rep, results, load)
 
 
 def parse_args(argv):
@@ -1169,6 +1183,7 @@ def main(argv=None) -> int:
         "compile": lambda load: bench_compile(cfg, rep, results, load),
         "memory": lambda load: bench_memory(cfg, rep, results, load),
         "accuracy": lambda load: bench_accuracy(cfg, rep, devices, results, load),
+        "native": lambda load: _bench_native(cfg, rep, results, load),
     }
     for key in SECTIONS:
         if key not in args.sections:

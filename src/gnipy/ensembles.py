@@ -14,6 +14,8 @@ values, e.g. from :func:`model_systems`). This module holds what that needs:
 
 from __future__ import annotations
 
+import warnings
+
 from collections.abc import Sequence
 
 import equinox as eqx
@@ -367,7 +369,8 @@ def is_batch(system: System, q0, v0, R0) -> bool:
     return False
 
 
-def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0, throw, meta, reporter):
+def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0, throw, meta, reporter,
+                   backend_asked: str = "auto"):
     """The batched run of :func:`gnipy.simulate` (B members: initial conditions and/or systems),
     one vmapped program; a failed member's nodes after its failure are NaN."""
     from .simulate import _DIAGNOSTIC_ARRAYS, _diagnostic_meta
@@ -386,9 +389,24 @@ def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, 
     method = method.prepare(system, first_b0)
     hj = np.float64(h)
     state0 = _init_batch(method, core, sys_batched, b0, v0, hj)
-    out = _run_batch(method, core, sys_batched, state0, hj, np.asarray(plan.lengths, np.int32), np.int32(plan.tail),
-                     np.float64(partial * h), bool(partial), plan.save_final, False, reporter.active,
-                     np.int32(reporter.stride))
+    out = None
+    if meta.get("backend") == "native":
+        from .native.backend import native_loop, run_native
+
+        loop = native_loop(method, core, jax.tree_util.tree_map(lambda a: a[0], state0), batch=True)
+        if hasattr(loop, "run"):
+            out = run_native(loop, method, core, state0, hj, plan.lengths, plan.tail, partial * h, partial=bool(partial),
+                             save_final=plan.save_final, save_states=False, batched=True,
+                             progress_stride=reporter.stride if reporter.active else None)
+        else:
+            meta = dict(meta, backend="xla")
+            if backend_asked == "native":
+                warnings.warn(f"backend='native': running on XLA, because the step does not lower: {loop}",
+                              RuntimeWarning, stacklevel=3)
+    if out is None:
+        out = _run_batch(method, core, sys_batched, state0, hj, np.asarray(plan.lengths, np.int32),
+                         np.int32(plan.tail), np.float64(partial * h), bool(partial), plan.save_final, False,
+                         reporter.active, np.int32(reporter.stride))
     if reporter.active:
         jax.block_until_ready(out)
     batch_diag = _diagnostic_meta(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,

@@ -126,18 +126,7 @@ class Prepared:
                     out = run_nodes(method, system, state, h, lengths, tail, h_last, partial=config[1],
                                     save_final=config[2], save_states=config[3], progress=config[4],
                                     progress_stride=stride)
-                    out["q"] = system.space.coordinates(out["b"])
-                    out["R"] = system.space.orientation(out["b"])
-                    out["t"] = times
-                    if out["hidden"] is not None:
-                        T = out["v"].shape[0]
-                        pad = node_padding(T) - T
-
-                        def edge(a):
-                            return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
-
-                        out["padded"] = jax.tree_util.tree_map(edge, (out["b"], out["v"], out["p"], out["hidden"]))
-                    return out
+                    return _complete(system, out, times)
 
                 return run
 
@@ -146,6 +135,36 @@ class Prepared:
         start = state0 if from_state else self._start
         return program(self._leaves, start, np.float64(h), np.asarray(lengths, np.int32), np.int32(tail),
                        np.float64(h_last), np.int32(progress_stride), np.asarray(times, np.float64))
+
+    def run_native(self, state0, h: float, lengths, tail: int, h_last: float, times, *, partial: bool,
+                   save_final: bool, save_states: bool, progress_stride: int | None = None):
+        """:meth:`run` on the native backend (:mod:`gnipy.native`): the same result, or None when
+        the method's step does not lower (then `self.cache["native"]` holds the reason)."""
+        from .native.backend import native_loop, run_native
+
+        if state0 is None:
+            program = self._runs.get("init")
+            if program is None:
+                self._split()
+                rebuild = self._rebuild
+
+                def make():
+                    def init(leaves, start, h):
+                        method, system = rebuild(leaves)
+                        return method.init(system, start[0], start[1], h)
+                    return init
+
+                program = _program(None if self._key is None else ("init", self._key), make)
+                self._runs["init"] = program
+            self._split()
+            state0 = program(self._leaves, self._start, np.float64(h))
+        loop = native_loop(self.method, self.core, state0)
+        if not hasattr(loop, "run"):
+            self.cache["native"] = str(loop)
+            return None
+        return run_native(loop, self.method, self.core, state0, h, lengths, tail, h_last, partial=partial,
+                          save_final=save_final, save_states=save_states, times=times, complete=_complete,
+                          progress_stride=progress_stride)
 
     def node_diagnostics(self, padded, h: float, T: int, times=None):
         """:func:`gnipy.diagnostics.node_diagnostics` at the first `T` of the padded saved
@@ -178,6 +197,23 @@ class Prepared:
         out = program(self._sys_leaves, *padded, np.float64(h), t)
         # device arrays, not waited for: the run's caller goes on while they are computed
         return out if out[0].shape[0] == T else _first(out, T)
+
+
+def _complete(system, out, times):
+    """A run's result completed inside its program: the nodes' coordinates `q`, orientations `R`,
+    times `t`, and for the GNI family the nodes padded for :meth:`Prepared.node_diagnostics`."""
+    out["q"] = system.space.coordinates(out["b"])
+    out["R"] = system.space.orientation(out["b"])
+    out["t"] = times
+    if out["hidden"] is not None:
+        T = out["v"].shape[0]
+        pad = node_padding(T) - T
+
+        def edge(a):
+            return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
+
+        out["padded"] = jax.tree_util.tree_map(edge, (out["b"], out["v"], out["p"], out["hidden"]))
+    return out
 
 
 def _state_reading(system, method):

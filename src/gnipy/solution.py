@@ -93,6 +93,7 @@ class Solution(eqx.Module):
             a drift of the reported energy is diagnosed (:attr:`energy_verdict`).
         orientation: what R is (how it was reconstructed, and whether it is a physical attitude),
             a sentence (:attr:`gnipy.System.orientation_description`); empty on $\\mathbb{R}^n$.
+        backend: which compiler ran the step loop: `"xla"` or `"native"` (:mod:`gnipy.native`).
         system, method, h, coordinates: metadata.
 
     **Batches.** A solution of B trajectories (from :func:`gnipy.simulate` with batched
@@ -133,6 +134,7 @@ class Solution(eqx.Module):
     conserved: str = eqx.field(static=True, default="")
     orientation: str = eqx.field(static=True, default="")
     energy_invariant: bool = eqx.field(static=True, default=False)
+    backend: str = eqx.field(static=True, default="xla")
 
     @classmethod
     def of(cls, **fields) -> "Solution":
@@ -230,7 +232,7 @@ class Solution(eqx.Module):
             h=self.h, coordinates=self.coordinates, velocities=self.velocities, params=params, start=self.start,
             hidden_momentum=row(self.hidden_momentum), hidden_expected=row(self.hidden_expected),
             energy_plus=row(self.energy_plus), conserved=self.conserved,
-            orientation=self.orientation, energy_invariant=self.energy_invariant,
+            orientation=self.orientation, energy_invariant=self.energy_invariant, backend=self.backend,
         )
 
     def failures(self) -> list[dict[str, Any]]:
@@ -325,7 +327,7 @@ class Solution(eqx.Module):
         ds.attrs.update(
             {
                 "gnipy_version": __version__, "model": self.system, "method": self.method, "h": float(self.h),
-                "steps": int(self.steps), "start": self.start, "result": int(self.result),
+                "steps": int(self.steps), "start": self.start, "result": int(self.result), "backend": self.backend,
                 "newton_iterations_total": int(np.asarray(self.iterations)[0]),
                 "newton_iterations_max": int(np.asarray(self.iterations)[1]),
                 "created": created,

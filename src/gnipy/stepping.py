@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["run_nodes", "run_nodes_checkpointed", "checkpoint_blocks", "progress_reporter", "residual_bytes",
+__all__ = ["run_nodes", "run_nodes_checkpointed", "finish_native", "checkpoint_blocks", "progress_reporter", "residual_bytes",
            "GRADIENT_MEMORY_BYTES"]
 
 _INT = jnp.int32
@@ -154,6 +154,22 @@ def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool
     carry = _carry0(state0)
     blocks = jnp.concatenate([jnp.asarray(lengths, _INT).reshape(-1), jnp.asarray(tail, _INT).reshape(1)])
     carry, obs = jax.lax.scan(block, carry, blocks)
+    obs = jax.tree_util.tree_map(lambda a: a[:-1], obs)
+    if partial:
+        carry = _final_step(method, system, carry, h, h_last)
+        if save_final:
+            obs = _concat(obs, observe(carry[0], h_last))
+    return _finish(method, system, carry, obs)
+
+
+def finish_native(method, system, states, carry, h, h_last, *, partial: bool, save_final: bool,
+                  save_states: bool = False):
+    """The result of :func:`run_nodes` from the native loop's output (:mod:`gnipy.native`): the
+    state after each block of steps (`states`, a leading block axis; the last is the tail's) and
+    the loop's final carry. The nodes are observed here as `run_nodes` observes them, and a
+    shortened last step (`partial`) runs here."""
+    observe = _observer(method, system, save_states)
+    obs = jax.vmap(lambda st: observe(st, h))(states)
     obs = jax.tree_util.tree_map(lambda a: a[:-1], obs)
     if partial:
         carry = _final_step(method, system, carry, h, h_last)

@@ -1,0 +1,214 @@
+"""Which backend runs a simulation's step loop, and the native run itself.
+
+`gnipy.simulate(..., backend=)`:
+
+- `"xla"`: the loop of :func:`gnipy.stepping.run_nodes`, compiled by XLA (JAX's compiler);
+- `"native"`: the same loop with the method's step compiled to scalar machine code
+  (:mod:`gnipy.native.program`), the observation of the saved nodes on XLA;
+- `"auto"` (the default): native when it can run and the run is long enough to pay for building
+  it (:data:`NATIVE_MIN_STEPS` trajectory-steps), else XLA. The choice depends only on the run's
+  arguments, never on what ran before in the process.
+
+A batch of initial conditions runs on every core (one chunk of members per core), several
+members at a time in vector lanes (:func:`gnipy.native.program.default_lanes`), each member with
+the bits of its own single run.
+
+The native loop runs when JAX's default device is the CPU (or `"native"` was asked for), llvmlite
+is installed, the system is unforced (a forced system's drive stays on XLA), a batch shares one
+system (parameter batches run on XLA), the run is not traced by a JAX transformation (gradients
+stay on XLA), and every primitive of the step lowers. When it cannot, XLA runs and
+`Solution.backend` says so (with `"native"` asked for, a warning gives the reason).
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..compilation import jit
+from ..errors import InputError
+from .lowering import Unsupported
+from .program import available, build_loop
+
+__all__ = ["BACKENDS", "NATIVE_MIN_STEPS", "check_backend", "choose", "run_native", "native_loop"]
+
+#: The values of `simulate(..., backend=)`.
+BACKENDS = ("auto", "xla", "native")
+
+#: The trajectory-steps (steps × members) from which `backend="auto"` builds a native program.
+#: Building one costs 0.1–1.5 s the first time (0.1–0.4 s from the disk cache: tracing and
+#: lowering), about what XLA's compilation of the same loop costs; a native step is 8–10× faster
+#: (BENCHMARKS.md), so from about 10⁴ steps a run gains even when both were to be built. Shorter
+#: runs stay on XLA, whose programs are shared across initial conditions and parameter values.
+NATIVE_MIN_STEPS = 20_000
+
+_LOOPS: dict = {}
+_LOOPS_MAX = 64
+
+
+def check_backend(backend) -> str:
+    """`backend` checked: one of :data:`BACKENDS`."""
+    if not isinstance(backend, str) or backend not in BACKENDS:
+        raise InputError(f"backend: expected one of {', '.join(map(repr, BACKENDS))}, got {backend!r}")
+    return backend
+
+
+def _loop_key(method, system):
+    from ..preparation import _split
+
+    leaves, key, _ = _split((method, system))
+    if key is None:
+        return None
+    try:
+        return key, tuple((np.asarray(a).dtype.str, np.shape(a), np.asarray(a).tobytes()) for a in leaves)
+    except Exception:
+        return None
+
+
+def _why_not(system, *, batched_system: bool = False, traced: bool = False) -> str | None:
+    if traced:
+        return "the run is traced by a JAX transformation (gradients stay on XLA)"
+    if batched_system:
+        return "a batch of systems (parameter values) runs on XLA"
+    if getattr(system, "force", None) is not None:
+        return "forced systems (their drive) run on XLA"
+    if not available():
+        return "llvmlite is not installed"
+    return None
+
+
+def choose(backend: str, system, method, *, trajectory_steps: int, batched_system: bool = False,
+           traced: bool = False) -> tuple[str, str]:
+    """`(backend, why)`: `"native"` or `"xla"` for this run, and a sentence when XLA runs although
+    native was possible or asked for. The choice depends on the run's arguments only (not on what
+    ran before in the process), so that a run gives the same bits in any process."""
+    from ..reference import ContinuousReference
+
+    if backend == "xla" or isinstance(method, ContinuousReference):
+        return "xla", ""
+    reason = _why_not(system, batched_system=batched_system, traced=traced)
+    if reason is None and backend == "auto":
+        if jax.default_backend() != "cpu":
+            reason = f"JAX's default device is {jax.default_backend()}"
+        elif trajectory_steps < NATIVE_MIN_STEPS:
+            return "xla", f"a short run ({trajectory_steps} < {NATIVE_MIN_STEPS} trajectory-steps)"
+    if reason is not None:
+        if backend == "native":
+            warnings.warn(f"backend='native': running on XLA, because {reason}", RuntimeWarning, stacklevel=3)
+        return "xla", reason
+    return "native", ""
+
+
+def native_loop(method, system, state0, *, batch: bool = False):
+    """The compiled loop of `method` on `system` (built once per method and system values; for a
+    `batch`, with the version that runs several trajectories in vector lanes), or the
+    :class:`Unsupported` reason."""
+    from ..stepping import _carry0, _stepper
+    from .program import default_lanes
+
+    lanes = default_lanes() if batch else 1
+    key = _loop_key(method, system)
+    key = None if key is None else (key, lanes)
+    hit = _LOOPS.get(key) if key is not None else None
+    if hit is not None:
+        return hit
+    try:
+        loop = build_loop(_stepper(method, system), _carry0(state0), 0.01, lanes=lanes)
+    except Unsupported as e:
+        loop = e
+    if key is not None:
+        if len(_LOOPS) >= _LOOPS_MAX:
+            _LOOPS.pop(next(iter(_LOOPS)))
+        _LOOPS[key] = loop
+    return loop
+
+
+def _flat_state(treedef, shapes, flat):
+    leaves, i = [], 0
+    for s in shapes:
+        n = int(np.prod(s, dtype=np.int64))
+        leaves.append(flat[..., i:i + n].reshape(flat.shape[:-1] + tuple(s)))
+        i += n
+    return jax.tree_util.tree_unflatten(treedef, leaves)
+
+
+@jit
+def _post(method, system, layout, saved, carry, h, h_last, times, partial: bool, save_final: bool,
+          save_states: bool, batched: bool, complete):
+    from ..stepping import finish_native
+
+    treedef, shapes, S = layout
+
+    def one(sv, c):
+        states = _flat_state(treedef, shapes, sv)
+        i32 = jnp.int32
+        cy = (_flat_state(treedef, shapes, c[:S]), c[S].astype(i32), c[S + 1].astype(i32), c[S + 2],
+              c[S + 3].astype(i32), c[S + 4].astype(i32))
+        out = finish_native(method, system, states, cy, h, h_last, partial=partial, save_final=save_final,
+                            save_states=save_states)
+        return out if complete is None else complete(system, out, times)
+
+    return jax.vmap(one)(saved, carry) if batched else one(saved, carry)
+
+
+@jit
+def _flatten_states(state):
+    leaves = jax.tree_util.tree_leaves(state)
+    return jnp.concatenate([jnp.reshape(x, (x.shape[0], -1)) for x in leaves], axis=1)
+
+
+def _run_reporting(loop, carry, h, blocks, stride: int):
+    """`loop.run` in pieces of about `stride` steps, the steps done reported after each
+    (:class:`gnipy.stepping.progress_reporter`); the same result as one call."""
+    from ..stepping import _report
+
+    pieces, ends = [], []  # sub-blocks, and whether each ends a block
+    for n in blocks:
+        n = int(n)
+        cuts = list(range(0, n, stride)) + [n]
+        parts = [b - a for a, b in zip(cuts[:-1], cuts[1:])] or [0]
+        pieces += parts
+        ends += [False] * (len(parts) - 1) + [True]
+    rows, done, i = [], 0, 0
+    while i < len(pieces):
+        j, steps = i, 0
+        while j < len(pieces) and (steps < stride or j == i):  # about `stride` steps per call
+            steps += pieces[j]
+            j += 1
+        chunk = pieces[i:j]
+        carry, saved = loop.run(carry, h, chunk)
+        rows.append(saved)
+        done += sum(chunk)
+        i += len(chunk)
+        _report(done)
+    saved = np.concatenate(rows, axis=-2)
+    return carry, saved[..., np.asarray(ends), :]
+
+
+def run_native(loop, method, system, state0, h, lengths, tail, h_last, *, partial: bool, save_final: bool,
+               save_states: bool, batched: bool = False, times=None, complete=None,
+               progress_stride: int | None = None) -> dict:
+    """The run of :func:`gnipy.stepping.run_nodes` (same arguments and result; `state0` with a
+    leading member axis when `batched`) on the compiled `loop`; `complete(system, out, times)`
+    adds fields inside the same XLA program. With `progress_stride`, the steps done are reported
+    every `progress_stride` steps or so (the loop then runs in pieces)."""
+    leaves, treedef = jax.tree_util.tree_flatten(state0)
+    shapes = tuple(tuple(np.shape(x))[1 if batched else 0:] for x in leaves)
+    S = int(sum(int(np.prod(s, dtype=np.int64)) for s in shapes))
+    if batched:
+        flat = np.asarray(_flatten_states(state0), dtype=np.float64)
+    else:
+        flat = np.concatenate([np.ravel(np.asarray(x, dtype=np.float64)) for x in leaves])
+    counters = np.array([0.0, -1.0, 0.0, 0.0, 0.0])
+    carry0 = np.concatenate([flat, np.broadcast_to(counters, flat.shape[:-1] + (5,))], axis=-1)
+    blocks = np.concatenate([np.asarray(lengths, np.int32).reshape(-1), np.asarray([tail], np.int32)])
+    if progress_stride:
+        carry, saved = _run_reporting(loop, carry0, float(h), blocks, int(progress_stride))
+    else:
+        carry, saved = loop.run(carry0, float(h), blocks)
+    return _post(method, system, (treedef, shapes, S), saved, carry, np.float64(h), np.float64(h_last),
+                 None if times is None else np.asarray(times, np.float64), bool(partial), bool(save_final),
+                 bool(save_states), bool(batched), complete)

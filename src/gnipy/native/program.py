@@ -1,0 +1,495 @@
+"""The native step loop: one method's step (its jaxpr, lowered by :mod:`gnipy.native.lowering`)
+inside the loop of :func:`gnipy.stepping.run_nodes`, compiled by LLVM (llvmlite) to machine code
+for this CPU, kept on disk, and run over one trajectory or a batch split across the CPU's cores.
+
+The compiled loop does what `run_nodes` does between saved nodes: the steps with their failure
+bookkeeping (the first failed step and its residual; the state stays at the last good step), and
+after each block of steps the state, written to a buffer. The observation of the saved states
+(velocities, momenta, energy, constraint residuals) and a shortened last step run on XLA
+(:func:`gnipy.stepping.finish_native`). Once a step has failed the loop skips to the end of its
+block: the state no longer changes, so the result is that of the XLA loop.
+
+**Cache.** Compiled object code is kept in `$GNIPY_CACHE_DIR/native` (default
+`~/.cache/gnipy/native`) under the SHA-256 of the program (its LLVM IR, the llvmlite version and the
+CPU's name and features), written whole (a temporary file renamed) with the object code's own
+SHA-256 at its end, and loaded by later processes instead of compiling again (a file whose
+digest does not match is compiled again). `GNIPY_NATIVE_CACHE=0` turns the disk cache off.
+
+Batches run the members in chunks, one per core (threads: the compiled code runs without the
+GIL), and within a chunk several members at a time in vector lanes (`gnipy_run_lanes`, built with
+:class:`~gnipy.native.lowering.Function`'s `lanes`).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+import functools
+import hashlib
+import os
+import tempfile
+import threading
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+
+from .control import _flatten, _unflatten
+from .lowering import lower_jaxpr
+from .scalars import Function, Reg, Unsupported, _const_array, llvm_type
+
+__all__ = ["NativeLoop", "NativeFunction", "build_loop", "build_function", "cache_dir", "available", "cores"]
+
+_LOCK = threading.Lock()
+_ENGINES: dict = {}
+_INIT = []
+
+
+@functools.cache
+def available() -> bool:
+    """Whether llvmlite can be imported (the native backend's compiler)."""
+    try:
+        import llvmlite.binding  # noqa: F401
+    except Exception:
+        return False
+    return True
+
+
+def cores() -> int:
+    """The cores this process may use (for batches)."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # not on Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def cache_dir() -> Path | None:
+    """Where compiled object code is kept (None when `GNIPY_NATIVE_CACHE=0`)."""
+    if os.environ.get("GNIPY_NATIVE_CACHE", "1").strip() in ("0", "false", "no", "off"):
+        return None
+    root = os.environ.get("GNIPY_CACHE_DIR")
+    return (Path(root) if root else Path.home() / ".cache" / "gnipy") / "native"
+
+
+def _llvm():
+    import llvmlite.binding as llvm
+
+    if not _INIT:
+        llvm.initialize_native_target()
+        llvm.initialize_native_asmprinter()
+        libm = ctypes.util.find_library("m")
+        if libm:
+            llvm.load_library_permanently(libm)
+        _INIT.append(True)
+    return llvm
+
+
+def _target_machine():
+    llvm = _llvm()
+    target = llvm.Target.from_default_triple()
+    return target.create_target_machine(cpu=llvm.get_host_cpu_name(), features=llvm.get_host_cpu_features().flatten(),
+                                        opt=3, reloc="default", codemodel="jitdefault")
+
+
+def _object_code(ir: str, key: str) -> tuple[bytes, str]:
+    """The object code of `ir` and where it came from ("disk" or "compiled"). A cache file holds
+    the object code then its SHA-256; a file that does not match is compiled again (and replaced)."""
+    folder = cache_dir()
+    path = folder / f"{key}.o" if folder is not None else None
+    if path is not None and path.is_file():
+        try:
+            data = path.read_bytes()
+            obj, digest = data[:-32], data[-32:]
+            if len(data) > 32 and hashlib.sha256(obj).digest() == digest:
+                return obj, "disk"
+        except OSError:
+            pass
+    llvm = _llvm()
+    module = llvm.parse_assembly(ir)
+    module.verify()
+    tm = _target_machine()
+    pto = llvm.create_pipeline_tuning_options(speed_level=3)
+    pb = llvm.create_pass_builder(tm, pto)
+    pb.getModulePassManager().run(module, pb)
+    obj = tm.emit_object(module)
+    if path is not None:
+        try:  # written whole or not at all: a temporary file in the same folder, renamed
+            folder.mkdir(parents=True, exist_ok=True)
+            fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
+            with os.fdopen(fd, "wb") as f:
+                f.write(obj + hashlib.sha256(obj).digest())
+            os.replace(tmp, path)
+        except OSError:
+            pass
+    return obj, "compiled"
+
+
+def _load(ir: str):
+    """`(engine, source, seconds)`: the program of `ir`, from memory, disk or LLVM."""
+    import llvmlite
+
+    llvm = _llvm()
+    key = hashlib.sha256("\n".join([ir, llvmlite.__version__, llvm.get_host_cpu_name(),
+                                    llvm.get_host_cpu_features().flatten()]).encode()).hexdigest()
+    with _LOCK:
+        hit = _ENGINES.get(key)
+        if hit is not None:
+            return hit[0], "memory", 0.0
+        t0 = time.perf_counter()
+        obj, source = _object_code(ir, key)
+        engine = llvm.create_mcjit_compiler(llvm.parse_assembly(""), _target_machine())
+        engine.add_object_file(llvm.ObjectFileRef.from_data(obj))
+        engine.finalize_object()
+        _ENGINES[key] = (engine,)
+        return engine, source, time.perf_counter() - t0
+
+
+_SINGLE = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p)
+_BATCH = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_double, ctypes.c_void_p, ctypes.c_int64, ctypes.c_void_p,
+                          ctypes.c_int64, ctypes.c_int64)
+
+
+class NativeLoop:
+    """A compiled step loop. `run(carry, h, blocks)` → `(carry, saved)`: `carry` the flat carry of
+    :func:`gnipy.stepping.run_nodes` as float64 (the state's scalars first, then the step index,
+    first failed step, its residual, total and largest iterations), `(B, M)` for a batch; `saved`
+    the state after each block, `(blocks, S)` or `(B, blocks, S)`."""
+
+    def __init__(self, engine, n_carry: int, n_state: int, source: str, seconds: float, lines: int,
+                 timings: dict | None = None):
+        self._engine = engine
+        self.n_carry, self.n_state = n_carry, n_state
+        #: where the program came from ("compiled", "disk", "memory"), the seconds that took, the
+        #: lines of LLVM IR, and the seconds of each stage of the build (trace, lower, load)
+        self.source, self.seconds, self.lines = source, seconds, lines
+        self.timings = timings or {}
+        self._single = _SINGLE(engine.get_function_address("gnipy_run"))
+        self._batch = _BATCH(engine.get_function_address("gnipy_run_batch"))
+
+    def run(self, carry: np.ndarray, h: float, blocks) -> tuple[np.ndarray, np.ndarray]:
+        carry = np.array(carry, dtype=np.float64, order="C")
+        lengths = np.ascontiguousarray(blocks, dtype=np.int32)
+        nb = lengths.shape[0]
+        if carry.ndim == 1:
+            saved = np.empty((nb, self.n_state), dtype=np.float64)
+            self._single(carry.ctypes.data, float(h), lengths.ctypes.data, nb, saved.ctypes.data)
+            return carry, saved
+        B = carry.shape[0]
+        saved = np.empty((B, nb, self.n_state), dtype=np.float64)
+        args = (carry.ctypes.data, float(h), lengths.ctypes.data, nb, saved.ctypes.data)
+        workers = min(cores(), B)
+        if workers <= 1:
+            self._batch(*args, 0, B)
+        else:  # ctypes releases the GIL during the call: the chunks run on every core
+            edges = np.linspace(0, B, workers + 1).astype(np.int64)
+            with ThreadPoolExecutor(workers) as pool:
+                list(pool.map(lambda j: self._batch(*args, int(edges[j]), int(edges[j + 1])), range(workers)))
+        return carry, saved
+
+
+def _loop_heads(fn: Function) -> None:
+    """The two loops of a driver, up to the step's block `sbody`: over the blocks (`%b` of
+    `%nblocks`, each `%len` steps from `%lengths`; after a block, `bsave`) and over a block's
+    steps (`%i`; the next step from `slatch`); `done` after the last block."""
+    fn.br("bhead")
+    fn.start("bhead")
+    fn.emit("%b = phi i64 [ 0, %entry ], [ %bnext, %bsave ]")
+    fn.emit("%bc = icmp slt i64 %b, %nblocks")
+    fn.emit("br i1 %bc, label %bbody, label %done")
+    fn.start("bbody")
+    fn.emit("%lp = getelementptr i32, ptr %lengths, i64 %b")
+    fn.emit("%len32 = load i32, ptr %lp")
+    fn.emit("%len = sext i32 %len32 to i64")
+    fn.br("shead")
+    fn.start("shead")
+    fn.emit("%i = phi i64 [ 0, %bbody ], [ %inext, %slatch ]")
+    fn.emit("%sc = icmp slt i64 %i, %len")
+    fn.emit("br i1 %sc, label %sbody, label %bsave")
+    fn.start("sbody")
+
+
+def _driver(fn: Function, n_carry_types: list[str], n_state: int, emit_step, k_index: int, fail_index: int) -> str:
+    """The LLVM IR of `gnipy_run` (one trajectory) and `gnipy_run_batch` around the step."""
+    slots = [fn.alloca(ty) for ty in n_carry_types]
+    # entry: the carry from io
+    for j, (slot, ty) in enumerate(zip(slots, n_carry_types)):
+        p = fn.op("ptr", f"getelementptr double, ptr %io, i64 {j}")
+        v = fn.op("double", f"load double, ptr {p.text}")
+        fn.emit(f"store {ty} {fn.cast(v, ty).text}, ptr {slot}")
+    _loop_heads(fn)
+    carry = [fn.op(ty, f"load {ty}, ptr {slot}") for slot, ty in zip(slots, n_carry_types)]
+    new = emit_step(carry, Reg("%h", "double"))
+    for slot, ty, v in zip(slots, n_carry_types, new):
+        fn.emit(f"store {ty} {fn.cast(v, ty).text}, ptr {slot}")
+    fn.br("slatch")
+    fn.start("slatch")
+    fn.emit("%inext = add i64 %i, 1")
+    fk_ty = n_carry_types[fail_index]
+    fn.emit(f"%fk = load {fk_ty}, ptr {slots[fail_index]}")
+    fn.emit(f"%failed = icmp sge {fk_ty} %fk, 0")
+    fn.emit("br i1 %failed, label %sskip, label %shead")
+    fn.start("sskip")  # failed: the state stays; only the step index moves on to the block's end
+    k_ty = n_carry_types[k_index]
+    fn.emit("%rest = sub i64 %len, %inext")
+    fn.emit(f"%rest_k = trunc i64 %rest to {k_ty}" if k_ty != "i64" else "%rest_k = add i64 %rest, 0")
+    fn.emit(f"%k_old = load {k_ty}, ptr {slots[k_index]}")
+    fn.emit(f"%k_new = add {k_ty} %k_old, %rest_k")
+    fn.emit(f"store {k_ty} %k_new, ptr {slots[k_index]}")
+    fn.br("bsave")
+    fn.start("bsave")
+    fn.emit(f"%row = mul i64 %b, {n_state}")
+    for j in range(n_state):
+        ty = n_carry_types[j]
+        v = fn.op(ty, f"load {ty}, ptr {slots[j]}")
+        d = fn.cast(v, "double")
+        idx = fn.op("i64", f"add i64 %row, {j}")
+        p = fn.op("ptr", f"getelementptr double, ptr %saved, i64 {idx.text}")
+        fn.emit(f"store double {d.text}, ptr {p.text}")
+    fn.emit("%bnext = add i64 %b, 1")
+    fn.br("bhead")
+    fn.start("done")
+    for j, (slot, ty) in enumerate(zip(slots, n_carry_types)):
+        v = fn.op(ty, f"load {ty}, ptr {slot}")
+        p = fn.op("ptr", f"getelementptr double, ptr %io, i64 {j}")
+        fn.emit(f"store double {fn.cast(v, 'double').text}, ptr {p.text}")
+    fn.emit("ret void")
+    return _define(fn, "gnipy_run")
+
+
+def _define(fn: Function, name: str) -> str:
+    return (f"define void @{name}(ptr noalias %io, double %h, ptr noalias %lengths, i64 %nblocks, "
+            f"ptr noalias %saved) {{\nentry:\n" + "\n".join(fn.allocas) + "\n" + "\n".join(fn.lines) + "\n}\n")
+
+
+def _lanes_driver(fn: Function, types: list[str], n_state: int, emit_step) -> str:
+    """`gnipy_run_lanes`: `fn.lanes` consecutive trajectories at once, one per vector lane (no early
+    exit after a failure: a failed lane keeps its state through the step's own bookkeeping)."""
+    W, M = fn.lanes, len(types)
+    slots = [fn.alloca(fn.T(ty)) for ty in types]
+
+    def gather(base_index):  # <W x double> of io[l*M + i] over the lanes
+        acc = "poison"
+        for lane in range(W):
+            p = fn.op("ptr", f"getelementptr double, ptr %io, i64 {lane * M + base_index}")
+            x = fn.fresh()
+            fn.emit(f"{x} = load double, ptr {p.text}")
+            nxt = fn.fresh()
+            fn.emit(f"{nxt} = insertelement {fn.T('double')} {acc}, double {x}, i32 {lane}")
+            acc = nxt
+        return Reg(acc, "double")
+
+    for i, (slot, ty) in enumerate(zip(slots, types)):
+        fn.emit(f"store {fn.T(ty)} {fn.V(fn.cast(gather(i), ty))}, ptr {slot}")
+    hv = "poison"
+    for lane in range(W):
+        nxt = fn.fresh()
+        fn.emit(f"{nxt} = insertelement {fn.T('double')} {hv}, double %h, i32 {lane}")
+        hv = nxt
+    h_reg = Reg(hv, "double")
+    fn.emit(f"%rowlen = mul i64 %nblocks, {n_state}")
+    _loop_heads(fn)
+    carry = [fn.op(ty, f"load {fn.T(ty)}, ptr {slot}") for slot, ty in zip(slots, types)]
+    new = emit_step(carry, h_reg)
+    for slot, ty, v in zip(slots, types, new):
+        fn.emit(f"store {fn.T(ty)} {fn.V(fn.cast(v, ty))}, ptr {slot}")
+    fn.br("slatch")
+    fn.start("slatch")
+    fn.emit("%inext = add i64 %i, 1")
+    fn.br("shead")
+    fn.start("bsave")
+    fn.emit(f"%row = mul i64 %b, {n_state}")
+
+    def scatter(value, offset_text):  # lane l to base[l*stride + offset]
+        for lane in range(W):
+            e = fn.fresh()
+            fn.emit(f"{e} = extractelement {fn.T('double')} {value.text}, i32 {lane}")
+            p = fn.op("ptr", offset_text(lane))
+            fn.emit(f"store double {e}, ptr {p.text}")
+
+    for j in range(n_state):
+        v = fn.op(types[j], f"load {fn.T(types[j])}, ptr {slots[j]}")
+        d = fn.cast(v, "double")
+        for lane in range(W):
+            e = fn.fresh()
+            fn.emit(f"{e} = extractelement {fn.T('double')} {fn.V(d)}, i32 {lane}")
+            a = fn.fresh()
+            fn.emit(f"{a} = mul i64 %rowlen, {lane}")
+            b = fn.fresh()
+            fn.emit(f"{b} = add i64 {a}, %row")
+            c = fn.fresh()
+            fn.emit(f"{c} = add i64 {b}, {j}")
+            p = fn.op("ptr", f"getelementptr double, ptr %saved, i64 {c}")
+            fn.emit(f"store double {e}, ptr {p.text}")
+    fn.emit("%bnext = add i64 %b, 1")
+    fn.br("bhead")
+    fn.start("done")
+    for i, (slot, ty) in enumerate(zip(slots, types)):
+        v = fn.op(ty, f"load {fn.T(ty)}, ptr {slot}")
+        d = fn.cast(v, "double")
+        scatter(Reg(fn.V(d), "double"), lambda lane, i=i: f"getelementptr double, ptr %io, i64 {lane * M + i}")
+    fn.emit("ret void")
+    return _define(fn, "gnipy_run_lanes")
+
+
+def _batch_function(M: int, n_state: int, lanes: int) -> str:
+    """`gnipy_run_batch(.., lo, hi)`: trajectories lo..hi-1, `lanes` at a time while they last."""
+    vector = ""
+    if lanes > 1:
+        vector = f"""  %left = sub i64 %hi, %j
+  %wide = icmp sge i64 %left, {lanes}
+  br i1 %wide, label %vec, label %one
+vec:
+  %voff = mul i64 %j, {M}
+  %vio = getelementptr double, ptr %io, i64 %voff
+  %vrows = mul i64 %j, %nblocks
+  %vsoff = mul i64 %vrows, {n_state}
+  %vs = getelementptr double, ptr %saved, i64 %vsoff
+  call void @gnipy_run_lanes(ptr %vio, double %h, ptr %lengths, i64 %nblocks, ptr %vs)
+  %jv = add i64 %j, {lanes}
+  br label %head
+one:
+"""
+    incoming = "[ %jnext, %one ]" + (", [ %jv, %vec ]" if lanes > 1 else "")
+    return f"""define void @gnipy_run_batch(ptr %io, double %h, ptr %lengths, i64 %nblocks, ptr %saved, i64 %lo, i64 %hi) {{
+entry:
+  br label %head
+head:
+  %j = phi i64 [ %lo, %entry ], {incoming}
+  %more = icmp slt i64 %j, %hi
+  br i1 %more, label %body, label %out
+body:
+{vector}{"" if lanes > 1 else "  br label %one" + chr(10) + "one:" + chr(10)}  %off = mul i64 %j, {M}
+  %pio = getelementptr double, ptr %io, i64 %off
+  %rows = mul i64 %j, %nblocks
+  %soff = mul i64 %rows, {n_state}
+  %ps = getelementptr double, ptr %saved, i64 %soff
+  call void @gnipy_run(ptr %pio, double %h, ptr %lengths, i64 %nblocks, ptr %ps)
+  %jnext = add i64 %j, 1
+  br label %head
+out:
+  ret void
+}}
+"""
+
+
+def default_lanes() -> int:
+    """Trajectories per vector in batches: 8 with AVX-512, 4 with AVX (doubles), else 2."""
+    feats = _llvm().get_host_cpu_features()
+    if feats.get("avx512f"):
+        return 8
+    return 4 if feats.get("avx") else 2
+
+
+def build_loop(step, carry0, h, lanes: int = 1) -> NativeLoop:
+    """Trace `step(carry, h) -> carry` at the example `carry0` (a pytree whose leaves are the
+    state's arrays then the loop's counters, as :func:`gnipy.stepping._carry0` builds it), lower it
+    and compile the loop; with `lanes` > 1 also a version that runs that many trajectories at once
+    in vector lanes (for batches). Raises :class:`~gnipy.native.lowering.Unsupported` when it
+    cannot."""
+    import jax
+
+    t0 = time.perf_counter()
+    leaves, treedef = jax.tree_util.tree_flatten(carry0)
+    closed = jax.make_jaxpr(lambda ls, hh: jax.tree_util.tree_leaves(step(jax.tree_util.tree_unflatten(treedef, ls), hh)))(
+        leaves, h)
+    jaxpr = closed.jaxpr
+    try:  # drop what the outputs do not need (e.g. the transposed solves of custom_linear_solve)
+        from jax._src.interpreters import partial_eval as pe
+
+        jaxpr, _ = pe.dce_jaxpr(jaxpr, [True] * len(jaxpr.outvars))
+        consts = [dict(zip(closed.jaxpr.constvars, closed.consts))[v] for v in jaxpr.constvars]
+    except Exception:
+        jaxpr, consts = closed.jaxpr, closed.consts
+    shapes = [np.shape(x) for x in leaves]
+    types = [llvm_type(np.asarray(x).dtype) if not hasattr(x, "dtype") else llvm_type(x.dtype) for x in leaves]
+    n_state_leaves = len(leaves) - 5
+    n_state = int(sum(int(np.prod(s, dtype=np.int64)) for s in shapes[:n_state_leaves]))
+    flat_types = [ty for s, ty in zip(shapes, types) for _ in range(int(np.prod(s, dtype=np.int64)))]
+    const_arrays = [_const_array(np.asarray(c)) for c in consts]
+
+    def emitter(fn):
+        def emit_step(flat, h_reg):
+            args = _unflatten(flat, shapes)
+            hh = np.empty((), dtype=object)
+            hh[()] = h_reg
+            outs = lower_jaxpr(fn, jaxpr, const_arrays, args + [hh])
+            out_flat, _ = _flatten(outs)
+            return out_flat
+        return emit_step
+
+    if any(ty not in ("double", "i32", "i64") for ty in flat_types):
+        raise Unsupported("a state with non-numeric leaves")
+    t1 = time.perf_counter()
+    fn = Function()
+    parts = [_driver(fn, flat_types, n_state, emitter(fn), k_index=n_state, fail_index=n_state + 1)]
+    decls = set(fn.decls)
+    if lanes > 1:
+        fv = Function(lanes)
+        parts.append(_lanes_driver(fv, flat_types, n_state, emitter(fv)))
+        decls |= fv.decls
+    parts.append(_batch_function(len(flat_types), n_state, lanes))
+    ir = "; gnipy native step loop\n" + "\n".join(sorted(decls)) + "\n\n" + "\n".join(parts)
+    t2 = time.perf_counter()
+    engine, source, seconds = _load(ir)
+    timings = {"trace_s": t1 - t0, "lower_s": t2 - t1, "load_s": time.perf_counter() - t2}
+    loop = NativeLoop(engine, len(flat_types), n_state, source, seconds, ir.count("\n"), timings)
+    loop.lanes = lanes
+    return loop
+
+
+
+_FUNC = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)
+
+
+class NativeFunction:
+    """A jaxpr compiled on its own (:func:`build_function`): `f(*arrays)` → list of NumPy arrays."""
+
+    def __init__(self, engine, in_avals, out_avals, source: str):
+        self._engine, self.source = engine, source
+        self.in_avals, self.out_avals = in_avals, out_avals
+        self._fn = _FUNC(engine.get_function_address("gnipy_fn"))
+
+    def __call__(self, *args):
+        flat = np.concatenate([np.ravel(np.asarray(a, dtype=np.float64)) for a in args] or [np.zeros(0)])
+        flat = np.ascontiguousarray(flat)
+        n_out = sum(int(np.prod(a.shape, dtype=np.int64)) for a in self.out_avals)
+        out = np.empty(max(n_out, 1), dtype=np.float64)
+        self._fn(flat.ctypes.data, out.ctypes.data)
+        res, i = [], 0
+        for a in self.out_avals:
+            n = int(np.prod(a.shape, dtype=np.int64))
+            res.append(out[i:i + n].reshape(a.shape).astype(a.dtype))
+            i += n
+        return res
+
+
+def build_function(f, *example_args) -> NativeFunction:
+    """Compile `f` (a JAX function of arrays, returning an array or a tuple of them) through the
+    native lowering: the same translator as the step loop, for tests and experiments. Inputs and
+    outputs travel as float64 (integers and booleans converted exactly)."""
+    import jax
+
+    closed = jax.make_jaxpr(lambda *a: tuple(jax.tree_util.tree_leaves(f(*a))))(*example_args)
+    fn = Function()
+    args, k = [], 0
+    for v in closed.jaxpr.invars:
+        ty = llvm_type(v.aval.dtype)
+        a = np.empty(v.aval.shape, dtype=object)
+        for idx in np.ndindex(v.aval.shape):
+            p = fn.op("ptr", f"getelementptr double, ptr %in, i64 {k}")
+            x = fn.op("double", f"load double, ptr {p.text}")
+            a[idx] = fn.cast(x, ty)
+            k += 1
+        args.append(a)
+    outs = lower_jaxpr(fn, closed.jaxpr, [_const_array(np.asarray(c)) for c in closed.consts], args)
+    flat, _ = _flatten(outs)
+    for j, v in enumerate(flat):
+        p = fn.op("ptr", f"getelementptr double, ptr %out, i64 {j}")
+        fn.emit(f"store double {fn.cast(v, 'double').text}, ptr {p.text}")
+    fn.emit("ret void")
+    ir = (f"{chr(10).join(sorted(fn.decls))}\n\ndefine void @gnipy_fn(ptr noalias %in, ptr noalias %out) {{\n"
+          f"entry:\n{chr(10).join(fn.allocas)}\n{chr(10).join(fn.lines)}\n}}\n")
+    engine, source, _ = _load(ir)
+    return NativeFunction(engine, [v.aval for v in closed.jaxpr.invars], [v.aval for v in closed.jaxpr.outvars],
+                          source)

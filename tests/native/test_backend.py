@@ -1,0 +1,206 @@
+"""`simulate(..., backend=)`: the native loop gives the XLA loop's results to round-off (the
+independent formulation: the same method compiled by XLA), on every zoo model's default method and
+on every method of an affine model and a group model; which backend runs, and why, is recorded;
+what the native loop does not do falls back to XLA with a reason."""
+
+import warnings
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import gnipy
+from gnipy.errors import InputError
+from gnipy.native.backend import NATIVE_MIN_STEPS
+
+STEPS = 10_000
+
+
+def _pair(system, method, **kw):
+    a = gnipy.simulate(system, method, backend="xla", **kw)
+    b = gnipy.simulate(system, method, backend="native", **kw)
+    assert a.backend == "xla" and b.backend == "native"
+    return a, b
+
+
+def _difference(a, b, names=("q", "v", "p", "energy", "R", "constraint_residual")):
+    """The largest difference between two runs' nodes, relative to max(1, the values' size)."""
+    out = 0.0
+    for name in names:
+        x, y = getattr(a, name), getattr(b, name)
+        if x is None or not np.size(x):
+            continue
+        x, y = np.asarray(x), np.asarray(y)
+        out = max(out, float(np.max(np.abs(x - y))) / max(1.0, float(np.max(np.abs(x)))))
+    return out
+
+
+def _assert_agree_or_floor(system, method, a, b, **kw):
+    """Native within 1e-12 of XLA, or — where the run amplifies round-off — within 10× of how far
+    the XLA run itself moves when its initial condition changes by one unit in the last place."""
+    err = _difference(a, b)
+    if err <= 1e-12:
+        return
+    floor = 0.0
+    for ulp in (1 + 2.0**-52, 1 - 2.0**-53):
+        moved = gnipy.simulate(system, method, np.asarray(a.q[0]) * ulp, np.asarray(a.v[0]) * ulp, backend="xla",
+                               project_v0=True, **kw)
+        floor = max(floor, _difference(a, moved))
+    assert err <= 10 * floor, (err, floor)
+
+
+def _assert_agree(a, b, tol=1e-12):
+    for name in ("q", "v", "p", "energy", "R", "constraint_residual"):
+        x, y = getattr(a, name), getattr(b, name)
+        if x is None:
+            assert y is None
+            continue
+        x, y = np.asarray(x), np.asarray(y)
+        assert x.shape == y.shape
+        if not x.size:
+            continue
+        scale = max(1.0, float(np.max(np.abs(x))))
+        err = float(np.max(np.abs(x - y))) / scale
+        assert err <= tol, (name, err)
+    np.testing.assert_array_equal(np.asarray(a.t), np.asarray(b.t))
+    assert a.success and b.success
+
+
+@pytest.mark.parametrize("model", gnipy.model_names())
+def test_every_zoo_model_default_method_equals_xla(model):
+    s = gnipy.make_system(model)
+    kw = dict(h=0.01, steps=STEPS, save_every=1000)
+    a, b = _pair(s, None, **kw)
+    _assert_agree_or_floor(s, None, a, b, **kw)
+
+
+@pytest.mark.parametrize("method", [m for m in gnipy.method_names() if m not in ("reference", "rat")])
+def test_every_method_on_an_affine_model_equals_xla(method):
+    s = gnipy.make_system("rotating-table-ball")
+    a, b = _pair(s, method, h=0.01, steps=STEPS, save_every=2500)
+    _assert_agree(a, b)
+
+
+@pytest.mark.parametrize("method", ["gni-trapezoid", "gni-midpoint", "sgni-midpoint", "dla", "discrete-gradient",
+                                    "yoshida4-gni-trapezoid", "rat"])
+def test_methods_on_a_group_model_equal_xla(method):
+    s = gnipy.make_system("suslov")
+    kw = dict(h=0.01, steps=STEPS, save_every=2500)
+    a, b = _pair(s, method, **kw)
+    _assert_agree_or_floor(s, method, a, b, **kw)
+
+
+def test_shortened_last_step_backward_run_states_and_continuation():
+    s = gnipy.make_system("chaplygin-sphere")
+    a, b = _pair(s, "gni-trapezoid", h=0.01, t_final=7.255, saveat=gnipy.SaveAt(every=100, states=True))
+    _assert_agree(a, b)
+    for x, y in zip(jax.tree_util.tree_leaves(a.states), jax.tree_util.tree_leaves(b.states)):
+        np.testing.assert_allclose(np.asarray(y), np.asarray(x), rtol=0, atol=1e-12)
+    # back again (the symmetric method's exact inverse), from the native run's final state
+    back = gnipy.simulate(s, "gni-trapezoid", h=-0.01, steps=725, state0=b.final_state, t0=7.25, backend="native",
+                          save_every=725)
+    back_x = gnipy.simulate(s, "gni-trapezoid", h=-0.01, steps=725, state0=b.final_state, t0=7.25, backend="xla",
+                            save_every=725)
+    _assert_agree(back_x, back)
+    # a run continued from a state equals one run
+    first = gnipy.simulate(s, "gni-trapezoid", h=0.01, steps=300, backend="native", save_every=300)
+    rest = gnipy.simulate(s, "gni-trapezoid", h=0.01, steps=200, state0=first.final_state, t0=3.0, backend="native",
+                          save_every=200)
+    whole = gnipy.simulate(s, "gni-trapezoid", h=0.01, steps=500, backend="native", save_every=500)
+    np.testing.assert_array_equal(np.asarray(rest.q[-1]), np.asarray(whole.q[-1]))
+
+
+def test_batch_of_initial_conditions_equals_xla_member_by_member():
+    s = gnipy.make_system("rolling-ball")
+    one = gnipy.simulate(s, "gni-trapezoid", h=0.01, steps=1)
+    rng = np.random.default_rng(3)
+    q = np.asarray(one.q[0]) + 0.05 * rng.standard_normal((11, one.q.shape[1]))
+    v = np.broadcast_to(np.asarray(one.v[0]), (11, one.v.shape[1]))
+    a, b = _pair(s, "gni-trapezoid", q0=q, v0=v, h=0.01, steps=3000, save_every=500, project_v0=True)
+    _assert_agree(a, b)
+    # each member gets the bits of its own single run (11 = 8 or 4 in vector lanes + the rest alone)
+    for j in (0, 4, 10):
+        single = gnipy.simulate(s, "gni-trapezoid", q[j], v[j], h=0.01, steps=3000, save_every=500, backend="native",
+                                project_v0=True)
+        np.testing.assert_array_equal(np.asarray(b.q[j]), np.asarray(single.q))
+        np.testing.assert_array_equal(np.asarray(b.R[j]), np.asarray(single.R))
+
+
+def _wall_system():
+    # V = log(1 − x): undefined for x ≥ 1, and the force 1/(1 − x) pushes the particle there
+    return gnipy.System(lambda q, v: 0.5 * v @ v - jnp.log1p(-q[0]), lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3,
+                        name="wall")
+
+
+def test_failed_step_is_the_same_on_both_backends():
+    s = _wall_system()
+    errs = []
+    for backend in ("xla", "native"):
+        with pytest.raises(gnipy.SolverFailure) as exc:
+            gnipy.simulate(s, "gni-midpoint", [0.5, 0.0, 0.0], [1.0, 0.0, 0.0], h=0.1, steps=200, save_every=3,
+                           backend=backend)
+        errs.append(exc.value)
+    assert errs[0].step == errs[1].step > 0
+    assert errs[0].solution.q.shape == errs[1].solution.q.shape
+    np.testing.assert_allclose(np.asarray(errs[1].solution.q), np.asarray(errs[0].solution.q), rtol=0, atol=1e-12)
+    part = gnipy.simulate(s, "gni-midpoint", [0.5, 0.0, 0.0], [1.0, 0.0, 0.0], h=0.1, steps=200, throw=False,
+                          backend="native")
+    assert part.result == 1 and part.failed_step == errs[0].step and len(part.t) == part.failed_step + 1
+
+
+def test_auto_chooses_by_run_length_and_records_it():
+    s = gnipy.make_system("vertical-disk")
+    short = gnipy.simulate(s, "gni-midpoint", h=0.01, steps=100, save_every=100)
+    assert short.backend == "xla"
+    long = gnipy.simulate(s, "gni-midpoint", h=0.01, steps=NATIVE_MIN_STEPS, save_every=NATIVE_MIN_STEPS)
+    assert long.backend == "native"
+    # the choice depends on the run alone: a short run after a long one is on XLA again
+    again = gnipy.simulate(s, "gni-midpoint", h=0.01, steps=100, save_every=100)
+    assert again.backend == "xla"
+    np.testing.assert_array_equal(np.asarray(again.q), np.asarray(short.q))
+    # a batch counts its members' steps
+    q = np.tile(np.asarray(short.q[0]), (NATIVE_MIN_STEPS // 100, 1))
+    v = np.tile(np.asarray(short.v[0]), (NATIVE_MIN_STEPS // 100, 1))
+    assert gnipy.simulate(s, "gni-midpoint", q, v, h=0.01, steps=100, save_every=100).backend == "native"
+    # the Solution's files say it
+    assert long.to_xarray().attrs["backend"] == "native"
+
+
+def test_progress_is_reported_on_the_native_backend():
+    seen = []
+    s = gnipy.make_system("knife-edge")
+    sol = gnipy.simulate(s, "gni-trapezoid", h=0.01, steps=5000, save_every=50, backend="native",
+                         progress=lambda done, total: seen.append((done, total)))
+    assert sol.backend == "native"
+    assert len(seen) >= 10 and seen[-1] == (5000, 5000)
+    assert all(a[0] <= b[0] for a, b in zip(seen, seen[1:]))
+    ref = gnipy.simulate(s, "gni-trapezoid", h=0.01, steps=5000, save_every=50, backend="native")
+    np.testing.assert_array_equal(np.asarray(sol.q), np.asarray(ref.q))
+
+
+def test_what_runs_on_xla_says_why():
+    s = gnipy.make_system("chaplygin-sleigh")
+    forced = s.with_force(lambda q, v, u, t: jnp.array([0.0, 0.0, u[0]]), inputs=1)
+    with pytest.warns(RuntimeWarning, match="forced"):
+        sol = gnipy.simulate(forced, "gni-trapezoid", h=0.1, steps=10, controls=np.ones((10, 1)), backend="native")
+    assert sol.backend == "xla"
+    with pytest.warns(RuntimeWarning, match="transformation"):
+        g = jax.grad(lambda v0: gnipy.simulate(s, "gni-trapezoid", v0=v0, h=0.1, steps=5, backend="native").q[-1, 0])(
+            jnp.asarray(gnipy.get_model("chaplygin-sleigh").v0))
+    assert np.all(np.isfinite(np.asarray(g)))
+    # a primitive the native lowering does not know: XLA runs, and the warning names it
+    cum = gnipy.System(lambda q, v: 0.5 * v @ v - 0.5 * jnp.cumsum(q)[-1] ** 2, lambda q: jnp.array([[1.0, -1.0]]),
+                       n=2, name="cumsum")
+    with pytest.warns(RuntimeWarning, match="cumsum"):
+        sol = gnipy.simulate(cum, "gni-trapezoid", [0.1, 0.2], [1.0, 1.0], h=0.1, steps=10, backend="native")
+    assert sol.backend == "xla" and sol.success
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert gnipy.simulate(cum, "gni-trapezoid", [0.1, 0.2], [1.0, 1.0], h=0.1, steps=10).backend == "xla"
+
+
+def test_bad_backend_is_named():
+    s = gnipy.make_system("knife-edge")
+    with pytest.raises(InputError, match="backend: expected one of 'auto', 'xla', 'native', got 'llvm'"):
+        gnipy.simulate(s, h=0.1, steps=3, backend="llvm")
