@@ -335,9 +335,11 @@ OVERFLOW = [
 
 @pytest.mark.parametrize("args, option", OVERFLOW, ids=[" ".join(a) for a, _ in OVERFLOW])
 def test_overflowing_and_huge_step_counts_are_refused_at_once(tmp_path, no_computation, args, option):
-    start = time.perf_counter()
+    # CPU time of this process: "at once" means nothing is computed, whatever else loads the
+    # machine (the suite's other worker may hold both cores, e.g. with a native batch)
+    start = time.process_time()
     res = invoke("run", *args, "--out", tmp_path / "x.nc")
-    seconds = time.perf_counter() - start
+    seconds = time.process_time() - start
     assert_usage_error(res, f"Error: {option}:")
     assert seconds < 1.0 and os.listdir(tmp_path) == []
 
@@ -346,9 +348,9 @@ def test_overflowing_and_huge_step_counts_are_refused_at_once(tmp_path, no_compu
                                           (10**12, ["--steps/--save-every (from key", "TiB", "--yes"])])
 def test_config_with_a_huge_step_count_is_refused_at_once(tmp_path, no_computation, steps, words):
     (tmp_path / "run.toml").write_text(f'model = "{MODEL}"\nh = 0.1\nsteps = {steps}\nout = "x.nc"\n')
-    start = time.perf_counter()
+    start = time.process_time()  # CPU time: nothing computed, whatever the machine's load
     res = invoke("run", "--config", tmp_path / "run.toml")
-    assert time.perf_counter() - start < 1.0
+    assert time.process_time() - start < 1.0
     assert_usage_error(res, *words)
     (tmp_path / "tiny.toml").write_text('model = "knife-edge"\nh = 1e-320\nt-final = 10\nout = "x.nc"\n')
     assert_usage_error(invoke("run", "--config", tmp_path / "tiny.toml"), "--h (from key 'h'", "below")
