@@ -8,6 +8,11 @@ overflow). What must stay silent: the rolling balls, the vertical disk, the Chap
 GNI runs follow the reference (their exact solutions or invariants, tests/models).
 """
 
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -138,3 +143,56 @@ def test_verdict_rule_on_synthetic_ratios():
     r = 1e-3 * np.exp(t / 2)
     out = hidden_momentum_verdict(t, r, e, h)
     assert not out.in_band and out.first_time == pytest.approx(t[np.argmax(r > band)])
+
+
+# ------------------------------------------------------------------------------------------------
+# The diagnostics of a batch call no LAPACK kernel (a hang on jax 0.10, found with a batch of
+# Chaplygin spheres: two batched triangular solves waited on each other in XLA's CPU thread pool)
+# ------------------------------------------------------------------------------------------------
+_LAPACK = ("lu", "triangular_solve", "lu_pivots_to_permutation", "cholesky", "eigh", "svd", "qr")
+
+
+def _primitives(jaxpr, out=None):
+    out = set() if out is None else out
+    for eqn in jaxpr.eqns:
+        out.add(eqn.primitive.name)
+        for v in eqn.params.values():
+            for j in (v if isinstance(v, (tuple, list)) else (v,)):
+                inner = getattr(j, "jaxpr", None)
+                if inner is not None and hasattr(inner, "eqns"):
+                    _primitives(inner, out)
+                elif hasattr(j, "eqns"):
+                    _primitives(j, out)
+    return out
+
+
+@pytest.mark.parametrize("model", gnipy.model_names())
+def test_batched_node_diagnostics_call_no_lapack_kernel(model):
+    """The continuous multiplier at every saved node (vmapped over nodes and members) is solved by
+    gnipy.linalg's unrolled elimination, never by a LAPACK custom call."""
+    from gnipy.diagnostics import node_diagnostics
+
+    system = gnipy.make_system(model)
+    sol = gnipy.simulate(system, "gni-trapezoid", h=0.01, steps=2, backend="xla")
+    q = np.asarray(sol.q[:2])
+    y = q if sol.R is None else np.concatenate([q, np.asarray(sol.R[:2]).reshape(2, -1)], axis=1)
+    b = jax.vmap(system.space.unpack)(jnp.asarray(y))
+    hidden = jnp.zeros_like(sol.p[:2])
+    jaxpr = jax.make_jaxpr(jax.vmap(lambda bb, vv, pp, xx: node_diagnostics(system, bb, vv, pp, xx, 0.01)))(
+        b, sol.v[:2], sol.p[:2], hidden)
+    found = _primitives(jaxpr.jaxpr) & set(_LAPACK)
+    assert not found, f"{model}: LAPACK primitives {sorted(found)} in the batched node diagnostics"
+
+
+def test_parameter_batch_diagnostics_finish():
+    """The case that hung (jax 0.10.2, 2 cores): 9 Chaplygin spheres over 5000 steps on XLA. Run in
+    a subprocess so that a hang fails the test instead of stopping the suite."""
+    code = (
+        "import numpy as np, gnipy\n"
+        "systems = gnipy.model_systems('chaplygin-sphere', I1=np.linspace(0.25, 0.35, 9))\n"
+        "sol = gnipy.simulate(systems, 'gni-trapezoid', h=0.01, steps=5000, backend='xla')\n"
+        "print('done', sol.q.shape, bool(np.isfinite(np.asarray(sol.hidden_momentum)).all()))\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    assert "done (9, 5001, 2) True" in proc.stdout

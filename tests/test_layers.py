@@ -12,7 +12,7 @@ import gnipy
 #: Layer of each top-level module or package of src/gnipy (lower numbers are imported by higher).
 LAYERS = {
     # foundations used everywhere: errors, compilation options, input arrays, small solves, files
-    "errors": 0, "compilation": 0, "inputs": 0, "linalg": 0, "schema": 0, "files": 0, "text": 0,
+    "errors": 0, "compilation": 0, "inputs": 0, "linalg": 0, "sharding": 0, "schema": 0, "files": 0, "text": 0,
     "version": 0,
     # core: groups and retractions; the system, spaces, projectors, continuous equations, model table
     "lie_groups": 1, "retractions": 1,

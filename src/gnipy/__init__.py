@@ -40,6 +40,7 @@ from .projectors import projectors, reflect_momentum, reported_momentum  # noqa:
 from .reference import ContinuousReference  # noqa: E402
 from .retractions import Cayley, Exp, Retraction, get_retraction  # noqa: E402
 from .ensembles import model_systems, stack_systems  # noqa: E402
+from .sharding import member_devices  # noqa: E402
 from .simulate import simulate  # noqa: E402
 from .control import (  # noqa: E402
     ControlResult,
@@ -97,6 +98,7 @@ __all__ = [
     "read_netcdf",
     "verify_netcdf",
     "stack_systems",
+    "member_devices",
     "Solution",
     "SaveAt",
     "RESULTS",

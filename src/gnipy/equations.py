@@ -19,6 +19,8 @@ from __future__ import annotations
 import jax
 import jax.numpy as jnp
 
+from .linalg import solve
+
 __all__ = ["lagrange_dalembert_acceleration"]
 
 
@@ -44,7 +46,10 @@ def lagrange_dalembert_acceleration(system, b, v, t=None):
     mu, dmu = _along(system.mu, space, b, v)
     Y, dY = _along(system.Y, space, b, v)
     c = mu @ dY - dmu @ (v - Y)
-    Ginv_F = jnp.linalg.solve(G, F)
-    Ginv_muT = jnp.linalg.solve(G, mu.T)
-    lam = jnp.linalg.solve(mu @ Ginv_muT, c - mu @ Ginv_F)
+    # gnipy.linalg.solve, not jnp.linalg.solve: vmapped over many nodes (the run-time diagnostics of
+    # a batch), jaxlib 0.10's LAPACK triangular solves share XLA's CPU thread pool with the program
+    # that calls them, and two of them at once waited on each other for ever on a 2-core machine
+    X = solve(G, jnp.concatenate([F[:, None], mu.T], axis=1))
+    Ginv_F, Ginv_muT = X[:, 0], X[:, 1:]
+    lam = solve(mu @ Ginv_muT, c - mu @ Ginv_F)
     return Ginv_F + Ginv_muT @ lam, lam

@@ -220,8 +220,8 @@ def simulate(
             compiled to scalar machine code by LLVM, :mod:`gnipy.native`; 8–10× faster per step on
             the CPU, the same results to round-off) or `"auto"` (default: native on the CPU for runs
             of at least :data:`gnipy.native.backend.NATIVE_MIN_STEPS` trajectory-steps, when the
-            step lowers; otherwise XLA). Forced systems, parameter batches and runs under a JAX
-            transformation (gradients) run on XLA. `Solution.backend` says which ran.
+            step lowers; otherwise XLA). Forced systems and runs under a JAX transformation
+            (gradients) run on XLA. `Solution.backend` says which ran.
 
     Returns:
         A :class:`~gnipy.Solution` (`sol.success`, `sol.result`, `sol.message` say how it ended). For a
@@ -341,8 +341,7 @@ def simulate(
     from .native.backend import choose
 
     B = None if state0 is not None else _batch_size(systems, system, q0, v0, R0)
-    use, _ = choose(backend, system, method, trajectory_steps=(n + (1 if partial else 0)) * (B or 1),
-                    batched_system=systems is not None and len(systems) > 1)
+    use, _ = choose(backend, system, method, trajectory_steps=(n + (1 if partial else 0)) * (B or 1))
     meta["backend"] = use
 
     batched = systems is not None or (state0 is None and is_batch(system, q0, v0, R0))
@@ -507,14 +506,23 @@ class _Progress:
             task = self.bar.add_task("steps", total=self.total)
             self.bar.start()
             self.fn = lambda done, total: self.bar.update(task, completed=done)
-        self._ctx = progress_reporter(lambda done: self.fn(min(done, self.total), self.total))
+        self._done = 0
+
+        def advance(done):  # monotone: the chunks of a batch split across devices report on their own
+            done = min(int(done), self.total)
+            if done > self._done:
+                self._done = done
+                self.fn(done, self.total)
+
+        self._ctx = progress_reporter(advance)
         self._ctx.__enter__()
         return self
 
     def __exit__(self, *exc):
         if not self.active:
             return False
-        if exc[0] is None:
+        if exc[0] is None and self._done < self.total:
+            self._done = self.total
             self.fn(self.total, self.total)
         self._ctx.__exit__(*exc)
         if self.bar is not None:

@@ -127,6 +127,64 @@ def test_batch_of_initial_conditions_equals_xla_member_by_member():
         np.testing.assert_array_equal(np.asarray(b.R[j]), np.asarray(single.R))
 
 
+def test_parameter_batch_is_one_program_equal_to_xla_and_to_single_runs():
+    """A batch of systems (parameter values) runs native with the values as inputs of one program:
+    equal to the XLA batch to round-off, and member by member the bits of each system's own
+    single native run (whose values are constants in its program)."""
+    from gnipy.native.backend import native_loop
+
+    omegas = np.linspace(0.4, 1.6, 11)  # 11 = vector lanes (8 or 4) + members alone
+    systems = gnipy.model_systems("rolling-ball", Omega=omegas)
+    a = gnipy.simulate(systems, "gni-trapezoid", h=0.01, steps=3000, save_every=500, backend="xla")
+    b = gnipy.simulate(systems, "gni-trapezoid", h=0.01, steps=3000, save_every=500, backend="native")
+    assert a.backend == "xla" and b.backend == "native"
+    _assert_agree(a, b)
+    np.testing.assert_array_equal(np.asarray(b.member_params["Omega"]), omegas)
+    for j in (0, 4, 10):
+        single = gnipy.simulate(systems[j], "gni-trapezoid", h=0.01, steps=3000, save_every=500, backend="native")
+        np.testing.assert_array_equal(np.asarray(b.q[j]), np.asarray(single.q))
+        np.testing.assert_array_equal(np.asarray(b.R[j]), np.asarray(single.R))
+        # the energy is observed on XLA, which compiles the two programs differently (values as
+        # constants or as inputs): a few units in the last place
+        np.testing.assert_allclose(np.asarray(b.energy[j]), np.asarray(single.energy), rtol=1e-14, atol=0)
+    # one program for every value: other values of the same model reuse it
+    state = b.final_state
+    first = jax.tree_util.tree_map(lambda x: x[0], state)
+    from gnipy.methods import get_method
+
+    m = get_method("gni-trapezoid")
+    one = native_loop(m, systems[0].without_metadata(), first, batch=True, params=True)
+    other = native_loop(m, gnipy.model_systems("rolling-ball", Omega=[7.0])[0].without_metadata(), first, batch=True,
+                        params=True)
+    assert one is other
+    assert native_loop(m, systems[0].without_metadata(), first, batch=True) is not one  # values as constants
+
+
+def test_parameter_batch_with_a_failed_member():
+    """A member that fails stops there (NaN after its failed step) on both backends, at the same step."""
+    def lagrangian(c, q, v):  # V = log(c − x): undefined for x ≥ c, the force 1/(c − x) pushes x there
+        return 0.5 * v @ v - jnp.log(c - q[0])
+
+    def mu(q):
+        return jnp.array([[0.0, 0.0, 1.0]])
+
+    def wall(c):
+        return gnipy.System(jax.tree_util.Partial(lagrangian, jnp.asarray(c)), mu, n=3, name="wall")
+
+    systems = [wall(c) for c in (1e4, 1.0, 1e5)]
+    out = []
+    for backend in ("xla", "native"):
+        sol = gnipy.simulate(systems, "gni-midpoint", [0.5, 0.0, 0.0], [1.0, 0.0, 0.0], h=0.1, steps=200, save_every=3,
+                             throw=False, backend=backend)
+        assert sol.backend == backend
+        out.append(sol)
+    a, b = out
+    np.testing.assert_array_equal(np.asarray(a.failed_steps), np.asarray(b.failed_steps))
+    assert int(b.failed_steps[1]) > 0 and int(b.failed_steps[0]) == -1
+    np.testing.assert_allclose(np.asarray(b.q), np.asarray(a.q), rtol=0, atol=1e-12)
+    assert np.all(np.isnan(np.asarray(b.q[1, -1])))
+
+
 def _wall_system():
     # V = log(1 − x): undefined for x ≥ 1, and the force 1/(1 − x) pushes the particle there
     return gnipy.System(lambda q, v: 0.5 * v @ v - jnp.log1p(-q[0]), lambda q: jnp.array([[0.0, 0.0, 1.0]]), n=3,

@@ -13,10 +13,12 @@ A batch of initial conditions runs on every core (one chunk of members per core)
 members at a time in vector lanes (:func:`gnipy.native.program.default_lanes`), each member with
 the bits of its own single run.
 
+A batch of parameter values (a list of systems) runs the same way, with the systems' array
+leaves as inputs of one program instead of constants in it (:func:`native_loop`'s `params`).
+
 The native loop runs when JAX's default device is the CPU (or `"native"` was asked for), llvmlite
-is installed, the system is unforced (a forced system's drive stays on XLA), a batch shares one
-system (parameter batches run on XLA), the run is not traced by a JAX transformation (gradients
-stay on XLA), and every primitive of the step lowers. When it cannot, XLA runs and
+is installed, the system is unforced (a forced system's drive stays on XLA), the run is not traced
+by a JAX transformation (gradients stay on XLA), and every primitive of the step lowers. When it cannot, XLA runs and
 `Solution.backend` says so (with `"native"` asked for, a warning gives the reason).
 """
 
@@ -24,6 +26,7 @@ from __future__ import annotations
 
 import warnings
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -33,7 +36,7 @@ from ..errors import InputError
 from .lowering import Unsupported
 from .program import available, build_loop
 
-__all__ = ["BACKENDS", "NATIVE_MIN_STEPS", "check_backend", "choose", "run_native", "native_loop"]
+__all__ = ["BACKENDS", "NATIVE_MIN_STEPS", "check_backend", "choose", "run_native", "native_loop", "system_params"]
 
 #: The values of `simulate(..., backend=)`.
 BACKENDS = ("auto", "xla", "native")
@@ -56,23 +59,26 @@ def check_backend(backend) -> str:
     return backend
 
 
-def _loop_key(method, system):
+def _loop_key(method, system, params: bool = False):
+    """The key of a built loop: the structure of `(method, system)` and the values of its array
+    leaves (with `params`, the system's values are inputs of the program: only their shapes)."""
     from ..preparation import _split
 
     leaves, key, _ = _split((method, system))
     if key is None:
         return None
+    n_method = len(_split(method)[0])
     try:
-        return key, tuple((np.asarray(a).dtype.str, np.shape(a), np.asarray(a).tobytes()) for a in leaves)
+        return key, params, tuple((np.asarray(a).dtype.str, np.shape(a),
+                                   None if params and i >= n_method else np.asarray(a).tobytes())
+                                  for i, a in enumerate(leaves))
     except Exception:
         return None
 
 
-def _why_not(system, *, batched_system: bool = False, traced: bool = False) -> str | None:
+def _why_not(system, *, traced: bool = False) -> str | None:
     if traced:
         return "the run is traced by a JAX transformation (gradients stay on XLA)"
-    if batched_system:
-        return "a batch of systems (parameter values) runs on XLA"
     if getattr(system, "force", None) is not None:
         return "forced systems (their drive) run on XLA"
     if not available():
@@ -80,8 +86,7 @@ def _why_not(system, *, batched_system: bool = False, traced: bool = False) -> s
     return None
 
 
-def choose(backend: str, system, method, *, trajectory_steps: int, batched_system: bool = False,
-           traced: bool = False) -> tuple[str, str]:
+def choose(backend: str, system, method, *, trajectory_steps: int, traced: bool = False) -> tuple[str, str]:
     """`(backend, why)`: `"native"` or `"xla"` for this run, and a sentence when XLA runs although
     native was possible or asked for. The choice depends on the run's arguments only (not on what
     ran before in the process), so that a run gives the same bits in any process."""
@@ -89,7 +94,7 @@ def choose(backend: str, system, method, *, trajectory_steps: int, batched_syste
 
     if backend == "xla" or isinstance(method, ContinuousReference):
         return "xla", ""
-    reason = _why_not(system, batched_system=batched_system, traced=traced)
+    reason = _why_not(system, traced=traced)
     if reason is None and backend == "auto":
         if jax.default_backend() != "cpu":
             reason = f"JAX's default device is {jax.default_backend()}"
@@ -102,21 +107,36 @@ def choose(backend: str, system, method, *, trajectory_steps: int, batched_syste
     return "native", ""
 
 
-def native_loop(method, system, state0, *, batch: bool = False):
+def system_params(system) -> tuple[list, object]:
+    """`(values, rebuild)`: the array leaves of `system` (its parameter values) and
+    `rebuild(values)`, the system with other values."""
+    arrays, static = eqx.partition(system, eqx.is_array)
+    values, treedef = jax.tree_util.tree_flatten(arrays)
+    return values, lambda vs: eqx.combine(jax.tree_util.tree_unflatten(treedef, list(vs)), static)
+
+
+def native_loop(method, system, state0, *, batch: bool = False, params: bool = False):
     """The compiled loop of `method` on `system` (built once per method and system values; for a
     `batch`, with the version that runs several trajectories in vector lanes), or the
-    :class:`Unsupported` reason."""
+    :class:`Unsupported` reason. With `params`, the system's array leaves (its parameter values,
+    :func:`system_params`) are inputs of the loop, so one program runs every value: `system` is
+    then an example (one member of a parameter batch)."""
     from ..stepping import _carry0, _stepper
     from .program import default_lanes
 
     lanes = default_lanes() if batch else 1
-    key = _loop_key(method, system)
+    key = _loop_key(method, system, params)
     key = None if key is None else (key, lanes)
     hit = _LOOPS.get(key) if key is not None else None
     if hit is not None:
         return hit
     try:
-        loop = build_loop(_stepper(method, system), _carry0(state0), 0.01, lanes=lanes)
+        if params:
+            values, rebuild = system_params(system)
+            loop = build_loop(lambda c, hh, vs: _stepper(method, rebuild(vs))(c, hh), _carry0(state0), 0.01,
+                              lanes=lanes, params=values)
+        else:
+            loop = build_loop(_stepper(method, system), _carry0(state0), 0.01, lanes=lanes)
     except Unsupported as e:
         loop = e
     if key is not None:
@@ -137,12 +157,12 @@ def _flat_state(treedef, shapes, flat):
 
 @jit
 def _post(method, system, layout, saved, carry, h, h_last, times, partial: bool, save_final: bool,
-          save_states: bool, batched: bool, complete):
+          save_states: bool, batched: bool, system_batched: bool, complete):
     from ..stepping import finish_native
 
     treedef, shapes, S = layout
 
-    def one(sv, c):
+    def one(system, sv, c):
         states = _flat_state(treedef, shapes, sv)
         i32 = jnp.int32
         cy = (_flat_state(treedef, shapes, c[:S]), c[S].astype(i32), c[S + 1].astype(i32), c[S + 2],
@@ -151,7 +171,9 @@ def _post(method, system, layout, saved, carry, h, h_last, times, partial: bool,
                             save_states=save_states)
         return out if complete is None else complete(system, out, times)
 
-    return jax.vmap(one)(saved, carry) if batched else one(saved, carry)
+    if not batched:
+        return one(system, saved, carry)
+    return eqx.filter_vmap(one, in_axes=(eqx.if_array(0) if system_batched else None, 0, 0))(system, saved, carry)
 
 
 @jit
@@ -189,12 +211,14 @@ def _run_reporting(loop, carry, h, blocks, stride: int):
 
 
 def run_native(loop, method, system, state0, h, lengths, tail, h_last, *, partial: bool, save_final: bool,
-               save_states: bool, batched: bool = False, times=None, complete=None,
-               progress_stride: int | None = None) -> dict:
+               save_states: bool, batched: bool = False, system_batched: bool = False, times=None,
+               complete=None, progress_stride: int | None = None) -> dict:
     """The run of :func:`gnipy.stepping.run_nodes` (same arguments and result; `state0` with a
     leading member axis when `batched`) on the compiled `loop`; `complete(system, out, times)`
-    adds fields inside the same XLA program. With `progress_stride`, the steps done are reported
-    every `progress_stride` steps or so (the loop then runs in pieces)."""
+    adds fields inside the same XLA program. With `system_batched`, `system` is a stack of
+    systems (:func:`gnipy.stack_systems`), one per member, and `loop` was built with `params`.
+    With `progress_stride`, the steps done are reported every `progress_stride` steps or so (the
+    loop then runs in pieces)."""
     leaves, treedef = jax.tree_util.tree_flatten(state0)
     shapes = tuple(tuple(np.shape(x))[1 if batched else 0:] for x in leaves)
     S = int(sum(int(np.prod(s, dtype=np.int64)) for s in shapes))
@@ -204,6 +228,12 @@ def run_native(loop, method, system, state0, h, lengths, tail, h_last, *, partia
         flat = np.concatenate([np.ravel(np.asarray(x, dtype=np.float64)) for x in leaves])
     counters = np.array([0.0, -1.0, 0.0, 0.0, 0.0])
     carry0 = np.concatenate([flat, np.broadcast_to(counters, flat.shape[:-1] + (5,))], axis=-1)
+    if system_batched:  # each member's parameter values after its counters (build_loop's params)
+        values, _ = system_params(system)
+        carry0 = np.concatenate([carry0] + [np.reshape(np.asarray(v, np.float64), (flat.shape[0], -1))
+                                            for v in values], axis=-1)
+    if carry0.shape[-1] != loop.n_carry:
+        raise ValueError(f"run_native: a carry of {carry0.shape[-1]} values for a loop of {loop.n_carry}")
     blocks = np.concatenate([np.asarray(lengths, np.int32).reshape(-1), np.asarray([tail], np.int32)])
     if progress_stride:
         carry, saved = _run_reporting(loop, carry0, float(h), blocks, int(progress_stride))
@@ -211,4 +241,4 @@ def run_native(loop, method, system, state0, h, lengths, tail, h_last, *, partia
         carry, saved = loop.run(carry0, float(h), blocks)
     return _post(method, system, (treedef, shapes, S), saved, carry, np.float64(h), np.float64(h_last),
                  None if times is None else np.asarray(times, np.float64), bool(partial), bool(save_final),
-                 bool(save_states), bool(batched), complete)
+                 bool(save_states), bool(batched), bool(system_batched), complete)

@@ -381,15 +381,28 @@ def default_lanes() -> int:
     return 4 if feats.get("avx") else 2
 
 
-def build_loop(step, carry0, h, lanes: int = 1) -> NativeLoop:
+def build_loop(step, carry0, h, lanes: int = 1, params=None) -> NativeLoop:
     """Trace `step(carry, h) -> carry` at the example `carry0` (a pytree whose leaves are the
     state's arrays then the loop's counters, as :func:`gnipy.stepping._carry0` builds it), lower it
     and compile the loop; with `lanes` > 1 also a version that runs that many trajectories at once
     in vector lanes (for batches). Raises :class:`~gnipy.native.lowering.Unsupported` when it
-    cannot."""
+    cannot.
+
+    With `params` (a list of arrays: an example of the values), the step is `step(carry, h,
+    params)` and the values are inputs of the program instead of constants in it: each trajectory's
+    row of the carry holds them after the counters (:class:`NativeLoop`'s `n_carry` counts them),
+    and the loop passes them on unchanged. One program then serves every value (a batch of
+    parameter values)."""
     import jax
 
     t0 = time.perf_counter()
+    n_state_leaves = len(jax.tree_util.tree_leaves(carry0)) - 5
+    if params is not None:
+        inner, params = step, tuple(params)
+        carry0 = (carry0, params)
+
+        def step(c, hh):
+            return inner(c[0], hh, c[1]), c[1]
     leaves, treedef = jax.tree_util.tree_flatten(carry0)
     closed = jax.make_jaxpr(lambda ls, hh: jax.tree_util.tree_leaves(step(jax.tree_util.tree_unflatten(treedef, ls), hh)))(
         leaves, h)
@@ -403,7 +416,6 @@ def build_loop(step, carry0, h, lanes: int = 1) -> NativeLoop:
         jaxpr, consts = closed.jaxpr, closed.consts
     shapes = [np.shape(x) for x in leaves]
     types = [llvm_type(np.asarray(x).dtype) if not hasattr(x, "dtype") else llvm_type(x.dtype) for x in leaves]
-    n_state_leaves = len(leaves) - 5
     n_state = int(sum(int(np.prod(s, dtype=np.int64)) for s in shapes[:n_state_leaves]))
     flat_types = [ty for s, ty in zip(shapes, types) for _ in range(int(np.prod(s, dtype=np.int64)))]
     const_arrays = [_const_array(np.asarray(c)) for c in consts]
@@ -418,8 +430,11 @@ def build_loop(step, carry0, h, lanes: int = 1) -> NativeLoop:
             return out_flat
         return emit_step
 
-    if any(ty not in ("double", "i32", "i64") for ty in flat_types):
-        raise Unsupported("a state with non-numeric leaves")
+    for i, (ty, x) in enumerate(zip(types, leaves)):
+        if ty not in ("double", "i32", "i64"):
+            what = "the state" if i < n_state_leaves + 5 else "a parameter of the system"
+            raise Unsupported(f"{what} has a leaf of dtype {np.asarray(x).dtype} (the loop carries float64, "
+                              "int32 and int64)")
     t1 = time.perf_counter()
     fn = Function()
     parts = [_driver(fn, flat_types, n_state, emitter(fn), k_index=n_state, fail_index=n_state + 1)]
