@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from gnipy.native import Unsupported
-from gnipy.native.program import build_function
+from gnipy.native.function import build_function
 
 # (no subnormals: XLA's CPU code flushes them to zero, see test_subnormals_are_kept)
 SPECIAL = np.array([0.0, -0.0, 1.0, -1.5, 2.5, 1e-300, -1e300, np.inf, -np.inf, np.nan, 3.0, 0.5])
