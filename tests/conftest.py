@@ -15,3 +15,34 @@ def _release_compiled_programs():
     kernel's code separately (vm.max_map_count would be exceeded; see gnipy.compilation)."""
     yield
     release_compiled_programs_if_needed(fraction=0.25)
+
+
+@pytest.fixture
+def lock_holder():
+    """`hold(path)`: another process holding the output lock of `path` (as a running gnipy writer
+    does, gnipy.files.output_lock) until the test ends; returns the process (its `pid`)."""
+    import subprocess
+    import sys
+    import textwrap
+
+    started = []
+
+    def hold(path):
+        script = textwrap.dedent(f"""
+            import sys
+            from gnipy.files import output_lock
+            with output_lock({str(path)!r}):
+                print("held", flush=True)
+                sys.stdin.read()
+        """)
+        p = subprocess.Popen([sys.executable, "-c", script], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                             text=True)
+        started.append(p)
+        assert p.stdout.readline().strip() == "held"
+        return p
+
+    yield hold
+    for p in started:
+        if p.poll() is None:
+            p.stdin.close()
+            p.wait(timeout=60)

@@ -136,3 +136,59 @@ def _small_solution():
         _SMALL["sol"] = gnipy.simulate(gnipy.make_system("knife-edge"), "gni-trapezoid", h=0.1, steps=4,
                                        save_every=4)
     return _SMALL["sol"]
+
+
+# ------------------------------------------------------------------------------------------------
+# Strict types (issue 28, D9): a string or a boolean is not a number, a flag is True or False
+# ------------------------------------------------------------------------------------------------
+texts_and_bools = st.one_of(st.text(max_size=6), st.booleans(), st.sampled_from([b"0.1", np.bool_(True), "0.01",
+                                                                                   "1e-2", "nan"]))
+
+
+@FUZZ
+@given(value=texts_and_bools, argument=st.sampled_from(["h", "t_final", "t0"]))
+def test_texts_and_booleans_are_not_numbers(knife, value, argument):
+    """`simulate(h=True)` ran with h = 1 and `h="0.01"` was accepted: now each is refused, naming it."""
+    kwargs = {"h": 0.1, "t_final": 0.4, argument: value}
+    with pytest.raises(gnipy.InputError, match=rf"^{argument}: expected a (positive )?number"):
+        gnipy.simulate(knife, "gni-trapezoid", **kwargs)
+
+
+@FUZZ
+@given(value=st.one_of(st.text(max_size=4), st.integers(), st.none(), st.just([True])),
+       argument=st.sampled_from(["throw", "project_v0"]))
+def test_flags_are_true_or_false(knife, value, argument):
+    """`throw="no"` and `project_v0="no"` were truthy."""
+    with pytest.raises(gnipy.InputError, match=rf"^{argument}: expected True or False"):
+        gnipy.simulate(knife, "gni-trapezoid", h=0.1, steps=2, **{argument: value})
+
+
+@pytest.mark.parametrize("q0", [["0", "0", "0"], [True, 0.0, 0.0], np.array(["1", "2", "3"])])
+def test_initial_conditions_of_strings_or_booleans_are_refused(knife, q0):
+    with pytest.raises(gnipy.InputError, match="^q0: expected 3 real numbers, got (strings|str|bool)"):
+        gnipy.simulate(knife, "gni-trapezoid", q0, [1.0, 0.0, 0.0], h=0.1, steps=2)
+
+
+@pytest.mark.parametrize("value", ["1", ["0", "1"], True, [True, False], np.array([True, False])])
+def test_model_parameters_of_strings_or_booleans_are_refused(value):
+    with pytest.raises(gnipy.InputError, match="^params: parameter 'Omega'"):
+        gnipy.model_systems("rolling-ball", Omega=value)
+    with pytest.raises(gnipy.InputError, match="^params: parameter 'Omega'"):
+        gnipy.get_model("rolling-ball").system(Omega=value)
+
+
+def test_save_times_in_the_wrong_order_are_refused(knife):
+    """`SaveAt(ts=[0.05, 0.01])` was silently sorted, so row i no longer matched ts[i]."""
+    with pytest.raises(gnipy.InputError, match=r"^saveat.ts: the times are decreasing, but h = 0.01 runs forward"):
+        gnipy.simulate(knife, "gni-trapezoid", h=0.01, steps=10, saveat=gnipy.SaveAt(ts=[0.05, 0.01]))
+    sol = gnipy.simulate(knife, "gni-trapezoid", h=0.01, steps=10, saveat=gnipy.SaveAt(ts=[0.01, 0.05]))
+    np.testing.assert_allclose(np.asarray(sol.t), [0.01, 0.05], rtol=0, atol=1e-15)
+    with pytest.raises(gnipy.InputError, match="^saveat.ts: expected a sequence of times, got str '0.1'"):
+        gnipy.SaveAt(ts=["0.1"])
+
+
+def test_a_sequence_of_different_systems_is_refused_by_name(knife):
+    """`simulate([knife-edge, vertical-disk])` raised a bare ValueError from np.stack."""
+    disk = gnipy.make_system("vertical-disk")
+    with pytest.raises(gnipy.InputError, match=r"^system\[1\]: is 'vertical-disk' .* system\[0\] is 'knife-edge'"):
+        gnipy.simulate([knife, disk], "gni-trapezoid", h=0.1, steps=2)

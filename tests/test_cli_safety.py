@@ -32,6 +32,7 @@ import xarray as xr
 from typer.testing import CliRunner
 
 import gnipy
+import gnipy.resources
 from gnipy.cli import app, resources
 from gnipy.cli.output import safe
 
@@ -359,11 +360,11 @@ def test_config_with_a_huge_step_count_is_refused_at_once(tmp_path, no_computati
 
 def test_memory_and_file_bounds_and_yes(tmp_path, monkeypatch):
     out = tmp_path / "x.nc"
-    monkeypatch.setattr(resources, "MAX_MEMORY_BYTES", 1000)
+    monkeypatch.setattr(gnipy.resources, "MAX_MEMORY_BYTES", 1000)
     err = assert_usage_error(invoke(*BASE, "--out", out), "--steps/--save-every", "in memory", "--checkpoint-every",
                              "--yes")
     assert "bytes" in err or "KiB" in err
-    monkeypatch.setattr(resources, "MAX_MEMORY_BYTES", 2**33)
+    monkeypatch.setattr(gnipy.resources, "MAX_MEMORY_BYTES", 2**33)
     monkeypatch.setattr(resources, "MAX_OUTPUT_BYTES", 100)
     assert_usage_error(invoke(*BASE, "--out", out), "--steps/--save-every", "the file would hold 11 saved nodes",
                        "--yes")
@@ -376,7 +377,7 @@ def test_memory_and_file_bounds_and_yes(tmp_path, monkeypatch):
     monkeypatch.setattr(shutil, "disk_usage", lambda path: Usage)
     assert_usage_error(invoke(*BASE, "--out", out), "free", "--yes")
     assert not out.exists()
-    monkeypatch.setattr(resources, "MAX_MEMORY_BYTES", 1000)
+    monkeypatch.setattr(gnipy.resources, "MAX_MEMORY_BYTES", 1000)
     res = invoke(*BASE, "--out", out, "--yes")  # the user says so: it runs
     assert res.exit_code == 0, res.output
     assert out.is_file()
@@ -384,7 +385,7 @@ def test_memory_and_file_bounds_and_yes(tmp_path, monkeypatch):
 
 def test_memory_bound_is_at_most_half_the_ram():
     pages = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    assert resources.memory_bound() == min(resources.MAX_MEMORY_BYTES, pages // 2)
+    assert resources.memory_bound() == min(gnipy.resources.MAX_MEMORY_BYTES, pages // 2)
 
 
 # --------------------------------------------------------------------------------------------------

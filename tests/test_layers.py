@@ -13,7 +13,7 @@ import gnipy
 LAYERS = {
     # foundations used everywhere: errors, compilation options, input arrays, small solves, files
     "errors": 0, "compilation": 0, "inputs": 0, "linalg": 0, "sharding": 0, "schema": 0, "files": 0, "text": 0,
-    "version": 0,
+    "version": 0, "private_cache": 0, "resources": 0,
     # core: groups and retractions; the system, spaces, projectors, continuous equations, model table
     "lie_groups": 1, "retractions": 1,
     "system": 2, "system_checks": 2, "forcing": 2, "spaces": 2, "projectors": 2, "equations": 2, "registry": 2,

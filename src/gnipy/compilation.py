@@ -23,6 +23,14 @@ opt-in. Turn it on by setting `GNIPY_COMPILATION_CACHE=1` (the command line and 
 call it yourself at the start of a Python session.
 
 The directory is `$GNIPY_CACHE_DIR` if set, else `~/.cache/gnipy/jax`.
+
+**Trust.** JAX loads the executables it finds there and runs them, and gnipy cannot authenticate
+JAX's entries (JAX reads and writes them itself, by path). So the directory is used only if it is
+private (:func:`gnipy.private_cache.private_directory`): a directory, not a link, owned by the
+current user and writable by no one else (a missing one is created with mode 0700). Another
+directory is refused with a :class:`~gnipy.private_cache.CacheWarning`, and the cache stays off.
+What remains trusted is that no one but the user (or root) writes into a directory only the user
+can write, and that its path keeps naming it while JAX uses it.
 """
 
 from __future__ import annotations
@@ -30,6 +38,8 @@ from __future__ import annotations
 import functools
 import os
 from pathlib import Path
+
+from .private_cache import CacheRefused, private_directory, warn_refused
 
 __all__ = [
     "COMPILER_OPTIONS",
@@ -104,19 +114,31 @@ def enable_compilation_cache(path=None, *, min_compile_seconds: float = 0.2) -> 
     """Turn on JAX's persistent compilation cache (takes effect for programs compiled afterwards;
     JAX reads the setting at its first compilation, so call this before simulating).
 
+    JAX's entries are executables that JAX loads and runs; gnipy cannot authenticate them (JAX
+    reads and writes them itself), so the only protection is that the directory is the user's
+    alone: it is checked as :func:`gnipy.private_cache.private_directory` does, and a missing one
+    is created with mode 0700.
+
     Arguments:
         path: the cache directory (default :func:`default_cache_dir`).
         min_compile_seconds: programs that compile faster than this are not stored.
 
     Returns:
-        The directory used, or None when the directory cannot be created (the cache is an
-        optimisation: nothing fails without it).
+        The directory used, or None when the directory cannot be created, or is refused because it
+        is not private: a symbolic link, another user's, or writable by its group or others (with a
+        :class:`~gnipy.private_cache.CacheWarning`). The cache is an optimisation: nothing fails
+        without it.
     """
     import jax
 
     directory = Path(path) if path is not None else default_cache_dir()
     try:
-        directory.mkdir(parents=True, exist_ok=True)
+        os.close(private_directory(directory))
+    except CacheRefused as e:
+        warn_refused(directory, str(e), what="JAX's compilation cache", instead="the cache stays off",
+                     remedy="Set GNIPY_CACHE_DIR to a folder that only you can write (gnipy creates a missing one "
+                            "with mode 0700), or pass such a folder, or leave GNIPY_COMPILATION_CACHE unset.")
+        return None
     except OSError:
         return None
     if not os.access(directory, os.W_OK | os.X_OK):

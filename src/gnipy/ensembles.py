@@ -27,6 +27,7 @@ from .compilation import jit
 from .sharding import member_devices, pad_members, shard_map
 from .spaces import Point
 from .errors import InputError, SolverFailure
+from .inputs import refuse_text_or_bool
 from .solution import RESULTS, Solution
 from .stepping import run_nodes
 from .system import System, real_array
@@ -128,6 +129,7 @@ def model_systems(name: str, **params) -> list[System]:
     spec = get_model(name)
     arrays = {}
     for k, v in params.items():
+        refuse_text_or_bool(f"params: parameter {k!r}", v, "numbers")
         try:
             a = np.asarray(v, dtype=np.float64)
         except (TypeError, ValueError) as e:

@@ -7,11 +7,13 @@
 - :class:`SolverFailure` (a `RuntimeError`): a step did not converge or gave a non-finite value;
   it carries the step, time, residual and the solution up to the failure.
 - :class:`OutputError` (an `OSError`): a file could not be written or read (the path and why).
+- :class:`OutputBusy` (an :class:`OutputError`): another process is writing the same output
+  (:class:`gnipy.files.output_lock`).
 """
 
 from __future__ import annotations
 
-__all__ = ["InputError", "MethodError", "SolverFailure", "OutputError"]
+__all__ = ["InputError", "MethodError", "SolverFailure", "OutputError", "OutputBusy"]
 
 
 class InputError(ValueError):
@@ -39,3 +41,7 @@ class SolverFailure(RuntimeError):
 
 class OutputError(OSError):
     """A file could not be written or read (the message names the path and why)."""
+
+
+class OutputBusy(OutputError):
+    """Another process is writing the same output (the message names it, with its process id)."""

@@ -168,31 +168,55 @@ def input_force(system, gains) -> tuple[InputForce, int, tuple[str, ...]]:
         `(F, m, input_names)`.
 
     Raises:
-        InputError: unknown velocity names, no inputs, or gains that are not finite numbers.
+        InputError: (naming `inputs.<input name>`, the key of a problem file) unknown velocity
+            names, no inputs, names that are not strings, gains that are not finite numbers (a
+            string or a boolean is not one), or an input whose gains are all zero (it would act on
+            nothing: the problem's derivatives with respect to it vanish, and the solver's
+            Gauss-Newton systems are singular).
     """
     import math
+    import numbers
 
     import numpy as np
 
     from .errors import InputError
 
     if not hasattr(gains, "items") or not gains:
-        raise InputError("inputs: expected a mapping {input name: {velocity name: gain}} with at least one input")
-    names = tuple(str(k) for k in gains)
+        raise InputError("inputs: expected a mapping {input name: {velocity name: gain}} with at least one input, "
+                         f"got {gains!r}")
+    bad = [k for k in gains if not isinstance(k, str) or not k]
+    if bad:
+        raise InputError(f"inputs: input names must be non-empty strings, got {bad[0]!r}")
+    names = tuple(gains)
     index = {c: i for i, c in enumerate(system.velocities)}
     B = np.zeros((system.dim, len(names)))
     for j, (name, row) in enumerate(gains.items()):
+        key = _key("inputs", name)
         if not hasattr(row, "items") or not row:
-            raise InputError(f"inputs: {name!r}: expected a mapping {{velocity name: gain}}, got {row!r}")
+            raise InputError(f"{key}: expected a mapping {{velocity name: gain}} with at least one entry, got {row!r}")
         for vel, gain in row.items():
             if vel not in index:
-                raise InputError(f"inputs: {name!r}: unknown velocity {vel!r}; expected one of "
-                                 f"{', '.join(system.velocities)}")
-            try:
-                g = float(gain)
-            except (TypeError, ValueError):
-                raise InputError(f"inputs: {name!r}: the gain of {vel!r} must be a number, got {gain!r}") from None
+                raise InputError(f"{key}: unknown velocity {vel!r}; expected one of {', '.join(system.velocities)}")
+            # a real scalar of Python, NumPy or JAX; a bool is an int to Python and a string converts
+            # under float(): neither is a gain
+            kind = getattr(getattr(gain, "dtype", None), "kind", None)
+            real = kind in ("i", "u", "f") and np.ndim(gain) == 0 if kind is not None else (
+                isinstance(gain, numbers.Real) and not isinstance(gain, bool))
+            if not real:
+                raise InputError(f"{key}: the gain of {vel!r} must be a number, got {type(gain).__name__} {gain!r}")
+            g = float(gain)
             if not math.isfinite(g):
-                raise InputError(f"inputs: {name!r}: the gain of {vel!r} must be finite, got {gain!r}")
+                raise InputError(f"{key}: the gain of {vel!r} must be finite, got {gain!r}")
             B[index[vel], j] = g
+        if not np.any(B[:, j]):
+            raise InputError(f"{key}: every gain is zero: the input would act on nothing (give a nonzero gain, or "
+                             "leave the input out)")
     return InputForce(jnp.asarray(B)), len(names), names
+
+
+def _key(section: str, name: str) -> str:
+    """`section.name` as a TOML key (the name quoted where it is not a bare key)."""
+    import json
+    import re
+
+    return f"{section}.{name}" if re.fullmatch(r"[A-Za-z0-9_-]+", name) else f"{section}.{json.dumps(name)}"

@@ -56,9 +56,14 @@ class ModelSpec:
     notes: str = ""
 
     def resolve_params(self, overrides: Mapping[str, Any] | None = None) -> dict[str, float]:
-        """Defaults updated with `overrides`; unknown names and non-finite values raise InputError."""
+        """Defaults updated with `overrides`; unknown names, values that are not numbers (a string or
+        a boolean is not one) and non-finite values raise InputError."""
         import math
 
+        from .inputs import is_text_or_bool
+
+        if overrides is not None and not isinstance(overrides, Mapping):
+            raise InputError(f"params: expected a mapping of parameter names to numbers, got {overrides!r}")
         params = dict(self.params)
         for k, v in (overrides or {}).items():
             if k not in params:
@@ -67,6 +72,8 @@ class ModelSpec:
             if isinstance(v, jax.core.Tracer):  # differentiated with respect to it (jax.grad): kept traced
                 params[k] = v
                 continue
+            if is_text_or_bool(v):
+                raise InputError(f"params: parameter {k!r} must be a number, got {type(v).__name__} {v!r}")
             try:
                 v = float(v)
             except (TypeError, ValueError) as e:

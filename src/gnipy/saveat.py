@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from .errors import InputError
+from .inputs import real_array
 
 __all__ = ["SaveAt", "Schedule", "schedule"]
 
@@ -62,8 +63,9 @@ class SaveAt:
                 raise InputError(f"saveat.every: must be a positive integer, got {e!r}")
             object.__setattr__(self, "every", int(e))
         if self.ts is not None:
+            ts = real_array("saveat.ts", self.ts, "a sequence of times").reshape(-1)
             try:
-                ts = np.asarray(self.ts, dtype=np.float64).reshape(-1)
+                ts = np.asarray(ts, dtype=np.float64).reshape(-1)
             except (TypeError, ValueError) as e:
                 raise InputError(f"saveat.ts: expected a sequence of times, got {self.ts!r}") from e
             if ts.size == 0:
@@ -131,6 +133,13 @@ def schedule(saveat: SaveAt, steps: int, partial: float = 0.0, *, h: float | Non
     elif saveat.ts is not None:
         if h is None:
             raise InputError("saveat.ts: needs a concrete h to place the times on the grid")
+        if len(saveat.ts) > 1 and (saveat.ts[1] > saveat.ts[0]) != (h > 0):
+            # the rows of the solution follow the run: ts in the other order would not match them
+            raise InputError(
+                f"saveat.ts: the times are {'increasing' if saveat.ts[1] > saveat.ts[0] else 'decreasing'}, but "
+                f"h = {h!r} runs {'forward' if h > 0 else 'backward'} in time; give them in the order the run "
+                f"reaches them ({'increasing' if h > 0 else 'decreasing'}), so that row i of the solution is ts[i]"
+            )
         nodes = set()
         t_end = t0 + h * (steps + partial)
         for t in saveat.ts:

@@ -21,6 +21,7 @@ import numpy as np
 
 from .compilation import jit
 from .errors import InputError, MethodError, SolverFailure
+from .inputs import flag, refuse_text_or_bool
 from .integrators.base import Integrator
 from .integrators.reversal import backward
 from .saveat import GRID_RTOL, SaveAt, schedule
@@ -47,6 +48,7 @@ def _traced(*trees) -> bool:
 
 
 def _number(name: str, x, *, positive: bool) -> float:
+    refuse_text_or_bool(name, x, f"a {'positive ' if positive else ''}number")
     if isinstance(x, (complex, np.complexfloating)) or (hasattr(x, "dtype") and np.iscomplexobj(x)):
         raise InputError(f"{name}: expected a {'positive ' if positive else ''}real number, got {x!r}")
     try:
@@ -56,6 +58,25 @@ def _number(name: str, x, *, positive: bool) -> float:
     if not math.isfinite(value) or (positive and value <= 0):
         raise InputError(f"{name}: must be a {'positive ' if positive else ''}finite number, got {x!r}")
     return value
+
+
+def _check_same_system(systems) -> None:
+    """A sequence of systems is a parameter batch: the same system with other parameter values.
+    Members whose dimensions or group differ are refused here, naming the first such member, before
+    their initial conditions are stacked (the full check of their structure is
+    :func:`gnipy.ensembles.stack_systems`)."""
+    def kind(s):
+        return (s.n, s.dim, None if s.group is None else type(s.group).__name__)
+
+    def say(s):
+        k = kind(s)
+        return f"{s.name or 'an unnamed system'!r} (n = {k[0]}, {k[1]} velocities, group {k[2] or 'none'})"
+
+    for i, s in enumerate(systems[1:], 1):
+        if kind(s) != kind(systems[0]):
+            raise InputError(f"system[{i}]: is {say(s)}, system[0] is {say(systems[0])}; a sequence of systems is "
+                             "a parameter batch (the same system with other parameter values): run different systems "
+                             "in separate calls")
 
 
 def _whole_steps(steps) -> int:
@@ -257,6 +278,7 @@ def simulate(
     from .native.backend import check_backend
 
     backend = check_backend(backend)
+    project_v0, throw = flag("project_v0", project_v0), flag("throw", throw)
     systems = None
     if isinstance(system, (list, tuple)):
         systems = list(system)
@@ -266,6 +288,7 @@ def simulate(
             bad = next(i for i, s in enumerate(systems) if not isinstance(s, System))
             raise InputError(f"system[{bad}]: expected a gnipy.System, got {type(systems[bad]).__name__}")
         system = systems[0]
+        _check_same_system(systems)
     if not isinstance(system, System):
         raise InputError(f"system: expected a gnipy.System or a sequence of them, got {type(system).__name__}")
     method = _method(system, method)

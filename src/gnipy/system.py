@@ -30,7 +30,7 @@ from .compilation import jit
 from .spaces import EuclideanSpace, GroupSpace, Point
 
 from .errors import InputError
-from .inputs import _as_vector, _fmt, _number, real_array, require_float64
+from .inputs import _as_vector, _fmt, _number, flag, real_array, require_float64
 from .system_checks import _metric_derivatives, _validation_values
 
 __all__ = ["System"]
@@ -435,6 +435,7 @@ class System(eqx.Module):
             InputError: naming the argument and the problem.
         """
         require_float64()
+        project_v0 = flag("project_v0", project_v0)
         b0 = self.initial_point(q0, R0)
         if v0 is not None:
             v0 = _as_vector("v0", v0, self.dim)

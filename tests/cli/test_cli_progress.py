@@ -170,3 +170,43 @@ def test_gni_sweep_reports_its_chunks(tmp_path, monkeypatch):
     assert res.exit_code == 0, res.output
     lines = _progress_lines(res.output, "sweep", "chunks")
     assert [line.split(",")[0] for line in lines] == [f"sweep: {k}/4 chunks" for k in range(5)], res.output
+
+
+# ------------------------------------------------------------------------------------------------
+# The bar on a terminal shows names literally (issue 28, D5)
+# ------------------------------------------------------------------------------------------------
+NASTY_NAMES = ["[/bold]x[red", "[link=http://x]y[/link]", "\x1b]0;pwned\x07title", "a\x1b[2Jb\x9bc"]
+
+
+@pytest.mark.parametrize("name", NASTY_NAMES)
+def test_the_bar_shows_a_name_literally(name, monkeypatch):
+    """A problem's name in the description: rich markup crashed the bar (MarkupError), escape
+    sequences reached the terminal (window title, clear screen). The bar, rendered to a string,
+    holds the name with its control characters as visible escapes and nothing interpreted."""
+    import io
+
+    import rich.console
+
+    from gnipy.text import safe
+
+    screen, real = io.StringIO(), rich.console.Console
+    monkeypatch.setattr(rich.console, "Console", lambda **kwargs: real(file=screen, force_terminal=True, width=400,
+                                                                        color_system=None))
+    with Progress("control", 60, "iterations", description=f"{name}: compiling", terminal=True) as progress:
+        progress.update(70, description=f"{name}: cost 1.5")
+        progress._bar.refresh()
+        shown = screen.getvalue()
+    assert f"{safe(name)}: cost 1.5" in shown
+    assert "\x1b]" not in shown and "\x07" not in shown and "\x9b" not in shown and "\x1b[2J" not in shown
+    assert "70/70" in shown  # more iterations than announced: the total follows, never "70/60"
+
+
+def test_plain_lines_never_count_past_the_total():
+    progress, lines, clock = plain(60, "iterations")
+    with progress:
+        for done in (30, 60, 70):
+            clock.now += 11
+            progress.update(done)
+    assert lines[-1].startswith("study: 70/70 iterations")
+    assert all(not re.match(r"study: (\d+)/(\d+)", x) or int(re.match(r"study: (\d+)/(\d+)", x)[1])
+               <= int(re.match(r"study: (\d+)/(\d+)", x)[2]) for x in lines)

@@ -263,3 +263,50 @@ def test_a_failed_simulation_during_the_fit_raises_a_solver_failure(initial_fit)
     with pytest.raises(gnipy.SolverFailure, match="fit: a simulation failed at some trial values of q0.x"):
         fit(gnipy.make_system(MODEL, I=0.0, a=TRUE["a"]), (np.asarray(sol.t), np.asarray(sol.q)), initial=("q0", "v0"),
             method=METHOD, h=H, q0=guess_q0, v0=guess_v0)
+
+
+class ReachedComputation(Exception):
+    """A refusal came too late: a simulation or the solver was reached."""
+
+
+def _tripwire(*args, **kwargs):
+    raise ReachedComputation("reached a computation")
+
+
+def test_strings_and_booleans_are_not_numbers_and_the_span_is_bounded(monkeypatch):
+    """Issue 28 (D6, D9): every number fit takes refuses strings and booleans (naming the
+    argument); a span of observations whose fitted run would not fit in memory is refused before
+    anything is compiled, max_bytes=None lifts the bound."""
+    import optimistix
+
+    import gnipy.control.identification as identification
+
+    monkeypatch.setattr(identification, "simulate", _tripwire)
+    monkeypatch.setattr(optimistix, "least_squares", _tripwire)
+    obs = Observations(TS, np.zeros((TS.size, 2)), ("x", "y"))
+    base = dict(params=GUESS, method=METHOD, h=H, q0=Q0, v0=V0)
+    cases = [
+        (dict(params={"I": "1.2"}), "params: 'I': expected a number"), (dict(params={"I": True}), "params: 'I'"),
+        (dict(params={1: 1.0}), "params: parameter names must be strings"),
+        (dict(params={"I": 1.2}, fixed={"m": True}), "fixed: 'm': expected a number"),
+        (dict(params={"I": 1.2}, fixed={"m": "1"}), "fixed: 'm'"),
+        (dict(h=True), "h: expected a number"), (dict(h="0.05"), "h:"), (dict(h=1e-320), "h:"), (dict(t0=True), "t0:"),
+        (dict(sigma="0.1"), "sigma:"), (dict(sigma=True), "sigma:"), (dict(sigma=1e-320), "sigma: sigma must lie in"),
+        (dict(q0=("0", 0.0, 0.0)), "q0:"), (dict(v0=(True, 0.4, 1.0)), "v0:"),
+        (dict(max_steps=True), "max_steps:"), (dict(max_steps=10**7), "max_steps:"), (dict(rtol="1e-10"), "rtol:"),
+        (dict(max_bytes="x"), "max_bytes:"),
+    ]
+    for kw, words in cases:
+        with pytest.raises(gnipy.InputError) as info:
+            fit(MODEL, obs, **(base | kw))
+        assert str(info.value).startswith(words), (kw, str(info.value))
+    for bad in (np.zeros((TS.size, 2)).astype(str), np.zeros((TS.size, 2), dtype=bool)):
+        with pytest.raises(gnipy.InputError, match="observations: expected"):
+            Observations(TS, bad, ("x", "y"))
+    with pytest.raises(gnipy.InputError, match="observations: expected"):
+        Observations([True, False], [1.0, 2.0], "x")
+    far = Observations([0.05, 3e6], np.zeros((2, 2)), ("x", "y"))  # 6·10⁷ steps of 0.05
+    with pytest.raises(gnipy.InputError, match=r"observations/h: .*60,000,001 nodes.* max_bytes=None"):
+        fit(MODEL, far, **base)
+    with pytest.raises(ReachedComputation):
+        fit(MODEL, far, **base, max_bytes=None)

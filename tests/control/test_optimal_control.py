@@ -184,3 +184,72 @@ def test_multiple_shooting_finds_the_single_shooting_optimum(solved):
     assert np.max(np.abs(one.controls - two.controls)) <= 1e-5
     with pytest.raises(gnipy.InputError, match="segments"):
         solve_optimal_control(problem.system, problem.target, segments=0, **kw)
+
+
+class ReachedComputation(Exception):
+    """A refusal came too late: a simulation was reached."""
+
+
+def _tripwire(*args, **kwargs):
+    raise ReachedComputation("reached a computation")
+
+
+def test_arguments_are_strict_and_the_memory_is_bounded_before_anything_is_computed(monkeypatch):
+    """Issue 28 (D6, D9): a string or a boolean is not a number, anywhere; a problem beyond the
+    memory bound (the SQP's matrices grow as (K·m)²) is refused naming steps, max_bytes=None lifts
+    the bound. Every refusal comes before the first simulation (a tripwire)."""
+    import gnipy.control.optimal_control as optimal_control
+
+    monkeypatch.setattr(optimal_control, "simulate", _tripwire)
+    p = load_problem("sleigh-steering")
+    ball = load_problem("ball-plate")
+    base = dict(h=p.h, steps=p.steps, q0=p.q0, v0=p.v0, controls0=p.controls0, bounds=p.bounds)
+    cases = [
+        (dict(effort=True), "effort: expected a number, got bool"), (dict(effort="1"), "effort: expected a number"),
+        (dict(smoothness=np.bool_(True)), "smoothness:"), (dict(smoothness=-1.0), "smoothness: must be >= 0"),
+        (dict(h=True), "h: expected a number"), (dict(h="0.05"), "h: expected a number"), (dict(h=1e-320), "h:"),
+        (dict(steps=80.0), "steps:"), (dict(steps=True), "steps:"), (dict(steps="80"), "steps:"),
+        (dict(max_iterations=True), "max_iterations:"), (dict(max_iterations=0), "max_iterations:"),
+        (dict(max_iterations=10**7), "max_iterations: must be an integer from 1 to 1,000,000"),
+        (dict(segments=True), "segments:"), (dict(segments=81), "segments:"),
+        (dict(bounds=("-1.5", 1.5)), "bounds: lower"), (dict(bounds=(True, 2.0)), "bounds: lower"),
+        (dict(bounds=(2.0, 1.0)), "bounds: need lower < upper"), (dict(bounds="ab"), "bounds:"),
+        (dict(target_tol="1e-10"), "target_tol:"), (dict(kkt_tol=0.0), "kkt_tol:"), (dict(t0=True), "t0:"),
+        (dict(check_continuous="no"), "check_continuous:"), (dict(project_v0="no"), "project_v0:"),
+        (dict(input_names="t"), "input_names:"), (dict(input_names=[1]), "input_names:"),
+        (dict(controls0=np.ones((80, 1), dtype=bool)), "controls0:"), (dict(controls0=[["1"]] * 80), "controls0:"),
+        (dict(max_bytes="lots"), "max_bytes:"), (dict(max_bytes=True), "max_bytes:"),
+        (dict(progress="yes"), "progress:"),
+        (dict(steps=10**8, controls0=None), "steps: 100,000,000 steps x 1 input"),
+    ]
+    for kw, words in cases:
+        with pytest.raises(gnipy.InputError) as info:
+            solve_optimal_control(p.system, p.target, **(base | kw))
+        assert str(info.value).startswith(words), (kw, str(info.value))
+    assert "pass max_bytes=None" in str(info.value)
+    for target, words in [({"x": True}, "target: 'x': expected a number"), ({"x": "1"}, "target: 'x'")]:
+        with pytest.raises(gnipy.InputError, match=words):
+            solve_optimal_control(p.system, target, **base)
+    with pytest.raises(gnipy.InputError, match="target: 'R'"):
+        solve_optimal_control(ball.system, {"R": [["1", "0", "0"], ["0", "1", "0"], ["0", "0", "1"]]}, h=0.1, steps=10)
+    with pytest.raises(ReachedComputation):  # max_bytes=None: past the bound, to the first simulation
+        solve_optimal_control(p.system, p.target, **(base | dict(steps=10**5, controls0=None, max_bytes=None)))
+
+
+def test_progress_count_never_passes_its_total():
+    """Issue 28 (D9): the iterations count on across SLSQP, the trust-constr fallback and SLSQP
+    again; the total reported is the most the solve can still take, raised when the fallback
+    starts (it showed 70/60)."""
+    p = load_problem("sleigh-steering")
+    calls, plain = [], []
+    result = solve_optimal_control(p.system, p.target, h=0.2, steps=20, q0=p.q0, v0=p.v0, controls0=p.controls0[::4],
+                                   bounds=p.bounds, max_iterations=2, check_continuous=False,
+                                   progress=lambda i, cost, miss, total: calls.append((i, total)))
+    assert [i for i, _ in calls] == list(range(1, len(calls) + 1)) and len(calls) == result.iterations
+    assert len(calls) > 2 and calls[0][1] == 2  # SLSQP stopped at its cap of 2: the fallback ran
+    assert all(i <= total for i, total in calls), calls
+    assert calls[-1][1] <= 2 + 2 * 2  # no more than the stages' caps
+    solve_optimal_control(p.system, p.target, h=0.2, steps=20, q0=p.q0, v0=p.v0, controls0=p.controls0[::4],
+                          bounds=p.bounds, max_iterations=2, check_continuous=False,
+                          progress=lambda i, cost, miss: plain.append(i))  # three arguments still work
+    assert plain == [i for i, _ in calls]

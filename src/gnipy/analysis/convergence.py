@@ -163,6 +163,7 @@ def convergence_study(
         MethodError: a method that cannot integrate this system (checked before anything runs).
     """
     from ..errors import InputError, MethodError
+    from ..inputs import refuse_text_or_bool
     from ..simulate import simulate
 
     if measure not in MEASURES:
@@ -171,12 +172,22 @@ def convergence_study(
         raise InputError(f"measure: {system.name!r} has no coordinates q (it lives on a group): measure v or state")
     if isinstance(saves, bool) or not isinstance(saves, int) or saves < 1:
         raise InputError(f"saves: expected a positive integer, got {saves!r}")
-    counts = sorted({int(n) for n in steps})
+    try:
+        given = list(steps)
+    except TypeError:
+        raise InputError(f"steps: expected a sequence of step counts, got {steps!r}") from None
+    if not all(isinstance(n, (int, np.integer)) and not isinstance(n, (bool, np.bool_)) for n in given):
+        raise InputError(f"steps: expected whole numbers of steps, got {given!r}")
+    counts = sorted({int(n) for n in given})
     if len(counts) < 2 or counts[0] < 1:
-        raise InputError(f"steps: need at least 2 distinct positive step counts, got {list(steps)!r}")
+        raise InputError(f"steps: need at least 2 distinct positive step counts, got {given!r}")
     if any(n % saves for n in counts):
         raise InputError(f"steps: each step count must be a multiple of saves = {saves}, got {counts}")
-    T = float(t_final)
+    refuse_text_or_bool("t_final", t_final, "a positive finite number")
+    try:
+        T = float(t_final)
+    except (TypeError, ValueError):
+        raise InputError(f"t_final: expected a positive finite number, got {t_final!r}") from None
     if not (math.isfinite(T) and T > 0):
         raise InputError(f"t_final: expected a positive finite number, got {t_final!r}")
 

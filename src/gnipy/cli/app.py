@@ -42,7 +42,10 @@ def main(
     """Simulate nonholonomic mechanical systems with the Geometric Nonholonomic Integrator (GNI).
 
     With GNIPY_COMPILATION_CACHE=1 in the environment, compiled programs are kept in
-    ~/.cache/gnipy/jax between runs ($GNIPY_CACHE_DIR to move it).
+    ~/.cache/gnipy/jax between runs ($GNIPY_CACHE_DIR to move it; a folder that is not yours alone,
+    or a link, is refused with a warning). The native backend keeps its object code in
+    ~/.cache/gnipy/native ($GNIPY_CACHE_DIR/native; GNIPY_NATIVE_CACHE=0 turns it off), each entry
+    authenticated for this user and program.
     """
     from gnipy.compilation import cache_requested, enable_compilation_cache
 

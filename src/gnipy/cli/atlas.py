@@ -9,6 +9,7 @@ import typer
 
 from .app import app
 from .errors import UsageError, guarded, relabel
+from .held import hold, holding
 from .output import EXIT_FAILURE, EXIT_USAGE, console, fail, safe, table
 from .parsing import parse_methods
 from .progress import Progress
@@ -67,7 +68,7 @@ def atlas(
 
     from gnipy.experiments.atlas_report import OUTPUT_FILES, atlas as run
     from gnipy.experiments.reproduce import check_output_dir
-    from gnipy.files import OutputError
+    from gnipy.files import OutputBusy, OutputError
 
     def parse():
         return (parse_models(models) if models else None, parse_methods(methods) if methods else None)
@@ -78,12 +79,17 @@ def atlas(
     except OutputError as e:
         fail(relabel("--out", e), EXIT_USAGE)
     command = "gni " + " ".join(shlex.quote(a) for a in ["atlas", *sys.argv[2:]]) if len(sys.argv) > 1 else None
-    try:
-        with Progress("atlas", unit="runs", heartbeat=True) as progress:
-            report = run(Path(out), quick=quick, models=model_names, methods=method_names, progress=progress,
-                         overwrite=overwrite, command=command)
-    except OutputError as e:
-        fail(relabel("--out", e), EXIT_FAILURE)
+    with holding():
+        try:
+            hold("--out", out)  # one writer per folder: a second atlas into it is refused now
+        except OutputBusy as e:
+            fail(str(e), EXIT_USAGE)
+        try:
+            with Progress("atlas", unit="runs", heartbeat=True) as progress:
+                report = run(Path(out), quick=quick, models=model_names, methods=method_names, progress=progress,
+                             overwrite=overwrite, command=command)
+        except OutputError as e:
+            fail(relabel("--out", e), EXIT_FAILURE)
     _print_summary(report)
 
 

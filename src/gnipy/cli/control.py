@@ -14,12 +14,55 @@ import typer
 
 from .app import app
 from .errors import UsageError, guarded, writing
-from .output import report_result
+from .output import report_result, safe
+from .held import hold
 from .paths import check_out_and_plot, check_readable
 from .progress import Progress
+from .resources import check_result_file, memory_bound
 from .run import write_plot
 
-__all__ = ["control"]
+__all__ = ["CONTROL_KEYWORDS", "CONTROL_OPTIONS", "control", "plot_title"]
+
+#: What gnipy's error messages name (`steps: ...`), as the keys of a control problem file that set it:
+#: every message of `gni control` names a key of the file or one of its options.
+CONTROL_OPTIONS = {
+    "system": "system.model",
+    "model": "system.model",
+    "params": "system.params",
+    "lagrangian": "system.params/start.q0",
+    "constraints": "system.params/start.q0",
+    "affine": "system.params/start.q0",
+    "force": "inputs",
+    "inputs": "inputs",
+    "input_names": "inputs",
+    "q0": "start.q0",
+    "v0": "start.v0",
+    "q0/v0": "start.q0/start.v0",
+    "R0": "start.R0",
+    "project_v0": "start.project_v0",
+    "h": "horizon.h",
+    "steps": "horizon.steps",
+    "steps/t_final": "horizon.steps",
+    "target": "target",
+    "method": "solver.method",
+    "bounds": "solver.bounds",
+    "effort": "solver.effort",
+    "smoothness": "solver.smoothness",
+    "max_iterations": "solver.max_iterations",
+    "segments": "solver.segments",
+    "controls0": "warm_start",
+    "controls": "warm_start",
+}
+#: The keyword arguments gnipy's messages suggest, as what `gni control` takes instead.
+CONTROL_KEYWORDS = {"max_bytes=None": "--yes", "project_v0=True": "project_v0 = true in [start]",
+                    "overwrite=True": "--overwrite"}
+
+
+def plot_title(text: str) -> str:
+    """`text` (a name from a file) as a figure title shown literally: control characters escaped
+    (:func:`gnipy.text.safe`) and `$` not read as the start of matplotlib's mathematics (an unclosed
+    `$x^` would fail when the figure is drawn)."""
+    return safe(text).replace("$", r"\$")
 
 
 @app.command()
@@ -41,6 +84,10 @@ def control(
         show_default=False,
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace existing --out and --plot files."),
+    yes: bool = typer.Option(
+        False, "--yes", help="Solve even when the memory or the file the problem needs is estimated beyond gnipy's "
+        "bounds (the SQP's matrices grow as the square of steps x inputs).",
+    ),
 ):
     """Solve an optimal-control problem on the GNI's steps and write the controlled run.
 
@@ -50,6 +97,8 @@ def control(
     is written to --out: the run's nodes as `gni run` writes them, the inputs u(control_step,
     input) and the solver's figures (cost, target and KKT residuals, iterations) as attributes.
     It exits with code 1 when the solver does not converge (the file is written all the same).
+    A problem whose memory (or result file) is estimated beyond gnipy's bounds is refused before
+    anything is computed, naming horizon.steps; --yes solves it anyway.
     """
     from gnipy.control.problems import WORKED_PROBLEMS
 
@@ -67,18 +116,28 @@ def control(
             check_readable(problem, "PROBLEM")
             source = problem
         if print_problem:
-            text = source if isinstance(source, str) else Path(source).read_text(encoding="utf-8")
+            from gnipy.control.problem_files import problem_text
+
+            # the file as read for solving (UTF-8, bounded in size), printed as it is: a template
+            text = source if isinstance(source, str) else problem_text(source)
             typer.echo(text, nl=not text.endswith("\n"))
             return
         check_out_and_plot(out, plot, overwrite)
-        prob = load_problem(source, name=example or "problem")
+        hold("--out", out)  # one writer per output: a second solve into it is refused now, not at the end
+        hold("--plot", plot)
+        # the memory bound is checked as the problem is read (before its warm start is built)
+        bound = None if yes else memory_bound()
+        prob = load_problem(source, name=example or "problem", max_bytes=bound)
+        if not yes:
+            check_result_file(prob.system, prob.steps + 1, out, "horizon.steps")
         start = time.perf_counter()
         with Progress("control", prob.max_iterations, "iterations",
                       description=f"{prob.name}: compiling and iterating") as progress:
-            def report(i, cost, miss):
-                progress.update(i, description=f"{prob.name}: cost {cost:.6g}, target miss {miss:.1e}")
+            # the total grows when SLSQP fails and the fallback (trust-constr, then SLSQP) starts
+            def report(i, cost, miss, total):
+                progress.update(i, total=total, description=f"{prob.name}: cost {cost:.6g}, target miss {miss:.1e}")
 
-            result = prob.solve(progress=report)
+            result = prob.solve(progress=report, max_bytes=bound)
         seconds = time.perf_counter() - start
         with writing("--out", out):
             write_control_result(result, prob, out, overwrite=overwrite)
@@ -86,8 +145,9 @@ def control(
         if plot is not None:
             from gnipy.plots import plot_control
 
-            write_plot(result, plot, overwrite, plot_control, title=f"{prob.name}: {result.method}")
+            write_plot(result, plot, overwrite, plot_control, title=plot_title(f"{prob.name}: {result.method}"))
             written += f", {plot}"
         report_result("gni control", prob.name, result, written, seconds)
 
-    guarded(go)
+    guarded(go, method_option="solver.method", options=CONTROL_OPTIONS, keywords=CONTROL_KEYWORDS,
+            out_of_memory="out of memory: use fewer steps (horizon.steps) or inputs")

@@ -16,6 +16,7 @@ from .app import app
 from .errors import UsageError, guarded, writing
 from .output import console, safe, table
 from .parsing import parse_methods, parse_R0, prepare_model, step_counts
+from .held import hold
 from .paths import check_output_dir, create_output_dir
 from .progress import Progress
 
@@ -84,6 +85,7 @@ def convergence(
             raise UsageError("--error", f"model {spec.name!r} has no coordinates q (it lives on a group): "
                              "use v or state")
         replace = check_output_dir(out, FILES, overwrite)
+        hold("--out", out)
 
         exact = None if spec.exact is None else functools.partial(spec.exact, params)
         with Progress("convergence", unit="runs") as progress:

@@ -9,6 +9,7 @@ import typer
 from .app import app
 from .errors import guarded, writing
 from .parsing import prepare
+from .held import hold
 from .paths import check_output
 from .run import simulate_model
 from .summary import attrs_for, run_report
@@ -38,6 +39,7 @@ def demo(
 
         spec, params, q0, v0 = prepare(DEMO_MODEL, DEMO_METHOD, DEMO_H, None, DEMO_T, None, None, None, 1)
         check_output(out, "--out", overwrite)
+        hold("--out", out)
         sol, v0, seconds = simulate_model(spec, params, DEMO_METHOD, q0, v0, DEMO_H, None, DEMO_T, False, 1)
         exact = exact_errors(spec, params, sol, q0, v0)
         drifts = invariant_drifts(spec, params, sol.q, sol.v)

@@ -55,19 +55,21 @@ class WriteFailure(Exception):
     """A file could not be written after the run (the message names the option and the path)."""
 
 
-def _flags(text: str) -> str:
-    for keyword, flag in _KEYWORD_FLAGS.items():
+def _flags(text: str, keywords: dict[str, str] | None = None) -> str:
+    for keyword, flag in (_KEYWORD_FLAGS if keywords is None else keywords).items():
         text = text.replace(f"{keyword} ({flag})", flag).replace(keyword, flag)
     return text
 
 
-def option_message(message, options: dict[str, str] = ARGUMENT_OPTIONS) -> str:
+def option_message(message, options: dict[str, str] = ARGUMENT_OPTIONS,
+                   keywords: dict[str, str] | None = None) -> str:
     """A gnipy error message (`argument: what was wrong`) as one about the command-line option of
-    that argument (:data:`ARGUMENT_OPTIONS`); the keyword arguments it suggests written as flags."""
+    that argument (:data:`ARGUMENT_OPTIONS`, or the command's own `options`); the keyword arguments
+    it suggests written as flags (`keywords`: the command's own, default those of `gni run`)."""
     head, sep, rest = str(message).partition(":")
     if sep and head.strip() in options:
-        return f"{options[head.strip()]}:{_flags(rest)}"
-    return str(message)
+        return f"{options[head.strip()]}:{_flags(rest, keywords)}"
+    return str(message) if keywords is None else _flags(str(message), keywords)
 
 
 def relabel(option: str, message) -> str:
@@ -99,11 +101,19 @@ def writing(option: str, path):
         raise WriteFailure(relabel(option, err)) from None
 
 
-def guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--method"):
-    """Run `fn()` turning gnipy's errors into one-line messages and exit codes.
+def guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--method",
+            options: dict[str, str] | None = None, keywords: dict[str, str] | None = None,
+            out_of_memory: str | None = None):
+    """Run `fn()` turning gnipy's errors into one-line messages and exit codes; the output locks
+    it takes (:func:`gnipy.cli.held.hold`) are released when it ends; an output another process
+    is writing (:class:`gnipy.OutputBusy`) is refused with exit code 2.
 
     `origins` maps an option to where its value came from (e.g. `"--h"` → `"key 'h' in run.toml"`):
-    a message about that option says so."""
+    a message about that option says so. A command other than `gni run` passes its own vocabulary,
+    so that every message names something it has: `options` maps gnipy's argument names to its
+    options or to the keys of its input file (instead of :data:`ARGUMENT_OPTIONS`, e.g. `"steps"` →
+    `"horizon.steps"`), `keywords` the keyword arguments gnipy's messages suggest to what it takes
+    instead (e.g. `"max_bytes=None"` → `"--yes"`), `out_of_memory` the advice when memory runs out."""
     import gnipy
     from gnipy.io import OutputError
 
@@ -116,15 +126,21 @@ def guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--m
                     break
         fail(message, EXIT_USAGE)
 
+    from .held import holding
+
     try:
-        return fn()
+        with holding():  # the outputs the command locks (held.hold), released however it ends
+            return fn()
     except UsageError as e:
         usage(str(e))
     except gnipy.MethodError as e:
-        message = option_message(e, {**ARGUMENT_OPTIONS, "method": method_option, "methods": method_option})
+        message = option_message(e, {**(ARGUMENT_OPTIONS if options is None else options), "method": method_option,
+                                     "methods": method_option}, keywords)
         usage(message if message.startswith(method_option) else f"{method_option}: {message}")
     except gnipy.InputError as e:
-        usage(option_message(e))
+        usage(option_message(e, ARGUMENT_OPTIONS if options is None else options, keywords))
+    except gnipy.OutputBusy as e:  # another process writes this output (held.hold): refused, as bad input is
+        usage(str(e))
     except gnipy.SolverFailure as e:
         fail(f"solver failure: {e}", EXIT_FAILURE)
     except WriteFailure as e:
@@ -142,4 +158,5 @@ def guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--m
             raise
         fail(relabel("--out", err), EXIT_FAILURE)
     except MemoryError:
-        fail("out of memory: save fewer nodes (--save-every) or stream the run (--checkpoint-every K)", EXIT_FAILURE)
+        fail(out_of_memory or "out of memory: save fewer nodes (--save-every) or stream the run (--checkpoint-every K)",
+             EXIT_FAILURE)

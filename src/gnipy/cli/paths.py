@@ -16,7 +16,6 @@ from .errors import UsageError, WriteFailure, relabel
 
 __all__ = ["check_output", "check_output_dir", "check_plot", "check_readable", "create_output_dir", "same_file"]
 
-
 def check_output(path: Path, option: str = "--out", overwrite: bool = False) -> Path:
     """`path` may be written as a regular file (:func:`gnipy.files.check_destination`): its directory
     exists and is writable, and nothing is there, or a regular file and `overwrite`; a symbolic

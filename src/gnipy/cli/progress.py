@@ -55,7 +55,7 @@ class Progress:
                  terminal: bool | None = None, write: Callable[[str], None] | None = None,
                  clock: Callable[[], float] = time.monotonic, heartbeat: bool = False):
         self.command, self.total, self.unit = command, total, unit
-        self.description = description or command
+        self.description = _shown(description or command)
         self.terminal = on_terminal() if terminal is None else terminal
         self.write = write or _echo_stderr
         self.clock = clock
@@ -76,7 +76,10 @@ class Progress:
             from rich.progress import BarColumn, MofNCompleteColumn, Progress as Bar, SpinnerColumn, TextColumn
             from rich.progress import TimeElapsedColumn, TimeRemainingColumn
 
-            self._bar = Bar(SpinnerColumn(), TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(),
+            # markup=False: a description holds names from files and the command line (a problem's
+            # name "[/bold]x[red" would otherwise be rich markup, and crash the bar)
+            self._bar = Bar(SpinnerColumn(), TextColumn("{task.description}", markup=False), BarColumn(),
+                            MofNCompleteColumn(),
                             TimeElapsedColumn(), TimeRemainingColumn(), console=Console(stderr=True),
                             transient=True)
             self._bar.__enter__()
@@ -104,10 +107,12 @@ class Progress:
         """`done` of `total` (units) are done; `description` says what runs now (on the bar)."""
         if total is not None:
             self.total = total
+        if self.total is not None and done > self.total:  # more work than announced: never "70/60"
+            self.total = done
         self.done = done
         if self._bar is not None:
             self._bar.update(self._task, completed=done, total=self.total,
-                             **({} if description is None else {"description": description}))
+                             **({} if description is None else {"description": _shown(description)}))
             return
         if self.total is None or done == self._last_done:
             return
@@ -143,6 +148,14 @@ class Progress:
             self._next_mark = (int(self.done / step) + 1) * step
 
 
+def _shown(text) -> str:
+    """`text` as the bar shows it: control characters as visible escapes (no escape sequence from a
+    name reaches the terminal); the bar's column prints it without markup."""
+    from gnipy.text import safe
+
+    return safe(text)
+
+
 def _count(x) -> str:
     return f"{int(x):,}" if float(x).is_integer() else f"{x:,.1f}"
 
@@ -166,10 +179,10 @@ class busy:
             from rich.console import Console
             from rich.progress import Progress as Bar, SpinnerColumn, TextColumn, TimeElapsedColumn
 
-            self.bar = Bar(SpinnerColumn(), TextColumn("{task.description}"), TimeElapsedColumn(),
+            self.bar = Bar(SpinnerColumn(), TextColumn("{task.description}", markup=False), TimeElapsedColumn(),
                            console=Console(stderr=True), transient=True)
             self.bar.__enter__()
-            self.bar.add_task(self.text, total=None)
+            self.bar.add_task(_shown(self.text), total=None)
         return self
 
     def __exit__(self, *exc):

@@ -10,6 +10,7 @@ import typer
 
 from .app import app
 from .errors import relabel
+from .held import hold, holding
 from .output import EXIT_FAILURE, EXIT_USAGE, fail
 from .progress import Progress, on_terminal
 
@@ -34,7 +35,7 @@ def reproduce(
     Exits with code 1 if a theorem row fails, a stage fails, or a file cannot be written; 2 if --out
     may not be written."""
     from gnipy.experiments import reproduce as reproduction
-    from gnipy.files import OutputError
+    from gnipy.files import OutputBusy, OutputError
 
     out = Path(out)
     try:
@@ -42,6 +43,19 @@ def reproduce(
     except OutputError as e:
         fail(relabel("--out", e), EXIT_USAGE)
     run = reproduction.run_reproduction
+    with holding():
+        try:
+            hold("--out", out)  # one writer per folder: a second reproduction into it is refused now
+        except OutputBusy as e:
+            fail(str(e), EXIT_USAGE)
+        result = _run(run, out, quick, overwrite)
+    if not result.ok:
+        raise typer.Exit(EXIT_FAILURE)
+
+
+def _run(run, out: Path, quick: bool, overwrite: bool):
+    from gnipy.files import OutputError
+
     try:
         if on_terminal():  # the reproduction's own display, a bar per stage
             result = run(out, quick, overwrite=overwrite)
@@ -51,5 +65,4 @@ def reproduce(
                 result = run(out, quick, overwrite=overwrite, **counted)
     except OutputError as e:  # the folder, or the report, could not be written (a full disk)
         fail(relabel("--out", e), EXIT_FAILURE)
-    if not result.ok:
-        raise typer.Exit(EXIT_FAILURE)
+    return result

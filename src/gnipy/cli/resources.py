@@ -3,48 +3,26 @@ the file and the free disk space (`--yes` lifts them), and when a run is streame
 
 from __future__ import annotations
 
-import os
 from pathlib import Path
 
 from gnipy.files import format_bytes, free_bytes
+from gnipy.resources import MAX_MEMORY_BYTES, memory_bound, node_bytes
 
 from .errors import UsageError
 
 __all__ = ["MAX_MEMORY_BYTES", "MAX_OUTPUT_BYTES", "MEMORY_COPIES", "STREAM_NODES", "check_resources",
-           "memory_bound", "node_bytes"]
+           "check_result_file", "memory_bound", "node_bytes"]
 
 #: `gni run` streams runs that save more nodes than this (memory stays bounded by one chunk).
 STREAM_NODES = 1_000_000
 
-#: `gni run` refuses (before compiling anything, unless --yes) a run whose saved nodes would need
-#: more memory than the smaller of this and half the machine's RAM (:func:`memory_bound`) ...
-MAX_MEMORY_BYTES = 8 * 2**30
+#: `gni run` refuses (unless --yes) a run whose saved nodes would need more memory than
+#: :func:`gnipy.resources.memory_bound` ...
 #: ... or a result file larger than this, or than the free space of its file system.
 MAX_OUTPUT_BYTES = 64 * 2**30
 #: The memory of an in-memory run, as a multiple of its saved nodes' bytes (the device arrays,
 #: their host copies, the dataset written).
 MEMORY_COPIES = 3
-
-
-def memory_bound() -> int:
-    """The memory bound of `gni run`: min(:data:`MAX_MEMORY_BYTES`, half the physical memory)."""
-    bound = MAX_MEMORY_BYTES
-    try:
-        phys = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-        if phys > 0:
-            bound = min(bound, phys // 2)
-    except (ValueError, OSError, AttributeError):  # not available on this system
-        pass
-    return bound
-
-
-def node_bytes(system) -> int:
-    """Bytes of one saved node of a result (a generous estimate): t, q, v, p, the hidden momentum,
-    energy, energy of p+, the constraint residual (at most one entry per velocity), R, the node and
-    step indices."""
-    k = system.group.matrix_size if system.group is not None else 0
-    values = 1 + system.n + 4 * len(system.velocities) + k * k + 4
-    return 8 * values + 16
 
 
 def check_resources(system, n_steps: int, stride: int, streamed: bool, chunk, out: Path, length: str,
@@ -92,3 +70,20 @@ def check_resources(system, n_steps: int, stride: int, streamed: bool, chunk, ou
             f"{length}/--save-every", f"{what}, but {str(directory)!r} has {format_bytes(free)} free; save fewer nodes "
             "(--save-every K) or free some space, or pass --yes to run anyway"
         )
+
+
+def check_result_file(system, nodes: int, out: Path, key: str) -> None:
+    """Refuse (`UsageError` naming `key`, the entry of the problem file that sets the run's length)
+    a result file of `gni control` / `gni fit` that would hold `nodes` nodes of `system` beyond
+    :data:`MAX_OUTPUT_BYTES` or the free disk space of its folder; `--yes` skips this. (Their memory
+    is bounded by the library, before anything is compiled: `max_bytes`.)"""
+    file_bytes = nodes * node_bytes(system)
+    what = f"--out would hold {nodes:,} nodes, about {format_bytes(file_bytes)}"
+    if file_bytes > MAX_OUTPUT_BYTES:
+        raise UsageError(key, f"{what}: more than gnipy's bound of {format_bytes(MAX_OUTPUT_BYTES)}; shorten the run, "
+                         "or pass --yes to run anyway")
+    directory = out.parent if str(out.parent) else Path(".")
+    free = free_bytes(directory)
+    if free is not None and file_bytes > free:
+        raise UsageError(key, f"{what}, but {str(directory)!r} has {format_bytes(free)} free; free some space or "
+                         "shorten the run, or pass --yes to run anyway")

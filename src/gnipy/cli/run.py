@@ -18,6 +18,7 @@ from .app import app
 from .config import CONFIG_KEYS, load_config
 from .errors import UsageError, WriteFailure, guarded, writing
 from .parsing import parse_R0, prepare
+from .held import hold
 from .paths import check_output, check_plot, same_file
 from .progress import Progress, busy
 from .summary import attrs_for, run_report, streamed_report
@@ -170,6 +171,8 @@ def run(
             check_plot(plot_, overwrite)
             if same_file(out_, plot_):
                 raise UsageError("--plot", f"{str(plot_)!r} is also --out: choose another path for the figure")
+        hold("--out", out_)  # one writer per output: a second `gni run` on it is refused now, not at the end
+        hold("--plot", plot_)
         chunk = pick("checkpoint_every", checkpoint_every)
         if chunk is not None and (isinstance(chunk, bool) or chunk < 1):
             raise UsageError("--checkpoint-every", f"must be a positive integer, got {chunk!r}")

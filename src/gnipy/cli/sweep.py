@@ -14,6 +14,7 @@ from .errors import ARGUMENT_OPTIONS, UsageError, guarded, option_message
 from .output import EXIT_FAILURE, EXIT_USAGE, console, fail, safe
 from .parsing import check_positive, parse_set
 from .progress import Progress, on_terminal
+from .held import hold
 
 __all__ = ["SWEEP_OPTIONS", "failures_message", "sweep", "sweep_message", "sweep_report"]
 
@@ -172,6 +173,7 @@ def sweep(
         check_positive("--steps", steps, "integer")
         check_positive("--t-final", t_final)
         set_params = parse_set(set_)
+        hold("--out", out)  # one writer per store: a second sweep into it is refused now
 
         original = warnings.showwarning
 

@@ -11,20 +11,17 @@ to steer them.
   steer a system to a terminal target at least cost, with the GNI's steps as the dynamics (direct
   single or multiple shooting; :class:`ControlResult`);
 - :mod:`gnipy.control.problems`: optimal-control problems as TOML files (`gni control`), the
-  worked problems (:data:`WORKED_PROBLEMS`) and the result file.
+  worked problems (:data:`WORKED_PROBLEMS`) and the result file; :mod:`gnipy.control.fit_problems`
+  the same for identification (`gni fit`); :mod:`gnipy.control.problem_files` reads both kinds of
+  file and checks their entries;
+- :mod:`gnipy.control.memory`: the memory both are estimated to need, bounded before anything is
+  compiled.
 """
 
+from .fit_problems import FitProblem, load_fit_problem, write_fit_result
 from .identification import FitResult, Observations, fit
 from .optimal_control import ControlResult, solve_optimal_control, terminal_residual
-from .problems import (
-    WORKED_PROBLEMS,
-    ControlProblem,
-    FitProblem,
-    load_fit_problem,
-    load_problem,
-    write_control_result,
-    write_fit_result,
-)
+from .problems import WORKED_PROBLEMS, ControlProblem, load_problem, write_control_result
 
 __all__ = ["fit", "FitResult", "Observations", "solve_optimal_control", "ControlResult", "terminal_residual",
            "ControlProblem", "load_problem", "write_control_result", "WORKED_PROBLEMS", "FitProblem",

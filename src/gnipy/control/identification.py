@@ -36,9 +36,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
-import os
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 import equinox as eqx
@@ -47,223 +46,29 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError, SolverFailure
-from ..inputs import finite_number, real_array, require_float64
+from ..inputs import real_array, real_number, require_float64, whole_number
 from ..registry import get_model
 from ..saveat import GRID_RTOL, SaveAt
-from ..simulate import simulate
+from ..simulate import MIN_STEP_SIZE, simulate
 from ..solution import Solution
 from ..system import System, project_velocity
+from .memory import check_fit_memory, memory_limit
+from .observations import Observations, _as_observations, _sigma_array, _Unnamed
+from .optimal_control import MAX_ITERATIONS
 
-__all__ = ["fit", "FitResult", "Observations", "RCOND"]
+__all__ = ["fit", "FitResult", "Observations", "RCOND", "MAX_STEPS"]
 
 #: Singular values of the scaled Jacobian below this fraction of the largest count as zero: the
 #: directions the projection of `v0` removes (about 1e-16 of the largest), and quantities the
 #: data cannot tell apart.
 RCOND = 1e-10
 
+#: The default of :func:`fit`'s `max_steps`: the most iterations of the solver.
+MAX_STEPS = 200
+
 #: A reported quantity is identifiable when its derivative lies in the row space of the Jacobian
 #: to this relative tolerance.
 IDENTIFIABLE_TOL = 1e-6
-
-
-# ----------------------------------------------------------------------------------------------
-# Observations
-# ----------------------------------------------------------------------------------------------
-@dataclasses.dataclass(frozen=True, eq=False)
-class Observations:
-    """Observed values of some of a system's variables at some times.
-
-    Arguments:
-        times: the observation times, shape (T,); each must be a node $t_0 + kh$ of the
-            simulation's step grid (checked by :func:`fit`, which knows `t0` and `h`), in the
-            order of the run.
-        values: the observed values, shape (T, k) (or (T,) for one variable); NaN marks a missing
-            value (that entry is left out of the fit).
-        variables: the names of the k observed variables: the system's coordinate names (e.g.
-            `"x"`, `"y"`, compared with the solution's `q`) or velocity names (e.g. `"dx"`,
-            compared with its `v`). A partial observation names only some of them.
-        sigma: optional standard deviations of the measurement errors: a number, one per
-            variable (k,), or one per value (T, k). Given here or as :func:`fit`'s `sigma`.
-
-    Raises:
-        InputError: (message starting `observations:`) on shapes that do not match, non-finite
-            times, repeated variable names, or a `sigma` that is not positive and finite.
-    """
-
-    times: np.ndarray
-    values: np.ndarray
-    variables: tuple[str, ...]
-    sigma: np.ndarray | None = None
-
-    def __post_init__(self):
-        times = real_array("observations", self.times, "a sequence of times")
-        if times.ndim != 1 or times.size == 0:
-            raise InputError(f"observations: times must be a non-empty 1-D sequence, got shape {times.shape}")
-        if not np.all(np.isfinite(times)):
-            raise InputError("observations: times contain NaN or infinite values")
-        if isinstance(self.variables, str):
-            variables = (self.variables,)
-        else:
-            try:
-                variables = tuple(self.variables)
-            except TypeError:
-                raise InputError(
-                    f"observations: variables must be a sequence of names, got {self.variables!r}") from None
-        if not variables or not all(isinstance(v, str) for v in variables):
-            raise InputError(f"observations: variables must be a non-empty sequence of names, got {self.variables!r}")
-        if len(set(variables)) != len(variables):
-            raise InputError(f"observations: repeated variable names in {list(variables)}")
-        values = real_array("observations", self.values, "an array of observed values")
-        if values.ndim == 1 and len(variables) == 1:
-            values = values[:, None]
-        if values.shape != (times.size, len(variables)):
-            raise InputError(
-                f"observations: values have shape {values.shape}, expected ({times.size}, {len(variables)}): "
-                f"one row per time ({times.size}) and one column per variable ({', '.join(variables)})"
-            )
-        if np.any(np.isinf(values)):
-            raise InputError("observations: values contain infinite entries (mark a missing value with NaN)")
-        if not np.any(np.isfinite(values)):
-            raise InputError("observations: every value is missing (NaN)")
-        object.__setattr__(self, "times", times)
-        object.__setattr__(self, "values", values)
-        object.__setattr__(self, "variables", variables)
-        if self.sigma is not None:
-            object.__setattr__(self, "sigma", _sigma_array(self.sigma, values.shape, "observations"))
-
-    @property
-    def count(self) -> int:
-        """The number of observed (finite) values."""
-        return int(np.sum(np.isfinite(self.values)))
-
-    @classmethod
-    def from_solution(cls, solution: Solution, variables: Sequence[str] | None = None, *,
-                      sigma=None) -> "Observations":
-        """Observations read off a :class:`~gnipy.Solution` at its saved nodes.
-
-        Arguments:
-            solution: a single trajectory (not a batch).
-            variables: the coordinate and/or velocity names to take (default: every coordinate).
-            sigma: as in :class:`Observations`.
-        """
-        if not isinstance(solution, Solution):
-            raise InputError(f"observations: expected a gnipy.Solution, got {type(solution).__name__}")
-        if solution.batch_size is not None:
-            raise InputError("observations: a batch of trajectories; pass one member (sol.member(i))")
-        q, v = np.asarray(solution.q), np.asarray(solution.v)
-        coords = tuple(solution.coordinates) or tuple(f"q{i}" for i in range(q.shape[-1]))
-        vels = tuple(solution.velocities) or tuple(f"v{i}" for i in range(v.shape[-1]))
-        return cls._select(np.asarray(solution.t), q, v, coords, vels, variables, sigma)
-
-    @classmethod
-    def from_dataset(cls, dataset, variables: Sequence[str] | None = None, *, sigma=None) -> "Observations":
-        """Observations read from a result dataset (`Solution.to_xarray`, a file written by
-        :func:`gnipy.write_netcdf`), or from the path of such a netCDF file
-        (:func:`gnipy.io.read_netcdf`).
-
-        Arguments:
-            dataset: an `xarray.Dataset` with `q(time, coordinate)` and/or `v(time, velocity)`,
-                or a path to a netCDF file.
-            variables: the coordinate and/or velocity names to take (default: every coordinate).
-            sigma: as in :class:`Observations`.
-        """
-        import xarray as xr
-
-        from ..io import read_netcdf, result_times
-
-        if isinstance(dataset, (str, os.PathLike)):
-            dataset = read_netcdf(dataset)
-        if not isinstance(dataset, xr.Dataset):
-            raise InputError(f"observations: expected an xarray.Dataset or a path, got {type(dataset).__name__}")
-        if "member" in dataset.dims:
-            raise InputError("observations: the dataset holds a batch (dimension 'member'); select one member")
-        if "q" not in dataset.variables and "v" not in dataset.variables:
-            raise InputError("observations: the dataset has neither q(time, coordinate) nor v(time, velocity)")
-        empty = np.zeros((dataset.sizes.get("time", 0), 0))
-
-        def part(var, dim):
-            if var not in dataset.variables:
-                return empty, ()
-            names = tuple(str(c) for c in dataset[dim].values) if dim in dataset.coords else ()
-            a = dataset[var].transpose("time", dim).values
-            return np.asarray(a, dtype=np.float64), names or tuple(f"{var}{i}" for i in range(a.shape[1]))
-
-        q, coords = part("q", "coordinate")
-        v, vels = part("v", "velocity")
-        if variables is None and not coords:
-            raise InputError("observations: the dataset has no q(time, coordinate); name the variables to take")
-        return cls._select(result_times(dataset), q, v, coords, vels, variables, sigma)
-
-    @classmethod
-    def _select(cls, t, q, v, coords, vels, variables, sigma):
-        if variables is None:
-            variables = coords
-        if isinstance(variables, str):
-            variables = (variables,)
-        cols = []
-        for name in variables:
-            if name in coords:
-                cols.append(q[:, coords.index(name)])
-            elif name in vels:
-                cols.append(v[:, vels.index(name)])
-            else:
-                raise InputError(f"observations: unknown variable {name!r} (coordinates: "
-                                 f"{', '.join(coords) or 'none'}; velocities: {', '.join(vels) or 'none'})")
-        values = np.stack(cols, axis=1) if cols else np.zeros((len(t), 0))
-        return cls(np.asarray(t, dtype=np.float64), values, tuple(variables), sigma)
-
-
-def _sigma_array(sigma, shape, name: str) -> np.ndarray:
-    """`sigma` broadcast to `shape` (T, k): a number, (k,) or (T, k); positive and finite."""
-    s = real_array(name, sigma, "positive standard deviations")
-    if s.ndim == 1 and s.shape[0] == shape[1]:
-        s = np.broadcast_to(s[None, :], shape)
-    elif s.ndim == 0 or s.shape == shape:
-        s = np.broadcast_to(s, shape)
-    else:
-        raise InputError(f"{name}: sigma has shape {s.shape}; expected a number, one per variable ({shape[1]},) "
-                         f"or one per value {shape}")
-    if not np.all(np.isfinite(s)) or np.any(s <= 0):
-        raise InputError(f"{name}: sigma must be positive and finite")
-    return np.array(s, dtype=np.float64)
-
-
-def _as_observations(observations) -> Observations:
-    """What :func:`fit` accepts as `observations`, as an :class:`Observations`."""
-    import xarray as xr
-
-    if isinstance(observations, Observations):
-        return observations
-    if isinstance(observations, Solution):
-        return Observations.from_solution(observations)
-    if isinstance(observations, (xr.Dataset, str, os.PathLike)):
-        return Observations.from_dataset(observations)
-    if isinstance(observations, tuple) and len(observations) in (2, 3):
-        if len(observations) == 3:
-            return Observations(*observations)
-        return _Unnamed(*observations)
-    raise InputError(
-        "observations: expected a gnipy.control.Observations, a (times, values[, variables]) tuple, a "
-        f"gnipy.Solution, an xarray.Dataset or the path of a netCDF file, got {type(observations).__name__}"
-    )
-
-
-class _Unnamed:
-    """`(times, values)` without names: every coordinate, named once the system is known."""
-
-    def __init__(self, times, values):
-        self.times, self.values = times, values
-
-    def named(self, coordinates) -> Observations:
-        values = real_array("observations", self.values, "an array of observed values")
-        if values.ndim == 1 and len(coordinates) == 1:
-            values = values[:, None]
-        if values.ndim != 2 or values.shape[1] != len(coordinates):
-            raise InputError(
-                f"observations: values of shape {values.shape} without variable names must hold every coordinate "
-                f"({len(coordinates)} columns: {', '.join(coordinates)}); give (times, values, variables) for others"
-            )
-        return Observations(self.times, values, tuple(coordinates))
 
 
 # ----------------------------------------------------------------------------------------------
@@ -646,7 +451,27 @@ def _grid(times, t0: float, h: float) -> tuple[int, ...]:
     return tuple(ks)
 
 
-_number = finite_number
+def _check_method(method) -> None:
+    """A method's name (known), an integrator or None; `MethodError` otherwise, before the method
+    is put in the compiled problem (where another object fails obscurely)."""
+    from ..errors import MethodError
+    from ..integrators.base import Integrator
+    from ..methods import get_method
+    from ..reference import ContinuousReference
+
+    if method is None or isinstance(method, Integrator):
+        return
+    if isinstance(method, str):
+        method = get_method(method)
+    if isinstance(method, ContinuousReference):
+        raise MethodError("method: the continuous reference cannot be differentiated or traced; use an integrator")
+    if not isinstance(method, Integrator):
+        raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
+
+
+def _number(name: str, x) -> float:
+    """`x` as a finite float (`InputError` naming `name`: a string or a boolean is not a number)."""
+    return real_number(name, x)
 
 
 _TRACE_ERRORS = (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError,
@@ -669,10 +494,11 @@ def fit(
     sigma=None,
     controls=None,
     solver=None,
-    max_steps: int = 200,
+    max_steps: int = MAX_STEPS,
     rtol: float = 1e-10,
     atol: float = 1e-10,
     progress=False,
+    max_bytes="auto",
 ) -> FitResult:
     """Estimate model parameters and/or the initial condition from observed trajectories.
 
@@ -722,6 +548,10 @@ def fit(
             residuals).
         progress: `True` prints the iteration and chi² as the solver advances; a callable is
             called as `progress(iteration, chi2)` instead (rejected trial steps included).
+        max_bytes: the most memory the fit may need, estimated before anything is compiled
+            (:func:`gnipy.control.memory.fit_memory`: the fitted run holds every node from `t0` to
+            the last observation): `"auto"` (the default) the smaller of 8 GiB and half the
+            physical memory, a number of bytes, or None for no bound.
 
     Returns:
         A :class:`FitResult`: the estimates, standard errors, covariance and correlation, chi²
@@ -732,7 +562,9 @@ def fit(
     Raises:
         InputError: bad arguments (the message names the argument): unknown parameters or
             variables, observation times off the step grid, shapes that do not match, too few
-            observations, a model that cannot be built from traced parameter values.
+            observations, a model that cannot be built from traced parameter values, values that
+            are not numbers (a string or a boolean is not one), or a fit estimated beyond
+            `max_bytes` (naming `observations/h`).
         SolverFailure: a simulation failed during the fit (a step did not converge at some
             trial values of the estimated quantities; `step`, `time` and `residual` are then
             unknown: -1 and NaN). Better initial guesses or a smaller `h` help.
@@ -744,6 +576,8 @@ def fit(
     h = _number("h", h)
     if h == 0:
         raise InputError("h: must be nonzero")
+    if abs(h) < MIN_STEP_SIZE:
+        raise InputError(f"h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision")
     t0 = _number("t0", t0)
     if params is None:
         params = {}
@@ -752,15 +586,23 @@ def fit(
     if fixed is not None and not isinstance(fixed, Mapping):
         raise InputError(f"fixed: expected a dict name -> value, got {type(fixed).__name__}")
     fixed = dict(fixed or {})
-    param_names = tuple(str(k) for k in params)
+    for arg, table in (("params", params), ("fixed", fixed)):
+        bad = [k for k in table if not isinstance(k, str)]
+        if bad:
+            raise InputError(f"{arg}: parameter names must be strings, got {bad[0]!r}")
+    param_names = tuple(params)
     guesses = [_number(f"params: {k!r}", v) for k, v in params.items()]
+    for k, v in fixed.items():  # before a model reads them (its own check would take "1" or True)
+        if not isinstance(v, jax.core.Tracer):
+            _number(f"fixed: {k!r}", v)
     both = sorted(set(param_names) & set(fixed))
     if both:
         raise InputError(f"fixed: {both} also in params (a parameter is either estimated or fixed)")
-    if isinstance(max_steps, bool) or not isinstance(max_steps, (int, np.integer)) or max_steps < 1:
-        raise InputError(f"max_steps: must be a positive integer, got {max_steps!r}")
-    rtol, atol = _number("rtol", rtol), _number("atol", atol)
+    max_steps = whole_number("max_steps", max_steps, 1, MAX_ITERATIONS)
+    rtol, atol = real_number("rtol", rtol, lower=0.0), real_number("atol", atol, lower=0.0)
+    bound = memory_limit(max_bytes)
     reporter = _progress_reporter(progress)
+    _check_method(method)
 
     # the system, and how it is built from the parameters
     follow_ic = False
@@ -822,6 +664,9 @@ def fit(
         obs = obs.named(coords)
     columns = _columns(obs.variables, coords, vels)
     ks = _grid(obs.times, t0, h)
+    # before anything is compiled: the fitted run holds every node of the span
+    check_fit_memory(concrete, ks[-1], obs.values.size, len(names), t0=t0, t_last=float(obs.times[-1]), h=h,
+                     max_bytes=bound)
     if sigma is not None and obs.sigma is not None:
         raise InputError("sigma: given both here and in the observations; give one")
     sig = obs.sigma if sigma is None else _sigma_array(sigma, obs.values.shape, "sigma")
@@ -887,6 +732,9 @@ def fit(
     outputs, phi, v0p = (np.asarray(a) for a in _reported(problem, jnp.asarray(y)))
     chi2 = float(np.sum(r**2))
     Js = J * scale[None, :]
+    finite = bool(np.all(np.isfinite(Js)))
+    if not finite:  # a run that blew up at the estimate, or weights that overflow: no SVD to take
+        Js = np.zeros_like(Js)
     _, S, Vt = np.linalg.svd(Js, full_matrices=False)
     rank = int(np.sum(S > RCOND * S[0])) if S.size and S[0] > 0 else 0
     V = Vt[:rank].T
@@ -910,6 +758,9 @@ def fit(
     corr[~np.isfinite(corr)] = np.nan
     np.fill_diagonal(corr, np.where((stderr > 0) & np.isfinite(stderr), 1.0, np.nan))
 
+    if not finite:
+        success = False
+        solver_message += "; the Jacobian at the estimate is not finite (no uncertainties)"
     notes = [solver_message if success else f"the solver did not converge: {solver_message}"]
     if not identifiable.all():
         bad = [n for n, ok in zip(names, identifiable) if not ok]

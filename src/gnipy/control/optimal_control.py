@@ -59,13 +59,20 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..errors import InputError
-from ..inputs import finite_number
+from ..inputs import real_array, real_number, whole_number
+from ..resources import MAX_MEMORY_BYTES
 from ..saveat import SaveAt
-from ..simulate import default_initial_condition, simulate
+from ..simulate import MAX_TOTAL_STEPS, MIN_STEP_SIZE, default_initial_condition, simulate
 from ..solution import Solution
 from ..system import System
+from .memory import check_control_memory
 
-__all__ = ["solve_optimal_control", "ControlResult", "terminal_residual"]
+__all__ = ["solve_optimal_control", "ControlResult", "terminal_residual", "MAX_MEMORY_BYTES", "MAX_ITERATIONS"]
+
+
+#: The largest `max_iterations` accepted: SciPy's solvers count iterations in 32-bit integers, and an
+#: SQP that has not converged after a million iterations on these problems will not.
+MAX_ITERATIONS = 10**6
 
 
 @dataclasses.dataclass(frozen=True)
@@ -162,7 +169,7 @@ def terminal_residual(system: System, target) -> Callable:
             if system.group is None:
                 raise InputError("target: 'R' is for systems with a group part")
             k = system.group.matrix_size
-            R_target = np.asarray(value, dtype=np.float64)
+            R_target = real_array("target: 'R'", value, f"a {k}x{k} matrix")
             if R_target.shape != (k, k) or not np.all(np.isfinite(R_target)):
                 raise InputError(f"target: 'R' must be a finite {k}x{k} matrix, got shape {R_target.shape}")
             err = np.max(np.abs(R_target.T @ R_target - np.eye(k)))
@@ -196,18 +203,27 @@ def terminal_residual(system: System, target) -> Callable:
 
 
 def _finite(arg, name, value) -> float:
-    return finite_number(f"{arg}: {name!r}", value)
+    return real_number(f"{arg}: {name!r}", value)
 
 
 def _bounds(bounds, m: int):
     if bounds is None:
         return np.full(m, -np.inf), np.full(m, np.inf)
+    what = f"(lower, upper), each a number or {m} numbers"
     try:
-        lo, hi = bounds
-        lo = np.broadcast_to(np.asarray(lo, np.float64), (m,)).copy()
-        hi = np.broadcast_to(np.asarray(hi, np.float64), (m,)).copy()
-    except (TypeError, ValueError):
-        raise InputError(f"bounds: expected (lower, upper), each a number or {m} numbers, got {bounds!r}") from None
+        pair = not isinstance(bounds, (str, bytes, Mapping)) and len(bounds) == 2
+    except TypeError:  # no length (a number, a 0-d array)
+        pair = False
+    if not pair:
+        raise InputError(f"bounds: expected {what}, got {bounds!r}")
+    try:
+        lo, hi = (np.broadcast_to(real_array(f"bounds: {side}", b, "a number or one per input"), (m,)).copy()
+                  for side, b in zip(("lower", "upper"), bounds))
+    except ValueError as e:  # an InputError, or a shape that does not broadcast
+        if isinstance(e, InputError):
+            raise
+        raise InputError(f"bounds: expected {what}, got {bounds!r}") from None
+    # an infinite bound is no bound on that side; lower = +inf or upper = -inf fail lower < upper
     if np.any(np.isnan(lo)) or np.any(np.isnan(hi)) or np.any(lo >= hi):
         raise InputError(f"bounds: need lower < upper for every input, got {lo} and {hi}")
     return lo, hi
@@ -236,6 +252,8 @@ def solve_optimal_control(
     input_names=None,
     check_continuous: bool = True,
     segments: int = 1,
+    project_v0: bool = False,
+    max_bytes="auto",
 ) -> ControlResult:
     """Solve a discrete optimal-control problem by direct shooting on the GNI's steps (see
     the module docstring for the formulation and the choice of transcription).
@@ -264,7 +282,10 @@ def solve_optimal_control(
         kkt_tol: the relative KKT residual below which it counts as optimal (an SQP that stops
             with a larger one, or with bound multipliers of the wrong sign, reports no success).
         progress: `True` prints one line per SQP iteration (cost and miss), or a callable
-            `progress(iteration, cost, miss)`.
+            `progress(iteration, cost, miss)` or `progress(iteration, cost, miss, total)`. The
+            iterations count on across the solver's stages (SLSQP; where it fails, trust-constr
+            and SLSQP again, each up to `max_iterations`); `total` is the most the solve can now
+            take: `max_iterations` during the first SLSQP, raised when the fallback starts.
         input_names: names of the inputs, for files and figures (default `u0, u1, ...`).
         segments: the number of shooting segments: 1 (the default) is single shooting; with
             S > 1, multiple shooting: the method's state $(b, p^+)$ at the starts of segments
@@ -274,12 +295,19 @@ def solve_optimal_control(
             report how far it ends from the target (`continuous_miss`): the discrete problem's
             target is met to round-off by the discrete dynamics, the physical system's only to the
             method's accuracy at h.
+        project_v0: project `v0` onto the constraints ($\\mathbb{G}$-orthogonally) instead of
+            refusing a `v0` that violates them.
+        max_bytes: the most memory the solve may need, estimated before anything is compiled
+            (:func:`gnipy.control.memory.control_memory`: the SQP's dense matrices grow as
+            (K·m)²): `"auto"` (the default) the smaller of :data:`MAX_MEMORY_BYTES` and half the
+            physical memory, a number of bytes, or None for no bound.
 
     Returns:
         A :class:`ControlResult`.
 
     Raises:
-        InputError: bad arguments (named).
+        InputError: bad arguments (named; a string or a boolean is not a number), or a problem
+            estimated beyond `max_bytes` (naming `steps`).
     """
     start = time.perf_counter()
     if not isinstance(system, System):
@@ -287,36 +315,57 @@ def solve_optimal_control(
     if not system.is_forced or system.inputs == 0:
         raise InputError("system: an optimal-control problem needs inputs: System(..., force=F, inputs=m) "
                          "or system.with_force(F, inputs=m)")
-    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
-        raise InputError(f"steps: must be a positive integer, got {steps!r}")
-    K, m = int(steps), system.inputs
-    if not (isinstance(h, (int, float, np.floating)) and math.isfinite(h) and h > 0):
-        raise InputError(f"h: must be a positive finite number, got {h!r}")
-    if not (isinstance(effort, (int, float, np.floating)) and math.isfinite(effort) and effort >= 0):
-        raise InputError(f"effort: must be a non-negative number, got {effort!r}")
-    if not (isinstance(smoothness, (int, float, np.floating)) and math.isfinite(smoothness) and smoothness >= 0):
-        raise InputError(f"smoothness: must be a non-negative number, got {smoothness!r}")
+    K, m = whole_number("steps", steps, 1, MAX_TOTAL_STEPS), system.inputs
+    h = real_number("h", h, lower=0.0, strict=True)
+    if h < MIN_STEP_SIZE:
+        raise InputError(f"h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision")
+    effort = real_number("effort", effort, lower=0.0)
+    smoothness = real_number("smoothness", smoothness, lower=0.0)
+    t0 = real_number("t0", t0)
+    target_tol = real_number("target_tol", target_tol, lower=0.0, strict=True)
+    kkt_tol = real_number("kkt_tol", kkt_tol, lower=0.0, strict=True)
     if running_cost is not None and not callable(running_cost):
         raise InputError(f"running_cost: expected a callable c(q, v, u, t), got {type(running_cost).__name__}")
-    if isinstance(segments, bool) or not isinstance(segments, (int, np.integer)) or not 1 <= segments <= max(1, steps):
-        raise InputError(f"segments: must be an integer from 1 to steps = {steps!r}, got {segments!r}")
-    if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) or max_iterations < 1:
-        raise InputError(f"max_iterations: must be a positive integer, got {max_iterations!r}")
+    segments = whole_number("segments", segments, 1, K)
+    max_iterations = whole_number("max_iterations", max_iterations, 1, MAX_ITERATIONS)
+    for flag_name, value in (("check_continuous", check_continuous), ("project_v0", project_v0)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise InputError(f"{flag_name}: expected True or False, got {value!r}")
     lo, hi = _bounds(bounds, m)
-    if input_names is not None and len(tuple(input_names)) != m:
-        raise InputError(f"input_names: expected {m} names, got {len(tuple(input_names))}")
+    report = _reporter(progress)
+    if input_names is not None:
+        try:
+            if isinstance(input_names, (str, bytes)):
+                raise TypeError
+            input_names = tuple(input_names)
+        except TypeError:
+            raise InputError(f"input_names: expected a sequence of {m} names, got {input_names!r}") from None
+        if len(input_names) != m or not all(isinstance(n, str) for n in input_names):
+            raise InputError(f"input_names: expected {m} names (strings), got {input_names!r}")
+        if len(set(input_names)) != m:
+            raise InputError(f"input_names: repeated names in {list(input_names)}")
     method = "gni-trapezoid" if method is None else method
-    q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
     g = terminal_residual(system, target)
+    if callable(target):
+        d = 1  # not known before it is evaluated (by a simulation): at least one component
+    else:
+        d = sum(system.group.dim if name == "R" else 1 for name in target)
+    if d > K * m:
+        raise InputError(f"target: {d} conditions on {K * m} controls; use more steps")
+    # refused before anything is compiled or allocated (the SQP's matrices grow as (K·m)²)
+    check_control_memory(system, K, d, segments, max_bytes)
+    q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
     if controls0 is None:
         U0 = np.zeros((K, m))
     else:
-        U0 = np.asarray(controls0, dtype=np.float64)
+        U0 = real_array("controls0", controls0, f"a ({K}, {m}) array of numbers")
         if U0.ndim == 1 and m == 1:
             U0 = U0[:, None]
         if U0.shape != (K, m) or not np.all(np.isfinite(U0)):
             raise InputError(f"controls0: expected a finite array of shape ({K}, {m}), got {np.shape(controls0)}")
     U0 = np.clip(U0, lo, hi)
+    if project_v0:
+        _, v0 = system.check(q0, v0, R0=R0, project_v0=True)
     # check the problem once, eagerly: the start, the method, the target's shape (clear errors
     # before anything is compiled)
     first = simulate(system, method, q0, v0, R0=R0, h=h, steps=K, controls=U0, t0=t0, saveat=SaveAt(t1=True))
@@ -369,13 +418,13 @@ def solve_optimal_control(
         C_val = jax.jit(shooting.constraints)
         C_jac = jax.jit(jax.jacrev(shooting.constraints))
 
-    report = _reporter(progress)
     it = [0]
+    cap = [max_iterations]  # the most iterations the solve can take, as known now (progress's total)
 
     def callback(x):
         it[0] += 1
         if report is not None:
-            report(it[0], float(F_val(x)), float(np.max(np.abs(C_val(x)))))
+            report(it[0], float(F_val(x)), float(np.max(np.abs(C_val(x)))), max(cap[0], it[0]))
 
     # SLSQP starts its quasi-Newton Hessian at the identity; the effort's Hessian is h w I, so the
     # cost is divided by h w (its first steps are otherwise 1/(h w) too long)
@@ -411,8 +460,10 @@ def solve_optimal_control(
         # controls at a bound and a miss of 0.9); an interior-point method (trust-constr) from the
         # warm start finds the region, and SLSQP from there the active set and the last digits
         effort_only = running_cost is None and not smoothness and segments == 1
+        cap[0] = it[0] + 2 * max_iterations  # trust-constr, then SLSQP again
         first = _trust_constr(objective, constraint_fns, x0, x_lo, x_hi, max_iterations, callback,
                               hessian=scale * h * effort if effort_only else None)
+        cap[0] = it[0] + max_iterations
         res = _slsqp(objective, constraint_fns, np.clip(first.x, x_lo, x_hi), x_lo, x_hi, max_iterations, callback)
         retry = finish(res, f"SLSQP failed ({out['res'].message}); trust-constr ({first.nit} iterations), then SLSQP")
         iterations += int(first.nit) + int(res.nit)
@@ -580,10 +631,13 @@ def _polish(x, c_val, c_jac, lo, hi, tol, max_steps: int = 8):
         at_lo, at_hi = _at_bounds(x, lo, hi)
         free = ~(at_lo | at_hi)
         J = np.asarray(c_jac(x))[:, free]
-        if J.shape[1] < J.shape[0]:
+        if J.shape[1] < J.shape[0] or not np.all(np.isfinite(J)):
             break
         dx = np.zeros_like(x)
-        dx[free] = -J.T @ np.linalg.solve(J @ J.T, c)
+        try:
+            dx[free] = -J.T @ np.linalg.solve(J @ J.T, c)
+        except np.linalg.LinAlgError:  # J has dependent rows: the target is not reachable to first order here
+            break
         x_new = np.clip(x + dx, lo, hi)
         c_new = np.asarray(c_val(x_new))
         miss_new = float(np.max(np.abs(c_new)))
@@ -598,6 +652,8 @@ def _kkt(grad, Jg, x, lo, hi):
     """KKT residual over the free controls, the multipliers, the active bounds and their signs."""
     at_lo, at_hi = _at_bounds(x, lo, hi)
     free = ~(at_lo | at_hi)
+    if not (np.all(np.isfinite(grad)) and np.all(np.isfinite(Jg))):  # a run that blew up: no KKT point
+        return float("inf"), np.full(Jg.shape[0], np.nan), int(np.sum(~free)), False
     lam = np.linalg.lstsq(Jg[:, free].T, -grad[free], rcond=None)[0] if np.any(free) else np.zeros(Jg.shape[0])
     r = grad + Jg.T @ lam
     # relative to the size of the terms that must cancel, ∇J and J_gᵀλ (a fixed scale would pass
@@ -612,14 +668,23 @@ def _kkt(grad, Jg, x, lo, hi):
 
 
 def _reporter(progress):
+    """The `(iteration, cost, miss, total)` callable of `progress=`, or None."""
+    import inspect
+
     if progress is False or progress is None:
         return None
-    if callable(progress):
-        return progress
     if progress is True:
         from rich.console import Console
 
-        console = Console(stderr=True)
-        return lambda i, J, miss: console.print(f"iteration {i:4d}: cost {J:.10g}, target miss {miss:.3e}")
-    raise InputError(f"progress: expected True, False or a callable(iteration, cost, miss), got {progress!r}")
-
+        console = Console(stderr=True, markup=False, highlight=False)
+        return lambda i, J, miss, total: console.print(f"iteration {i:4d}: cost {J:.10g}, target miss {miss:.3e}")
+    if callable(progress) and not isinstance(progress, (bool, np.bool_)):
+        try:
+            inspect.signature(progress).bind(0, 0.0, 0.0, 0)
+            takes_total = True
+        except TypeError:
+            takes_total = False
+        except ValueError:  # no signature to inspect (some builtins): the documented three arguments
+            takes_total = False
+        return progress if takes_total else (lambda i, J, miss, total: progress(i, J, miss))
+    raise InputError(f"progress: expected True, False or a callable(iteration, cost, miss[, total]), got {progress!r}")

@@ -1,12 +1,13 @@
-"""Problems as data: the TOML problem files of `gni control` (optimal control) and `gni fit`
-(identification), the worked control problems, and the result files.
+"""Optimal-control problems as data: the TOML problem files of `gni control`, the worked control
+problems, and the result files.
 
 A control problem file (:func:`load_problem`) has the sections
 
 - `[system]`: `model` (a zoo model's name) and `params` (a table of parameter values);
 - `[inputs]`: one entry per input, `name = { velocity name = gain }`: the force $F = Bu$ of
   actuators along those velocity components (:func:`gnipy.forcing.input_force`);
-- `[start]`: `q0`, `v0` and, on $\\mathbb{R}^n\\times G$, `R0` (default: the model's);
+- `[start]`: `q0`, `v0` and, on $\\mathbb{R}^n\\times G$, `R0` (default: the model's), and
+  `project_v0 = true` to project a `v0` that violates the constraints onto them;
 - `[horizon]`: `h` and `steps`;
 - `[target]`: coordinate and velocity names with their values, and `R` (a matrix);
 - `[solver]` (optional): `method`, `bounds = [lower, upper]`, `effort`, `smoothness`,
@@ -15,45 +16,47 @@ A control problem file (:func:`load_problem`) has the sections
   `amplitude`, `phase` and `periods` (default: zero inputs);
 - `name`, `description` (optional).
 
+Every entry is checked when the file is read, before anything is compiled: a value of the wrong
+type (a string or a boolean is not a number), out of range, NaN or infinite, or of the wrong size
+for the model is an :class:`~gnipy.errors.InputError` naming its key (`horizon.steps: ...`,
+`inputs.torque: ...`), as is a problem whose memory is estimated beyond the bound (`max_bytes`).
+
 :data:`WORKED_PROBLEMS` holds the two worked problems of the control guide as such files.
 
-A fit problem file (`gni fit`, :func:`load_fit_problem`) names the model, the parameters to
-estimate with their guesses, the observations (a gnipy result file) and the integration::
-
-    [system]
-    model = "chaplygin-sleigh"
-    params = { m = 1.0 }           # fixed parameters (default: the model's)
-    [estimate]
-    params = { I = 1.2, a = 0.5 }  # estimated, with initial guesses
-    initial = ["q0"]               # optional: also q0 and/or v0
-    [observations]
-    file = "observed.nc"           # relative to the problem file
-    variables = ["x", "y"]         # optional (default: every coordinate)
-    sigma = 1e-3                   # optional (default: estimated from the scatter)
-    [start]                        # optional (default: the model's)
-    q0 = [0.0, 0.0, 0.0]
-    v0 = [1.0, 0.4, 1.0]
-    [integration]
-    method = "gni-trapezoid"       # optional (default: the model's)
-    h = 0.05                       # optional when the file records its h
+The reading of the files and the checks of their entries are :mod:`gnipy.control.problem_files`;
+fit problem files are :mod:`gnipy.control.fit_problems`.
 """
-
 from __future__ import annotations
 
 import dataclasses
 import math
-import tomllib
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..errors import InputError
 from ..system import System
+from .problem_files import (
+    _build,
+    _flag,
+    _got,
+    _integer,
+    _is_number,
+    _known_keys,
+    _method,
+    _model,
+    _names,
+    _number,
+    _numbers,
+    _rotation,
+    _start,
+    _table,
+    _text,
+    read_problem,
+)
 
-__all__ = ["ControlProblem", "WORKED_PROBLEMS", "load_problem", "write_control_result", "FitProblem",
-           "load_fit_problem", "write_fit_result"]
+__all__ = ["ControlProblem", "WORKED_PROBLEMS", "load_problem", "write_control_result"]
 
 #: The worked problems of the control guide, as problem files (`gni control --example NAME`).
 WORKED_PROBLEMS: dict[str, str] = {
@@ -140,7 +143,6 @@ periods = 1.0
 
 _SECTIONS = {"name", "description", "system", "inputs", "start", "horizon", "target", "solver", "warm_start"}
 
-
 @dataclasses.dataclass(frozen=True)
 class ControlProblem:
     """An optimal-control problem read from a problem file (module docstring).
@@ -150,7 +152,7 @@ class ControlProblem:
         system: the forced System (the model with the input force).
         input_names: the inputs' names, in order.
         target: the target mapping (:func:`gnipy.control.terminal_residual`).
-        q0, v0, R0: the start.
+        q0, v0, R0: the start; `project_v0`: project v0 onto the constraints.
         h, steps: the horizon.
         method, bounds, effort, smoothness, max_iterations, segments: the solver's options.
         controls0: the warm start (K, m).
@@ -175,9 +177,10 @@ class ControlProblem:
     segments: int
     controls0: np.ndarray
     source: str
+    project_v0: bool = False
 
-    def solve(self, progress=False, check_continuous: bool = True):
-        """:func:`gnipy.control.solve_optimal_control` on this problem."""
+    def solve(self, progress=False, check_continuous: bool = True, max_bytes="auto"):
+        """:func:`gnipy.control.solve_optimal_control` on this problem (`max_bytes` as there)."""
         from .optimal_control import solve_optimal_control
 
         return solve_optimal_control(
@@ -185,155 +188,133 @@ class ControlProblem:
             method=self.method, controls0=self.controls0, bounds=self.bounds, effort=self.effort,
             smoothness=self.smoothness, segments=self.segments,
             max_iterations=self.max_iterations, progress=progress, input_names=self.input_names,
-            check_continuous=check_continuous)
+            check_continuous=check_continuous, project_v0=self.project_v0, max_bytes=max_bytes)
 
 
-def load_problem(source, *, name: str = "problem") -> ControlProblem:
+def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlProblem:
     """Read a problem: a path to a TOML file, TOML text (a string holding a newline), a parsed
     mapping, or the name of a worked problem (:data:`WORKED_PROBLEMS`).
 
+    Every entry is checked here, before anything is compiled: its type (a string or a boolean is
+    not a number, NaN and infinities are refused), its range, and its size against the model (the
+    lengths of `q0`, `v0`, the names of the target, `R0` and `R` rotations).
+
+    Arguments:
+        source: the problem (see above).
+        name: the problem's name when the file has none and is not a path (a path's stem is).
+        max_bytes: the memory bound of :func:`gnipy.control.solve_optimal_control`, checked here
+            (before the warm start is built): `"auto"`, a number of bytes or None.
+
     Raises:
-        InputError: a missing or malformed entry, named by its section and key.
+        InputError: a missing or malformed entry, named by its section and key (`horizon.steps:
+            ...`), or a problem estimated beyond `max_bytes` (naming `horizon.steps`).
     """
+    from ..forcing import input_force
+    from ..simulate import MAX_TOTAL_STEPS, MIN_STEP_SIZE
+    from .memory import check_control_memory
+    from .optimal_control import MAX_ITERATIONS
+
     if isinstance(source, str) and source in WORKED_PROBLEMS:
         source = WORKED_PROBLEMS[source]
-    data, text, _, name = _read(source, name, f"a worked problem's name ({', '.join(WORKED_PROBLEMS)})")
+    data, text, _, name = read_problem(source, name, f"a worked problem's name ({', '.join(WORKED_PROBLEMS)})")
     unknown = set(data) - _SECTIONS
     if unknown:
-        raise InputError(f"problem: unknown section(s) {', '.join(sorted(unknown))}; expected {', '.join(sorted(_SECTIONS))}")
-    from ..forcing import input_force
-    from ..registry import get_model
-
-    system_sec = _section(data, "system")
-    _known_keys(data, {"system": {"model", "params"}, "start": {"q0", "v0", "R0"}, "horizon": {"h", "steps"}})
-    model = system_sec.get("model")
-    if not isinstance(model, str):
-        raise InputError("system.model: expected a model name (see `gni models`)")
-    try:
-        spec = get_model(model)
-    except (KeyError, ValueError, InputError) as e:
-        raise InputError(f"system.model: {e}") from None
-    params = spec.resolve_params(system_sec.get("params") or {})
-    base = spec.build(params)
-    F, m, input_names = input_force(base, _section(data, "inputs"))
+        raise InputError(f"problem: unknown section(s) {_names(unknown)}; expected {', '.join(sorted(_SECTIONS))}")
+    title = _text("name", data.get("name", name))
+    description = _text("description", data.get("description", "")).strip()
+    spec, params = _model(data)
+    base = _build(spec, params, "system.params")
+    F, m, input_names = input_force(base, _table(data, "inputs"))
     system = base.with_force(F, inputs=m)
-    start = data.get("start", {})
-    q0 = tuple(_numbers("start.q0", start["q0"])) if "q0" in start else None
-    v0 = tuple(_numbers("start.v0", start["v0"])) if "v0" in start else None
-    R0 = np.asarray(_matrix("start.R0", start["R0"])) if "R0" in start else None
-    if q0 is None or v0 is None:
-        dq, dv = spec.initial_condition(params)
-        q0 = dq if q0 is None else q0
-        v0 = dv if v0 is None else v0
-    horizon = _section(data, "horizon")
-    h = _positive("horizon.h", horizon.get("h"))
-    steps = horizon.get("steps")
-    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
-        raise InputError(f"horizon.steps: expected a positive integer, got {steps!r}")
-    target = dict(_section(data, "target"))
-    if "R" in target:
-        target["R"] = _matrix("target.R", target["R"])
-    solver = data.get("solver", {})
-    method = str(solver.get("method", "gni-trapezoid"))
-    bounds = solver.get("bounds")
-    if bounds is not None:
-        if not isinstance(bounds, list) or len(bounds) != 2:
-            raise InputError(f"solver.bounds: expected [lower, upper], got {bounds!r}")
-        bounds = (bounds[0], bounds[1])
-    effort = solver.get("effort", 1.0)
-    smoothness = solver.get("smoothness", 0.0)
-    segments = solver.get("segments", 1)
-    unknown = set(solver) - {"method", "bounds", "effort", "smoothness", "max_iterations", "segments"}
-    if unknown:
-        raise InputError(f"solver: unknown key(s) {', '.join(sorted(unknown))}; expected method, bounds, effort, "
-                         "smoothness, max_iterations, segments")
-    max_iterations = solver.get("max_iterations", 500)
-    warm = data.get("warm_start", {})
+    start = _table(data, "start", required=False)
+    _known_keys(start, "start", {"q0", "v0", "R0", "project_v0"})
+    q0, v0, R0 = _start(start, system, spec, params)
+    project_v0 = _flag("start.project_v0", start.get("project_v0", False))
+    horizon = _table(data, "horizon")
+    _known_keys(horizon, "horizon", {"h", "steps"})
+    h = _number("horizon.h", horizon.get("h"), positive=True)
+    if h < MIN_STEP_SIZE:
+        raise InputError(f"horizon.h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision")
+    steps = _integer("horizon.steps", horizon.get("steps"), 1, MAX_TOTAL_STEPS)
+    if not math.isfinite(h * steps):
+        raise InputError(f"horizon: the horizon h x steps = {h!r} x {steps} is not a finite time")
+    target = _target(_table(data, "target"), system)
+    solver = _table(data, "solver", required=False)
+    _known_keys(solver, "solver", {"method", "bounds", "effort", "smoothness", "max_iterations", "segments"})
+    method = _method("solver.method", solver.get("method", "gni-trapezoid"))
+    bounds = _bounds(solver.get("bounds"), m)
+    effort = _number("solver.effort", solver.get("effort", 1.0), nonnegative=True)
+    smoothness = _number("solver.smoothness", solver.get("smoothness", 0.0), nonnegative=True)
+    max_iterations = _integer("solver.max_iterations", solver.get("max_iterations", 500), 1, MAX_ITERATIONS)
+    segments = _integer("solver.segments", solver.get("segments", 1), 1, steps, "horizon.steps")
+    size = sum(system.group.dim if k == "R" else 1 for k in target)
+    if size > steps * m:
+        raise InputError(f"horizon.steps: the target's {size} conditions need at least as many controls; "
+                         f"{steps} steps x {m} inputs are {steps * m}")
+    # refused before the warm start (K x m numbers) is built or anything is compiled
+    check_control_memory(system, steps, size, segments, max_bytes, key="horizon.steps")
+    warm = _table(data, "warm_start", required=False)
     controls0 = _warm_start(warm, steps, m, h)
     return ControlProblem(
-        name=str(data.get("name", name)), description=str(data.get("description", "")).strip(), system=system,
-        input_names=input_names, target=target, q0=q0, v0=v0, R0=R0, h=h, steps=steps, method=method,
-        bounds=bounds, effort=effort, smoothness=smoothness, max_iterations=max_iterations, segments=segments, controls0=controls0, source=text)
+        name=title, description=description, system=system, input_names=input_names, target=target, q0=q0, v0=v0,
+        R0=R0, h=h, steps=steps, method=method, bounds=bounds, effort=effort, smoothness=smoothness,
+        max_iterations=max_iterations, segments=segments, controls0=controls0, source=text, project_v0=project_v0)
 
 
-def _read(source, name: str, also: str = "") -> tuple[dict, str, Path, str]:
-    """`(data, text, directory, name)` of a problem given as a path (a string without a newline),
-    TOML text or a parsed mapping; the directory is the file's (relative paths in it), else the
-    working directory."""
-    base, text = Path("."), ""
-    if isinstance(source, Path) or (isinstance(source, str) and "\n" not in source):
-        path = Path(source)
-        try:
-            text = path.read_text(encoding="utf-8")
-        except OSError as e:
-            raise InputError(f"problem: cannot read {str(path)!r}: {e.strerror or e}") from None
-        base, name, source = path.parent, path.stem, text
-    if isinstance(source, str):
-        try:
-            return tomllib.loads(source), source, base, name
-        except tomllib.TOMLDecodeError as e:
-            raise InputError(f"problem: not valid TOML: {e}") from None
-    if isinstance(source, Mapping):
-        return dict(source), text, base, name
-    raise InputError(f"problem: expected a path, TOML text, a mapping{' or ' + also if also else ''}, "
-                     f"got {type(source).__name__}")
+def _target(table: Mapping, system: System) -> dict:
+    """The `[target]` table: coordinate and velocity names with numbers, `R` a rotation."""
+    names = (*system.coordinates, *system.velocities) + (("R",) if system.group is not None else ())
+    target = {}
+    for key, value in table.items():
+        if key == "R" and system.group is not None:
+            target[key] = _rotation("target.R", value, system)
+        elif key in names:
+            target[key] = _number(f"target.{key}", value)
+        else:
+            raise InputError(f"target: unknown name {key!r}; expected one of {', '.join(names)}")
+    return target
 
 
-def _known_keys(data, known: dict[str, set[str]]) -> None:
-    """Refuse keys a section does not have (a misspelt key would otherwise be a default)."""
-    for section, keys in known.items():
-        unknown = set(data.get(section) or {}) - keys
-        if unknown:
-            raise InputError(f"{section}: unknown key(s) {', '.join(sorted(unknown))}; expected "
-                             f"{', '.join(sorted(keys))}")
-
-
-def _section(data, key) -> Mapping:
-    sec = data.get(key)
-    if not isinstance(sec, Mapping) or not sec:
-        raise InputError(f"{key}: missing or empty section [{key}]")
-    return sec
-
-
-def _numbers(where, value) -> list[float]:
-    if not isinstance(value, list) or not all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
-        raise InputError(f"{where}: expected a list of numbers, got {value!r}")
-    if not all(math.isfinite(x) for x in value):
-        raise InputError(f"{where}: contains NaN or infinite values")
-    return [float(x) for x in value]
-
-
-def _matrix(where, value) -> np.ndarray:
-    if not isinstance(value, list) or not value:
-        raise InputError(f"{where}: expected a matrix as a list of rows, got {value!r}")
-    rows = [_numbers(where, r) for r in value]
-    if len({len(r) for r in rows}) != 1:
-        raise InputError(f"{where}: rows of different lengths")
-    return np.asarray(rows)
-
-
-def _positive(where, value) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-        raise InputError(f"{where}: expected a positive number, got {value!r}")
-    return float(value)
+def _bounds(value, m: int):
+    """`[lower, upper]`, each a number or one per input; lower < upper (-inf and inf: no bound)."""
+    if value is None:
+        return None
+    if not isinstance(value, list) or len(value) != 2:
+        raise InputError(f"solver.bounds: expected [lower, upper], got {_got(value)}")
+    sides = []
+    for side, b in zip(("lower", "upper"), value):
+        if isinstance(b, list):
+            if len(b) != m or not all(_is_number(x) for x in b):
+                raise InputError(f"solver.bounds: the {side} bound must be a number or a list of {m} numbers (one per "
+                                 f"input), got {_got(b)}")
+        elif not _is_number(b):
+            raise InputError(f"solver.bounds: the {side} bound must be a number, got {_got(b)}")
+        arr = np.broadcast_to(np.asarray(b, dtype=np.float64), (m,))
+        if np.any(np.isnan(arr)):
+            raise InputError(f"solver.bounds: the {side} bound is NaN")
+        sides.append(arr)
+    lo, hi = sides
+    if np.any(lo >= hi):
+        raise InputError(f"solver.bounds: need lower < upper for every input, got {value[0]!r} and {value[1]!r}")
+    return value[0], value[1]
 
 
 def _warm_start(warm, steps: int, m: int, h: float) -> np.ndarray:
     if not warm:
         return np.zeros((steps, m))
-    unknown = set(warm) - {"amplitude", "phase", "periods"}
-    if unknown:
-        raise InputError(f"warm_start: unknown key(s) {', '.join(sorted(unknown))}; expected amplitude, phase, periods")
-    amp = np.asarray(_numbers("warm_start.amplitude", warm.get("amplitude", [0.0] * m)))
-    phase = np.asarray(_numbers("warm_start.phase", warm.get("phase", [0.0] * m)))
-    if amp.shape != (m,) or phase.shape != (m,):
-        raise InputError(f"warm_start: amplitude and phase need one value per input ({m})")
-    periods = warm.get("periods", 1.0)
-    if isinstance(periods, bool) or not isinstance(periods, (int, float)) or not math.isfinite(periods):
-        raise InputError(f"warm_start.periods: expected a number, got {periods!r}")
+    _known_keys(warm, "warm_start", {"amplitude", "phase", "periods"})
+    names = tuple(f"input {j + 1}" for j in range(m))
+    amp = np.asarray(_numbers("warm_start.amplitude", warm.get("amplitude", [0.0] * m), names))
+    phase = np.asarray(_numbers("warm_start.phase", warm.get("phase", [0.0] * m), names))
+    periods = _number("warm_start.periods", warm.get("periods", 1.0))
     T = steps * h
     t = (np.arange(steps) + 0.5) * h  # the middle of each step
-    return amp[None, :] * np.sin(2 * np.pi * float(periods) * t[:, None] / T + phase[None, :])
+    with np.errstate(invalid="ignore", over="ignore"):  # checked below
+        u = amp[None, :] * np.sin(2 * np.pi * periods * t[:, None] / T + phase[None, :])
+    if not np.all(np.isfinite(u)):
+        raise InputError(f"warm_start: the inputs it makes are not finite (the phase 2 pi periods t / T + phase "
+                         f"overflows for periods = {periods!r}, phase = {phase.tolist()!r}); choose smaller values")
+    return u
 
 
 def write_control_result(result, problem: ControlProblem | None, path, *, overwrite: bool = False) -> None:
@@ -371,166 +352,5 @@ def write_control_result(result, problem: ControlProblem | None, path, *, overwr
                            attrs={**schema.variable_attrs("u"), "components": ",".join(names)})
     ds = ds.assign_coords(control_step=np.arange(K), input=names, control_time=("control_step", t[:K]))
     for name in ("control_step", "control_time", "input"):
-        ds[name].attrs.update(schema.variable_attrs(name))
-    write_netcdf(ds, path, overwrite=overwrite)
-
-
-_FIT_SECTIONS = {"name", "description", "system", "estimate", "observations", "start", "integration"}
-
-
-@dataclasses.dataclass(frozen=True)
-class FitProblem:
-    """An identification problem read from a fit problem file (module docstring).
-
-    Attributes:
-        name, description: from the file.
-        model: the zoo model's name.
-        fixed: the fixed parameters.
-        params: the estimated parameters' initial guesses.
-        initial: which parts of the initial condition are estimated (`"q0"`, `"v0"`).
-        observations: the :class:`~gnipy.control.Observations`.
-        q0, v0, R0: the start (guesses where estimated).
-        method, h, t0: the integration.
-        source: the file's text.
-    """
-
-    name: str
-    description: str
-    model: str
-    fixed: dict
-    params: dict
-    initial: tuple
-    observations: Any
-    q0: Any
-    v0: Any
-    R0: Any
-    method: Any
-    h: float
-    t0: float
-    source: str
-
-    def solve(self, progress=False):
-        """:func:`gnipy.fit` on this problem."""
-        from .identification import fit
-
-        return fit(self.model, self.observations, params=self.params or None, fixed=self.fixed or None,
-                   initial=self.initial, method=self.method, h=self.h, t0=self.t0, q0=self.q0, v0=self.v0,
-                   R0=self.R0, progress=progress)
-
-
-def load_fit_problem(source, *, name: str = "fit") -> FitProblem:
-    """Read a fit problem: a path to a TOML file (its observation file is relative to it), TOML
-    text, or a parsed mapping (paths then relative to the working directory).
-
-    Raises:
-        InputError: a missing or malformed entry, named by its section and key.
-    """
-    from .identification import Observations
-
-    data, text, base, name = _read(source, name)
-    unknown = set(data) - _FIT_SECTIONS
-    if unknown:
-        raise InputError(f"problem: unknown section(s) {', '.join(sorted(unknown))}; expected "
-                         f"{', '.join(sorted(_FIT_SECTIONS))}")
-    from ..registry import get_model
-
-    system_sec = _section(data, "system")
-    _known_keys(data, {"system": {"model", "params"}, "start": {"q0", "v0", "R0"}})
-    model = system_sec.get("model")
-    if not isinstance(model, str):
-        raise InputError("system.model: expected a model name (see `gni models`)")
-    try:
-        get_model(model)
-    except (KeyError, ValueError, InputError) as e:
-        raise InputError(f"system.model: {e}") from None
-    fixed = dict(system_sec.get("params") or {})
-    estimate = _section(data, "estimate")
-    unknown = set(estimate) - {"params", "initial"}
-    if unknown:
-        raise InputError(f"estimate: unknown key(s) {', '.join(sorted(unknown))}; expected params, initial")
-    params = dict(estimate.get("params") or {})
-    initial = estimate.get("initial", [])
-    if isinstance(initial, str):
-        initial = [initial]
-    if not isinstance(initial, list) or not set(initial) <= {"q0", "v0"}:
-        raise InputError(f"estimate.initial: expected a list of 'q0' and/or 'v0', got {initial!r}")
-    if not params and not initial:
-        raise InputError("estimate: nothing to estimate: give params = {...} and/or initial = [...]")
-    obs_sec = _section(data, "observations")
-    unknown = set(obs_sec) - {"file", "variables", "sigma"}
-    if unknown:
-        raise InputError(f"observations: unknown key(s) {', '.join(sorted(unknown))}; expected file, variables, sigma")
-    file = obs_sec.get("file")
-    if not isinstance(file, str) or not file:
-        raise InputError("observations.file: expected the path of a gnipy result file (netCDF)")
-    obs_path = Path(file) if Path(file).is_absolute() else base / file
-    if not obs_path.is_file():
-        raise InputError(f"observations.file: cannot read {str(obs_path)!r}: no such file")
-    variables = obs_sec.get("variables")
-    if variables is not None and (not isinstance(variables, list) or not all(isinstance(v, str) for v in variables)):
-        raise InputError(f"observations.variables: expected a list of names, got {variables!r}")
-    sigma = obs_sec.get("sigma")
-    if sigma is not None:
-        sigma = _positive("observations.sigma", sigma)
-    observations = Observations.from_dataset(str(obs_path), variables, sigma=sigma)
-    start = data.get("start", {})
-    q0 = tuple(_numbers("start.q0", start["q0"])) if "q0" in start else None
-    v0 = tuple(_numbers("start.v0", start["v0"])) if "v0" in start else None
-    R0 = np.asarray(_matrix("start.R0", start["R0"])) if "R0" in start else None
-    integ = data.get("integration", {})
-    unknown = set(integ) - {"method", "h", "t0"}
-    if unknown:
-        raise InputError(f"integration: unknown key(s) {', '.join(sorted(unknown))}; expected method, h, t0")
-    h = integ.get("h")
-    if h is None:
-        import xarray as xr
-
-        with xr.open_dataset(obs_path) as ds:
-            h = ds.attrs.get("h")
-        if h is None:
-            raise InputError("integration.h: missing, and the observation file does not record its h")
-    h = _positive("integration.h", float(h))
-    t0 = integ.get("t0", 0.0)
-    if isinstance(t0, bool) or not isinstance(t0, (int, float)) or not math.isfinite(t0):
-        raise InputError(f"integration.t0: expected a number, got {t0!r}")
-    return FitProblem(name=str(data.get("name", name)), description=str(data.get("description", "")).strip(),
-                      model=model, fixed=fixed, params=params, initial=tuple(initial), observations=observations,
-                      q0=q0, v0=v0, R0=R0, method=integ.get("method"), h=h, t0=float(t0), source=text)
-
-
-def write_fit_result(result, problem: FitProblem | None, path, *, overwrite: bool = False) -> None:
-    """Write a :class:`~gnipy.control.FitResult` to netCDF, whole or not at all: the fitted run's
-    nodes (as `gni run` writes them), the estimates `estimate(quantity)`, their standard errors
-    `standard_error(quantity)` and covariance `covariance(quantity, quantity_)`, and the fit's
-    figures (chi², degrees of freedom, iterations) as attributes."""
-    import xarray as xr
-
-    from .. import schema
-    from ..io import write_netcdf
-
-    attrs = {
-        "command": "gni fit",
-        "fit_chi2": float(result.chi2),
-        "fit_dof": int(result.dof),
-        "fit_reduced_chi2": float(result.reduced_chi2),
-        "fit_n_obs": int(result.n_obs),
-        "fit_rank": int(result.rank),
-        "fit_sigma_known": int(result.sigma_known),
-        "fit_success": int(result.success),
-        "fit_message": str(result.message),
-        "fit_iterations": int(result.iterations),
-        "fit_wall_time_s": float(result.wall_time),
-        "fit_observed_variables": ",".join(result.observations.variables),
-    }
-    if problem is not None and problem.source:
-        attrs["fit_problem_file"] = problem.source
-    ds = result.solution.to_xarray(attrs=attrs)
-    names = [str(n) for n in result.names]
-    for var, values, dims in (("estimate", result.values, ("quantity",)),
-                              ("standard_error", result.stderr, ("quantity",)),
-                              ("covariance", result.covariance, ("quantity", "quantity_"))):
-        ds[var] = xr.DataArray(np.asarray(values, dtype=np.float64), dims=dims, attrs=schema.variable_attrs(var))
-    ds = ds.assign_coords(quantity=names, quantity_=names)
-    for name in ("quantity", "quantity_"):
         ds[name].attrs.update(schema.variable_attrs(name))
     write_netcdf(ds, path, overwrite=overwrite)

@@ -10,10 +10,22 @@ after each block of steps the state, written to a buffer. The observation of the
 block: the state no longer changes, so the result is that of the XLA loop.
 
 **Cache.** Compiled object code is kept in `$GNIPY_CACHE_DIR/native` (default
-`~/.cache/gnipy/native`) under the SHA-256 of the program (its LLVM IR, the llvmlite version and the
-CPU's name and features), written whole (a temporary file renamed) with the object code's own
-SHA-256 at its end, and loaded by later processes instead of compiling again (a file whose
-digest does not match is compiled again). `GNIPY_NATIVE_CACHE=0` turns the disk cache off.
+`~/.cache/gnipy/native`) and loaded by later processes instead of compiling again;
+`GNIPY_NATIVE_CACHE=0` turns the disk cache off. Loading object code runs it, so the cache goes
+through :mod:`gnipy.private_cache`, and what is trusted is exactly this: the folder, opened without
+following a link, if it is a directory owned by the current user that its group and others cannot
+write (a missing one is created with mode 0700); in it, the per-user secret `.key` (32 random
+bytes, mode 0600, the user's); and an entry `<key>.o`, a regular file of the user with one link,
+holding the object code then `HMAC-SHA256(secret, key + b"\0" + object code)`. The key is the
+SHA-256 of the program (its LLVM IR, the llvmlite version and the CPU's name and features), so an
+entry loads only for the program it was compiled from, and only if this user's gnipy wrote it.
+An entry that does not authenticate (damaged, truncated, another program's, planted, or written
+by an older gnipy with the object code's SHA-256 at its end) is compiled again and replaced. A
+folder that is refused (another user's, writable by others, a link, an unusable secret), or an
+entry that is a link or not the user's, is not read: the program is compiled in memory, with
+one :class:`~gnipy.private_cache.CacheWarning` per process and folder. Entries are written whole
+(a temporary file `.<key>.o.gnipy-PID-HEX.tmp`, renamed); a failed write (a full disk, a
+file-size limit) removes its temporary file and the run goes on with the compiled code.
 
 Batches run the members in chunks, one per core (threads: the compiled code runs without the
 GIL), and within a chunk several members at a time in vector lanes (`gnipy_run_lanes`, built with
@@ -27,7 +39,6 @@ import ctypes.util
 import functools
 import hashlib
 import os
-import tempfile
 import threading
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -35,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..private_cache import open_private_cache
 from .control import _flatten, _unflatten
 from .lowering import lower_jaxpr
 from .scalars import Function, Reg, Unsupported, _const_array, llvm_type
@@ -92,19 +104,13 @@ def _target_machine():
                                         opt=3, reloc="default", codemodel="jitdefault")
 
 
-def _object_code(ir: str, key: str) -> tuple[bytes, str]:
-    """The object code of `ir` and where it came from ("disk" or "compiled"). A cache file holds
-    the object code then its SHA-256; a file that does not match is compiled again (and replaced)."""
-    folder = cache_dir()
-    path = folder / f"{key}.o" if folder is not None else None
-    if path is not None and path.is_file():
-        try:
-            data = path.read_bytes()
-            obj, digest = data[:-32], data[-32:]
-            if len(data) > 32 and hashlib.sha256(obj).digest() == digest:
-                return obj, "disk"
-        except OSError:
-            pass
+_CACHE_TEXT = dict(
+    what="native object code", instead="the program was compiled in memory",
+    remedy="Set GNIPY_CACHE_DIR to a folder that only you can write (gnipy creates a missing one with mode "
+           "0700; the cache is its 'native' folder), or GNIPY_NATIVE_CACHE=0 to keep no native code on disk.")
+
+
+def _compile(ir: str) -> bytes:
     llvm = _llvm()
     module = llvm.parse_assembly(ir)
     module.verify()
@@ -112,17 +118,28 @@ def _object_code(ir: str, key: str) -> tuple[bytes, str]:
     pto = llvm.create_pipeline_tuning_options(speed_level=3)
     pb = llvm.create_pass_builder(tm, pto)
     pb.getModulePassManager().run(module, pb)
-    obj = tm.emit_object(module)
-    if path is not None:
-        try:  # written whole or not at all: a temporary file in the same folder, renamed
-            folder.mkdir(parents=True, exist_ok=True)
-            fd, tmp = tempfile.mkstemp(dir=folder, suffix=".tmp")
-            with os.fdopen(fd, "wb") as f:
-                f.write(obj + hashlib.sha256(obj).digest())
-            os.replace(tmp, path)
-        except OSError:
-            pass
-    return obj, "compiled"
+    return tm.emit_object(module)
+
+
+def _object_code(ir: str, key: str) -> tuple[bytes, str]:
+    """The object code of `ir` and where it came from ("disk" or "compiled"). Only an entry of a
+    private cache folder authenticated for `key` is loaded (see the module docstring); anything
+    else is compiled again, and the entry written (when the folder is usable)."""
+    folder = cache_dir()
+    cache = open_private_cache(folder, **_CACHE_TEXT) if folder is not None else None
+    name = f"{key}.o"
+    try:
+        if cache is not None:
+            obj = cache.read(name, key)
+            if obj is not None:
+                return obj, "disk"
+        obj = _compile(ir)
+        if cache is not None:
+            cache.write(name, key, obj)  # False when it cannot be written: the code in memory serves
+        return obj, "compiled"
+    finally:
+        if cache is not None:
+            cache.close()
 
 
 def _load(ir: str):

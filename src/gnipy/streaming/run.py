@@ -4,9 +4,9 @@ the destination."""
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
-import math
 import os
 from collections.abc import Callable, Mapping
 from pathlib import Path
@@ -18,6 +18,7 @@ import numpy as np
 
 from ..diagnostics import conserved_quantity, energy_is_invariant
 from ..errors import InputError
+from ..inputs import finite_number, flag
 from ..files import (
     OutputError,
     atomic_write,
@@ -25,6 +26,7 @@ from ..files import (
     check_destination,
     clean_stale_temporaries,
     is_owned_dir,
+    output_lock,
     remove_owned_dir,
 )
 from ..integrators.base import Integrator, MethodError
@@ -122,6 +124,8 @@ def simulate_to_file(
     from ..reference import ContinuousReference
 
     release_compiled_programs_if_needed()
+    project_v0, throw = flag("project_v0", project_v0), flag("throw", throw)
+    resume, overwrite = flag("resume", resume), flag("overwrite", overwrite)
     if not isinstance(system, System):
         raise InputError(f"system: expected a gnipy.System, got {type(system).__name__}")
     if system.is_forced:
@@ -158,9 +162,7 @@ def simulate_to_file(
     if max_bytes is not None and (isinstance(max_bytes, bool) or not isinstance(max_bytes, (int, float, np.integer))
                                   or not max_bytes >= 0):
         raise InputError(f"max_bytes: expected a number of bytes >= 0 or None, got {max_bytes!r}")
-    t0 = float(t0)
-    if not math.isfinite(t0):
-        raise InputError(f"t0: must be finite, got {t0!r}")
+    t0 = finite_number("t0", t0)
     q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
     b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
     method.check(system, b0)
@@ -193,112 +195,115 @@ def simulate_to_file(
         if notice is not None:
             notice(message)
 
-    # --- the destination -----------------------------------------------------------------
+    # --- the destination: locked from here on (a second writer of `path` is refused at once) ---
     given = path
     finished = Path(os.fspath(given)).expanduser() if isinstance(given, (str, os.PathLike)) else None
-    if resume and finished is not None and finished.is_file() and not finished.is_symlink():
-        done_already = _finished_result(finished, canonical, method, system, h, t0, throw, overwrite, note)
-        if done_already is not None:
-            clean_stale_temporaries(done_already.path)
-            finished_parts = parts_directory(done_already.path)
-            if is_owned_dir(finished_parts):  # left by a process killed after the rename
-                _own_temporaries(finished_parts)
-                remove_owned_dir(finished_parts, _OWN_FILES)
-            return done_already
-    path = check_destination(given, overwrite=overwrite, argument="path")
-    parts = parts_directory(path)
+    with output_lock(finished, argument="path") if finished is not None else contextlib.nullcontext():
+        if resume and finished is not None and finished.is_file() and not finished.is_symlink():
+            done_already = _finished_result(finished, canonical, method, system, h, t0, throw, overwrite, note)
+            if done_already is not None:
+                clean_stale_temporaries(done_already.path)
+                finished_parts = parts_directory(done_already.path)
+                if is_owned_dir(finished_parts):  # left by a process killed after the rename
+                    _own_temporaries(finished_parts)
+                    remove_owned_dir(finished_parts, _OWN_FILES)
+                return done_already
+        path = check_destination(given, overwrite=overwrite, argument="path")
+        parts = parts_directory(path)
 
-    # --- how large the output gets ---------------------------------------------------------
-    if max_bytes is not None:
-        _check_size(system, b0, steps, save_every, n_chunks, gni_family, path, parts, max_bytes)
+        # --- how large the output gets ---------------------------------------------------------
+        if max_bytes is not None:
+            _check_size(system, b0, steps, save_every, n_chunks, gni_family, path, parts, max_bytes)
 
-    clean_stale_temporaries(path)
-    resuming = _prepare_parts(parts, path, resume, note)
+        clean_stale_temporaries(path)
+        resuming = _prepare_parts(parts, path, resume, note)
 
-    hj = np.float64(h)  # as in simulate (the same compiled program)
-    core = system.without_metadata()
-    state = _init_one(method, core, b0, np.asarray(v0, dtype=np.float64), hj)
-    leaves, treedef = jax.tree_util.tree_flatten(state)
-    plan = _Plan(steps=steps, save_every=save_every, chunk_steps=chunk_steps, t0=t0, h=h, spec_hash=spec_hash,
-                 leaves=[np.asarray(x) for x in leaves], group=system.group is not None)
+        hj = np.float64(h)  # as in simulate (the same compiled program)
+        core = system.without_metadata()
+        state = _init_one(method, core, b0, np.asarray(v0, dtype=np.float64), hj)
+        leaves, treedef = jax.tree_util.tree_flatten(state)
+        plan = _Plan(steps=steps, save_every=save_every, chunk_steps=chunk_steps, t0=t0, h=h, spec_hash=spec_hash,
+                     leaves=[np.asarray(x) for x in leaves], group=system.group is not None)
 
-    done = 0
-    if resuming:
-        try:
-            stored = json.loads((parts / "spec.json").read_text(encoding="utf-8"))
-            if not isinstance(stored, dict):
-                raise ValueError("not a JSON object")
-        except (OSError, ValueError) as e:
-            raise OutputError(
-                f"resume: cannot read {parts / 'spec.json'} ({e}): the interrupted run's spec is damaged; "
-                "rerun with resume=False to start afresh"
-            ) from None
-        for key, value in canonical.items():
-            if stored.get(key) != value:
+        done = 0
+        if resuming:
+            try:
+                stored = json.loads((parts / "spec.json").read_text(encoding="utf-8"))
+                if not isinstance(stored, dict):
+                    raise ValueError("not a JSON object")
+            except (OSError, ValueError) as e:
                 raise OutputError(
-                    f"resume: the interrupted run in {parts} has a different {key} "
-                    f"({stored.get(key)!r}, requested {value!r}); rerun with resume=False to start afresh"
-                )
-        done, last, n_chunks = _verify_parts(parts, plan, n_chunks, note)
-        if last is not None:
-            leaves = [jnp.asarray(a) for a in last["leaves"]]
-        if done and progress is not None:
-            progress(min(steps, done * chunk_steps), steps)
-    else:
-        atomic_write_text(parts / "spec.json", json.dumps(spec, indent=1), checked=True)
-    state = jax.tree_util.tree_unflatten(treedef, leaves)
-    resumed = done
+                    f"resume: cannot read {parts / 'spec.json'} ({e}): the interrupted run's spec is damaged; "
+                    "rerun with resume=False to start afresh"
+                ) from None
+            for key, value in canonical.items():
+                if stored.get(key) != value:
+                    raise OutputError(
+                        f"resume: the interrupted run in {parts} has a different {key} "
+                        f"({stored.get(key)!r}, requested {value!r}); rerun with resume=False to start afresh"
+                    )
+            done, last, n_chunks = _verify_parts(parts, plan, n_chunks, note)
+            if last is not None:
+                leaves = [jnp.asarray(a) for a in last["leaves"]]
+            if done and progress is not None:
+                progress(min(steps, done * chunk_steps), steps)
+        else:
+            atomic_write_text(parts / "spec.json", json.dumps(spec, indent=1), checked=True)
+        state = jax.tree_util.tree_unflatten(treedef, leaves)
+        resumed = done
 
-    failed_step = -1
-    computed = 0
-    for c in range(done, n_chunks):
-        if stop_after_chunks is not None and computed >= stop_after_chunks:
-            return _partial_result(path, parts, c, steps, n_chunks, resumed, notes)
-        k_start, length, n_blocks, remainder, k_local, keep = plan.chunk(c)
-        # the chunk is one call of the driver, continuing from the previous chunk's state
-        sol = simulate(system, method, h=h, steps=length, saveat=SaveAt(every=save_every), state0=state,
-                       t0=plan.times(k_start, np.zeros(1))[0], throw=False)
-        state = sol.final_state
-        fail_k, fail_res, its = sol.failed_step, sol.failed_residual, sol.iterations
-        keep = keep[: len(sol.t)]  # a failed chunk stops at its last good node
-        if fail_k >= 0:
-            keep &= k_local[: len(sol.t)] <= fail_k  # may keep no node: the step after the previous part's last failed
-            failed_step = k_start + fail_k
-        k_local = k_local[: len(sol.t)]
-        variables = {
-            "time": (("time",), plan.times(k_start, k_local)[keep]),
-            "step": (("time",), (k_start + k_local)[keep]),
-            "q": (("time", "coordinate"), np.asarray(sol.q)[keep]),
-            "v": (("time", "velocity"), np.asarray(sol.v)[keep]),
-            "p": (("time", "velocity"), np.asarray(sol.p)[keep]),
-            "energy": (("time",), np.asarray(sol.energy)[keep]),
-            "constraint_residual": (("time", "constraint"), np.asarray(sol.constraint_residual)[keep]),
-        }
-        if sol.R is not None:
-            variables["R"] = (("time", "i", "j"), np.asarray(sol.R)[keep])
-        if sol.hidden_momentum is not None:  # the GNI family's diagnostics at the nodes (as Solution.to_xarray writes them)
-            for name, a in zip(("hidden_momentum", "hidden_momentum_expected", "energy_plus"),
-                               (sol.hidden_momentum, sol.hidden_expected, sol.energy_plus)):
-                variables[name] = (("time",), np.asarray(a)[keep])
-        for i, leaf in enumerate(jax.tree_util.tree_leaves(state)):
-            a = _storage(leaf)
-            variables[f"state_{i}"] = (tuple(f"state_{i}_d{j}" for j in range(a.ndim)), a)
-        its = np.asarray(its)
-        part_attrs = {
-            "result": RESULT_SOLVER_FAILED if fail_k >= 0 else 0, "failed_step": failed_step,
-            "residual": float(fail_res), "iterations_total": int(its[0]), "iterations_max": int(its[1]),
-            _CHUNK_ATTR: c, _SPEC_HASH_ATTR: spec_hash,
-        }
-        with _DeferredInterrupt() as interrupt:
-            atomic_write(_part_path(parts, c), lambda tmp: _write_part(tmp, variables, part_attrs), checked=True)
-        if interrupt.pending:  # Ctrl-C while the part was written: it is committed, stop here
-            raise KeyboardInterrupt
-        computed += 1
-        if progress is not None:
-            progress(min(steps, k_start + length), steps)
-        if fail_k >= 0:
-            n_chunks = c + 1
-            break
+        failed_step = -1
+        computed = 0
+        for c in range(done, n_chunks):
+            if stop_after_chunks is not None and computed >= stop_after_chunks:
+                return _partial_result(path, parts, c, steps, n_chunks, resumed, notes)
+            k_start, length, n_blocks, remainder, k_local, keep = plan.chunk(c)
+            # the chunk is one call of the driver, continuing from the previous chunk's state
+            sol = simulate(system, method, h=h, steps=length, saveat=SaveAt(every=save_every), state0=state,
+                           t0=plan.times(k_start, np.zeros(1))[0], throw=False)
+            state = sol.final_state
+            fail_k, fail_res, its = sol.failed_step, sol.failed_residual, sol.iterations
+            keep = keep[: len(sol.t)]  # a failed chunk stops at its last good node
+            if fail_k >= 0:
+                # may keep no node: the step after the previous part's last failed
+                keep &= k_local[: len(sol.t)] <= fail_k
+                failed_step = k_start + fail_k
+            k_local = k_local[: len(sol.t)]
+            variables = {
+                "time": (("time",), plan.times(k_start, k_local)[keep]),
+                "step": (("time",), (k_start + k_local)[keep]),
+                "q": (("time", "coordinate"), np.asarray(sol.q)[keep]),
+                "v": (("time", "velocity"), np.asarray(sol.v)[keep]),
+                "p": (("time", "velocity"), np.asarray(sol.p)[keep]),
+                "energy": (("time",), np.asarray(sol.energy)[keep]),
+                "constraint_residual": (("time", "constraint"), np.asarray(sol.constraint_residual)[keep]),
+            }
+            if sol.R is not None:
+                variables["R"] = (("time", "i", "j"), np.asarray(sol.R)[keep])
+            # the GNI family's diagnostics at the nodes (as Solution.to_xarray writes them)
+            if sol.hidden_momentum is not None:
+                for name, a in zip(("hidden_momentum", "hidden_momentum_expected", "energy_plus"),
+                                   (sol.hidden_momentum, sol.hidden_expected, sol.energy_plus)):
+                    variables[name] = (("time",), np.asarray(a)[keep])
+            for i, leaf in enumerate(jax.tree_util.tree_leaves(state)):
+                a = _storage(leaf)
+                variables[f"state_{i}"] = (tuple(f"state_{i}_d{j}" for j in range(a.ndim)), a)
+            its = np.asarray(its)
+            part_attrs = {
+                "result": RESULT_SOLVER_FAILED if fail_k >= 0 else 0, "failed_step": failed_step,
+                "residual": float(fail_res), "iterations_total": int(its[0]), "iterations_max": int(its[1]),
+                _CHUNK_ATTR: c, _SPEC_HASH_ATTR: spec_hash,
+            }
+            with _DeferredInterrupt() as interrupt:
+                atomic_write(_part_path(parts, c), lambda tmp: _write_part(tmp, variables, part_attrs), checked=True)
+            if interrupt.pending:  # Ctrl-C while the part was written: it is committed, stop here
+                raise KeyboardInterrupt
+            computed += 1
+            if progress is not None:
+                progress(min(steps, k_start + length), steps)
+            if fail_k >= 0:
+                n_chunks = c + 1
+                break
 
-    return _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant,
-                   overwrite=overwrite, plan=plan, spec=canonical, notes=notes)
+        return _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant,
+                       overwrite=overwrite, plan=plan, spec=canonical, notes=notes)

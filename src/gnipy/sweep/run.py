@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+import os
 import time
 import uuid
 from collections.abc import Callable, Mapping
@@ -211,6 +213,9 @@ def run_sweep(
     """
     t_start = time.perf_counter()
     address = None
+    for name, value in (("project_v0", project_v0), ("overwrite", overwrite)):
+        if not isinstance(value, (bool, np.bool_)):
+            raise SweepError(f"{name}: expected True or False, got {value!r}")
     if scheduler is not None and client is not None:
         raise SweepError("scheduler: give either a scheduler address or a client")
     if workers is not None:
@@ -229,55 +234,57 @@ def run_sweep(
         raise SweepError(f"progress: expected True, False or a callable, got {progress!r}")
     if scheduler is not None:
         address = scheduler_address(scheduler)
-    path, mode = check_out(out, overwrite)
-    creating = mode != "resume"
-    plan = _plan.make_plan(
-        model, grid, method=method, h=h, steps=steps, t_final=t_final, save_every=save_every,
-        set_params=set_params, project_v0=project_v0, chunk_size=chunk_size,
-        max_bytes=max_bytes if creating else None,
-        disk=(path.parent if str(path.parent) else Path(".")) if creating else None,
-    )
-    # temporaries of runs killed while creating or replacing this store
-    files.clean_stale_temporaries(path)
+    # one writer per store: a second sweep on `out` is refused at once (files.output_lock)
+    with files.output_lock(out, argument="out") if isinstance(out, (str, os.PathLike)) else contextlib.nullcontext():
+        path, mode = check_out(out, overwrite)
+        creating = mode != "resume"
+        plan = _plan.make_plan(
+            model, grid, method=method, h=h, steps=steps, t_final=t_final, save_every=save_every,
+            set_params=set_params, project_v0=project_v0, chunk_size=chunk_size,
+            max_bytes=max_bytes if creating else None,
+            disk=(path.parent if str(path.parent) else Path(".")) if creating else None,
+        )
+        # temporaries of runs killed while creating or replacing this store
+        files.clean_stale_temporaries(path)
 
-    repaired = 0
-    if creating:
-        done = np.zeros(plan.chunks, dtype=bool)
-    else:
-        done, repaired = resume(path, plan)
+        repaired = 0
+        if creating:
+            done = np.zeros(plan.chunks, dtype=bool)
+        else:
+            done, repaired = resume(path, plan)
 
-    todo = [int(i) for i in np.flatnonzero(~done)]
-    skipped = plan.chunks - len(todo)
-    if max_chunks is not None:
-        todo = todo[:max_chunks]
-    computed = members = 0
-    if todo:
-        with _Progress(progress, plan.chunks, skipped) as bar:
-            bar.describe(f"sweep {plan.spec['model']}: starting the cluster")
-            with Cluster(client, address, workers or default_workers(), connect_timeout, scheduler) as c:
-                if creating:
-                    create_store(path, plan, mode)
-                computed, members = _compute(path, plan, todo, c, bar)
-    group, _ = open_group(path, "out")
-    arrays = {k: group[k] for k in ("chunk_done", "result", "failed_step", "failed_time", "failed_residual")}
-    done = read_done("out", path, arrays, plan.chunks)
-    failed, failures = _failures(arrays, plan, done)
-    return SweepReport(
-        path=path,
-        members=plan.members,
-        chunks=plan.chunks,
-        chunks_computed=computed,
-        chunks_skipped=skipped,
-        chunks_remaining=int(np.sum(~done)),
-        failed_members=failed,
-        wall_time=time.perf_counter() - t_start,
-        members_computed=members,
-        steps=plan.spec["steps"],
-        chunk_size=plan.chunk,
-        spec=plan.spec,
-        chunks_repaired=repaired,
-        failures=failures,
-    )
+        todo = [int(i) for i in np.flatnonzero(~done)]
+        skipped = plan.chunks - len(todo)
+        if max_chunks is not None:
+            todo = todo[:max_chunks]
+        computed = members = 0
+        if todo:
+            with _Progress(progress, plan.chunks, skipped) as bar:
+                bar.describe(f"sweep {plan.spec['model']}: starting the cluster")
+                with Cluster(client, address, workers or default_workers(), connect_timeout, scheduler) as c:
+                    if creating:
+                        create_store(path, plan, mode)
+                    computed, members = _compute(path, plan, todo, c, bar)
+        group, _ = open_group(path, "out")
+        arrays = {k: group[k] for k in ("chunk_done", "result", "failed_step", "failed_time", "failed_residual")}
+        done = read_done("out", path, arrays, plan.chunks)
+        failed, failures = _failures(arrays, plan, done)
+        return SweepReport(
+            path=path,
+            members=plan.members,
+            chunks=plan.chunks,
+            chunks_computed=computed,
+            chunks_skipped=skipped,
+            chunks_remaining=int(np.sum(~done)),
+            failed_members=failed,
+            wall_time=time.perf_counter() - t_start,
+            members_computed=members,
+            steps=plan.spec["steps"],
+            chunk_size=plan.chunk,
+            spec=plan.spec,
+            chunks_repaired=repaired,
+            failures=failures,
+        )
 
 
 def _failures(arrays, plan, done: np.ndarray):

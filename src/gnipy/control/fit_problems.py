@@ -1,0 +1,307 @@
+"""Identification problems as data: the TOML problem files of `gni fit` and the result files.
+
+A fit problem file (`gni fit`, :func:`load_fit_problem`) names the model, the parameters to
+estimate with their guesses, the observations (a gnipy result file) and the integration::
+
+    [system]
+    model = "chaplygin-sleigh"
+    params = { m = 1.0 }           # fixed parameters (default: the model's)
+    [estimate]
+    params = { I = 1.2, a = 0.5 }  # estimated, with initial guesses
+    initial = ["q0"]               # optional: also q0 and/or v0
+    [observations]
+    file = "observed.nc"           # relative to the problem file
+    variables = ["x", "y"]         # optional (default: every coordinate)
+    sigma = 1e-3                   # optional (default: estimated from the scatter)
+    [start]                        # optional (default: the model's)
+    q0 = [0.0, 0.0, 0.0]
+    v0 = [1.0, 0.4, 1.0]
+    [integration]
+    method = "gni-trapezoid"       # optional (default: the model's)
+    h = 0.05                       # optional when the file records its h
+
+The entries are checked as :mod:`gnipy.control.problem_files` checks a control problem's: a value
+of the wrong type, out of range or of the wrong size is an :class:`~gnipy.errors.InputError` naming
+its key; an observation file that cannot be read names `observations.file`.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..errors import InputError
+from .problem_files import (
+    _build,
+    _got,
+    _is_number,
+    _known_keys,
+    _method,
+    _model,
+    _names,
+    _number,
+    _numbers,
+    _params,
+    _rotation,
+    _table,
+    _text,
+    read_problem,
+)
+
+__all__ = ["FitProblem", "load_fit_problem", "write_fit_result"]
+
+
+_FIT_SECTIONS = {"name", "description", "system", "estimate", "observations", "start", "integration"}
+
+
+@dataclasses.dataclass(frozen=True)
+class FitProblem:
+    """An identification problem read from a fit problem file (module docstring).
+
+    Attributes:
+        name, description: from the file.
+        model: the zoo model's name.
+        fixed: the fixed parameters.
+        params: the estimated parameters' initial guesses.
+        initial: which parts of the initial condition are estimated (`"q0"`, `"v0"`).
+        observations: the :class:`~gnipy.control.Observations`.
+        q0, v0, R0: the start (guesses where estimated).
+        method, h, t0: the integration.
+        source: the file's text.
+    """
+
+    name: str
+    description: str
+    model: str
+    fixed: dict
+    params: dict
+    initial: tuple
+    observations: Any
+    q0: Any
+    v0: Any
+    R0: Any
+    method: Any
+    h: float
+    t0: float
+    source: str
+
+    def solve(self, progress=False, max_bytes="auto"):
+        """:func:`gnipy.fit` on this problem (`max_bytes` as there)."""
+        from .identification import fit
+
+        return fit(self.model, self.observations, params=self.params or None, fixed=self.fixed or None,
+                   initial=self.initial, method=self.method, h=self.h, t0=self.t0, q0=self.q0, v0=self.v0,
+                   R0=self.R0, progress=progress, max_bytes=max_bytes)
+
+
+def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProblem:
+    """Read a fit problem: a path to a TOML file (its observation file is relative to it), TOML
+    text, or a parsed mapping (paths then relative to the working directory).
+
+    Every entry is checked here, before anything is compiled (types: a string or a boolean is not
+    a number; ranges; the names and sizes against the model), and the observation file too: a
+    gnipy result file whose `q(time, coordinate)` / `v(time, velocity)` hold numbers.
+
+    Arguments:
+        source: the problem (see above).
+        name: the problem's name when the file has none and is not a path (a path's stem is).
+        max_bytes: the memory bound (as :func:`gnipy.fit`'s): the observed variables of the file
+            are refused before they are read when they alone exceed it.
+
+    Raises:
+        InputError: a missing or malformed entry, named by its section and key
+            (`observations.sigma: ...`); an observation file that cannot be read or holds no
+            usable observations (`observations.file: ...`).
+    """
+    from ..simulate import MIN_STEP_SIZE
+    from .observations import SIGMA_RANGE
+    from .memory import check_fit_memory, memory_limit
+
+    data, text, base, name = read_problem(source, name)
+    unknown = set(data) - _FIT_SECTIONS
+    if unknown:
+        raise InputError(f"problem: unknown section(s) {_names(unknown)}; expected {', '.join(sorted(_FIT_SECTIONS))}")
+    title = _text("name", data.get("name", name))
+    description = _text("description", data.get("description", "")).strip()
+    spec, fixed_all = _model(data)
+    fixed = _params(spec, data["system"].get("params"), "system.params")
+    estimate = _table(data, "estimate")
+    _known_keys(estimate, "estimate", {"params", "initial"})
+    params = _params(spec, estimate.get("params"), "estimate.params")
+    both = set(params) & set(fixed)
+    if both:
+        raise InputError(f"estimate.params: {_names(both)} also in system.params (a parameter is either estimated or "
+                         "fixed)")
+    initial = estimate.get("initial", [])
+    if isinstance(initial, str):
+        initial = [initial]
+    if (not isinstance(initial, list) or not all(isinstance(k, str) for k in initial)
+            or not set(initial) <= {"q0", "v0"} or len(set(initial)) != len(initial)):
+        raise InputError(f"estimate.initial: expected a list of 'q0' and/or 'v0' (each once), got {_got(initial)}")
+    if not params and not initial:
+        raise InputError("estimate: nothing to estimate: give params = {...} and/or initial = [...]")
+    # the system at the initial guess: the names and sizes below are checked against it
+    system = _build(spec, {**fixed_all, **params}, "system.params/estimate.params")
+
+    obs_sec = _table(data, "observations")
+    _known_keys(obs_sec, "observations", {"file", "variables", "sigma"})
+    file = obs_sec.get("file")
+    if not isinstance(file, str) or not file:
+        raise InputError(f"observations.file: expected the path of a gnipy result file (netCDF), got {_got(file)}")
+    if "\x00" in file:
+        raise InputError(f"observations.file: {file!r}: a path cannot contain a NUL character")
+    obs_path = Path(file) if Path(file).is_absolute() else base / file
+    variables = obs_sec.get("variables")
+    if variables is not None:
+        known = (*system.coordinates, *system.velocities)
+        if not isinstance(variables, list) or not variables or not all(isinstance(v, str) for v in variables):
+            raise InputError(f"observations.variables: expected a list of names, got {_got(variables)}")
+        if len(set(variables)) != len(variables):
+            raise InputError(f"observations.variables: a name is repeated in {variables!r}")
+        unknown = [v for v in variables if v not in known]
+        if unknown:
+            raise InputError(f"observations.variables: unknown variable {unknown[0]!r} of model {spec.name!r} "
+                             f"(coordinates: {', '.join(system.coordinates)}; velocities: "
+                             f"{', '.join(system.velocities)})")
+    sigma = obs_sec.get("sigma")
+    if sigma is not None:
+        sigma = _number("observations.sigma", sigma, positive=True)
+        if not SIGMA_RANGE[0] <= sigma <= SIGMA_RANGE[1]:
+            raise InputError(f"observations.sigma: {sigma!r} is outside {SIGMA_RANGE[0]:g} .. {SIGMA_RANGE[1]:g}: the "
+                             "weights 1/sigma or the squared weighted residuals would not be finite in float64")
+
+    start = _table(data, "start", required=False)
+    _known_keys(start, "start", {"q0", "v0", "R0"})
+    q0 = tuple(_numbers("start.q0", start["q0"], system.coordinates)) if "q0" in start else None
+    v0 = tuple(_numbers("start.v0", start["v0"], system.velocities)) if "v0" in start else None
+    R0 = _rotation("start.R0", start["R0"], system) if "R0" in start else None
+    integ = _table(data, "integration", required=False)
+    _known_keys(integ, "integration", {"method", "h", "t0"})
+    method = integ.get("method")
+    if method is not None:
+        method = _method("integration.method", method)
+    h = integ.get("h")
+    if h is not None:
+        h = _number("integration.h", h, positive=True)
+    t0 = _number("integration.t0", integ.get("t0", 0.0))
+
+    observations, file_h = _read_observations(obs_path, variables, sigma, memory_limit(max_bytes))
+    if h is None:
+        if file_h is None:
+            raise InputError("integration.h: missing, and the observation file does not record its h; give "
+                             "[integration] h")
+        if not (_is_number(file_h) and math.isfinite(file_h) and file_h > 0):
+            raise InputError(f"integration.h: missing, and the observation file's attribute h ({file_h!r}) is not a "
+                             "positive number; give [integration] h")
+        h = float(file_h)
+    if h < MIN_STEP_SIZE:
+        raise InputError(f"integration.h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision")
+    # the fit's memory, before anything is compiled (gnipy.fit checks it again, with the step grid)
+    t_last = float(observations.times[-1])
+    span = (t_last - t0) / h
+    if math.isfinite(span) and span >= 0:
+        estimated = len(params) + ("q0" in initial) * system.n + ("v0" in initial) * system.dim
+        check_fit_memory(system, round(span), observations.values.size, estimated, t0=t0, t_last=t_last, h=h,
+                         max_bytes=max_bytes, key="observations.file/integration.h")
+    return FitProblem(name=title, description=description, model=spec.name, fixed=fixed, params=params,
+                      initial=tuple(initial), observations=observations, q0=q0, v0=v0, R0=R0, method=method, h=h,
+                      t0=t0, source=text)
+
+
+def _read_observations(path: Path, variables, sigma, bound: int | None):
+    """`(Observations, the file's h attribute or None)` from a gnipy result file: opened lazily, its
+    observed variables checked (dimensions, numbers) and their size bounded before they are read.
+    Every failure is an InputError naming `observations.file`."""
+    import xarray as xr
+
+    from ..files import format_bytes
+    from ..io import upgrade_layout
+    from .identification import Observations
+
+    where = f"observations.file: {str(path)!r}"
+    try:
+        st = path.stat()
+    except OSError as e:
+        raise InputError(f"{where}: cannot read it: {e.strerror or e}") from None
+    if not path.is_file():
+        raise InputError(f"{where}: not a regular file")
+    if st.st_size == 0:
+        raise InputError(f"{where}: the file is empty (not a gnipy result file)")
+
+    def unreadable(e) -> InputError:
+        why = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+        if isinstance(e, ValueError) and "backend" in why:
+            why = "not a netCDF file that xarray can open"
+        return InputError(f"{where}: cannot read it as a gnipy result file ({why})")
+
+    try:
+        ds = xr.open_dataset(path)  # lazily: the header now, the observed variables below
+    except MemoryError:
+        raise
+    except Exception as e:  # a damaged file fails in many ways (OSError, ValueError, HDF errors, ...)
+        raise unreadable(e) from None
+    with ds:
+        try:
+            ds = upgrade_layout(ds)
+        except Exception as e:
+            raise unreadable(e) from None
+        loaded = sum(int(ds[v].nbytes) for v in ("q", "v", "t", "time") if v in ds.variables)
+        if bound is not None and loaded > bound:
+            raise InputError(f"{where}: its observed variables are {format_bytes(loaded)}, more than the memory bound "
+                             f"of {format_bytes(bound)}; observe fewer times, or pass max_bytes=None to read it anyway")
+        file_h = ds.attrs.get("h")
+        if isinstance(file_h, np.ndarray) and file_h.size == 1 and file_h.dtype.kind in "iuf":
+            file_h = file_h.reshape(-1)[0]
+        if isinstance(file_h, (np.integer, np.floating)):
+            file_h = file_h.item()
+        try:
+            observations = Observations.from_dataset(ds, variables, sigma=sigma)
+        except InputError as e:
+            head, sep, rest = str(e).partition(": ")
+            raise InputError(f"{where}: {rest if sep and head == 'observations' else e}") from None
+        except MemoryError:
+            raise
+        except Exception as e:  # the data of a damaged file fail when read
+            raise unreadable(e) from None
+    return observations, file_h
+
+
+def write_fit_result(result, problem: FitProblem | None, path, *, overwrite: bool = False) -> None:
+    """Write a :class:`~gnipy.control.FitResult` to netCDF, whole or not at all: the fitted run's
+    nodes (as `gni run` writes them), the estimates `estimate(quantity)`, their standard errors
+    `standard_error(quantity)` and covariance `covariance(quantity, quantity_)`, and the fit's
+    figures (chi², degrees of freedom, iterations) as attributes."""
+    import xarray as xr
+
+    from .. import schema
+    from ..io import write_netcdf
+
+    attrs = {
+        "command": "gni fit",
+        "fit_chi2": float(result.chi2),
+        "fit_dof": int(result.dof),
+        "fit_reduced_chi2": float(result.reduced_chi2),
+        "fit_n_obs": int(result.n_obs),
+        "fit_rank": int(result.rank),
+        "fit_sigma_known": int(result.sigma_known),
+        "fit_success": int(result.success),
+        "fit_message": str(result.message),
+        "fit_iterations": int(result.iterations),
+        "fit_wall_time_s": float(result.wall_time),
+        "fit_observed_variables": ",".join(result.observations.variables),
+    }
+    if problem is not None and problem.source:
+        attrs["fit_problem_file"] = problem.source
+    ds = result.solution.to_xarray(attrs=attrs)
+    names = [str(n) for n in result.names]
+    for var, values, dims in (("estimate", result.values, ("quantity",)),
+                              ("standard_error", result.stderr, ("quantity",)),
+                              ("covariance", result.covariance, ("quantity", "quantity_"))):
+        ds[var] = xr.DataArray(np.asarray(values, dtype=np.float64), dims=dims, attrs=schema.variable_attrs(var))
+    ds = ds.assign_coords(quantity=names, quantity_=names)
+    for name in ("quantity", "quantity_"):
+        ds[name].attrs.update(schema.variable_attrs(name))
+    write_netcdf(ds, path, overwrite=overwrite)
