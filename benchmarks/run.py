@@ -45,6 +45,8 @@ What is measured (all gnipy runs in float64, the step size is h = 0.01 unless sa
    written by hand in Numba (:mod:`benchmarks.numba_gni`), one trajectory and batched, and the
    native build time in fresh processes (:mod:`benchmarks.native`). Sections 1-5 run the XLA
    backend (`backend="xla"`) explicitly.
+8. **monitor** -- what checking the verdicts at every node costs (issue 29): µs/step of the same
+   loop without and with the check, on both backends (:mod:`benchmarks.monitor`).
 6. **GPU** -- if JAX sees a GPU, sections 1 and 2 are run on it as well (the CPU rows are always
    run on the CPU device); the subprocess sections (3, 4) run on the CPU (``JAX_PLATFORMS=cpu``).
 
@@ -119,7 +121,7 @@ QUICK = Config(
     accuracy_T=(100.0,), accuracy_h=(0.01,), dop_reps=3, idle_sample_s=0.3,
 )
 
-SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy", "native")
+SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy", "native", "monitor")
 
 #: (case, method) of section 1; the case names are those of benchmarks.numpy_gni.
 PER_STEP_CASES = (
@@ -1146,6 +1148,12 @@ def parse_args(argv):
     return args
 
 
+def _bench_monitor(cfg, rep, results, load) -> None:
+    from benchmarks.monitor import bench_monitor
+
+    bench_monitor(cfg, rep, results, load)
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
@@ -1184,6 +1192,7 @@ def main(argv=None) -> int:
         "memory": lambda load: bench_memory(cfg, rep, results, load),
         "accuracy": lambda load: bench_accuracy(cfg, rep, devices, results, load),
         "native": lambda load: _bench_native(cfg, rep, results, load),
+        "monitor": lambda load: _bench_monitor(cfg, rep, results, load),
     }
     for key in SECTIONS:
         if key not in args.sections:

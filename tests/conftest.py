@@ -1,6 +1,6 @@
 """Shared test configuration: float64 JAX (gnipy enables it on import)."""
 
-import gnipy  # noqa: F401
+import gnipy
 
 
 import pytest  # noqa: E402
@@ -15,6 +15,25 @@ def _release_compiled_programs():
     kernel's code separately (vm.max_map_count would be exceeded; see gnipy.compilation)."""
     yield
     release_compiled_programs_if_needed(fraction=0.25)
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _verdicts_at_saved_nodes(request):
+    """A test module that sets `CHECK_EVERY_NODE = False` runs `gnipy.simulate` with
+    `check_every_node=False` by default: modules that test the numerics (orders, equalities with
+    the paper's schemes, round-off, reversibility, backends) and not the verdicts, whose hundreds
+    of programs then compile without the every-node check (about 1-3 s each for the GNI family,
+    which put the suite over its time budget). The check itself is tested in test_monitor.py,
+    test_diagnostics.py and wherever verdicts are asserted; streamed runs and sweeps always check."""
+    defaults = gnipy.simulate.__kwdefaults__
+    if getattr(request.module, "CHECK_EVERY_NODE", True):
+        yield
+        return
+    defaults["check_every_node"] = False
+    try:
+        yield
+    finally:
+        defaults["check_every_node"] = True
 
 
 @pytest.fixture

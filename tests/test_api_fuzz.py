@@ -158,8 +158,8 @@ def test_texts_and_booleans_are_not_numbers(knife, value, argument):
 @given(value=st.one_of(st.text(max_size=4), st.integers(), st.none(), st.just([True])),
        argument=st.sampled_from(["throw", "project_v0"]))
 def test_flags_are_true_or_false(knife, value, argument):
-    """`throw="no"` and `project_v0="no"` were truthy."""
-    with pytest.raises(gnipy.InputError, match=rf"^{argument}: expected True or False"):
+    """`throw="no"` and `project_v0="no"` were truthy (`throw` also takes "strict")."""
+    with pytest.raises(gnipy.InputError, match=rf"^{argument}: expected True(,| or) False"):
         gnipy.simulate(knife, "gni-trapezoid", h=0.1, steps=2, **{argument: value})
 
 

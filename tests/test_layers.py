@@ -21,7 +21,7 @@ LAYERS = {
     "integrators": 4, "methods": 4,
     # driver: one loop, saving, the Solution, diagnostics, reference run, batches, streamed runs
     "saveat": 5, "stepping": 5, "preparation": 5, "simulate": 5, "transformed": 5, "ensembles": 5,
-    "solution": 5, "diagnostics": 5, "reference": 5, "streaming": 5, "io": 5, "native": 5,
+    "solution": 5, "solution_text": 5, "diagnostics": 5, "monitor": 5, "reference": 5, "streaming": 5, "io": 5, "native": 5,
     "models": 6,
     "analysis": 7, "control": 7,
     "plots": 8, "sweep": 8, "experiments": 9,

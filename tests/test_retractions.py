@@ -155,6 +155,10 @@ def report(rname, gname):
             "dtau_at_0_is_I": _maxabs(D - jnp.eye(d)),
             # the closed-form jump dτ⁻¹_{−ξ} − dτ⁻¹_ξ (= ad_ξ) against the difference of the two
             "dtau_inv_jump_vs_difference": _maxabs(retraction.dtau_inv_jump(group, xi) - (Dim - Di)),
+            # dτ⁻¹_ξ ξ in closed form (DLA's constraint velocity) against the matrix, and from −ξ (its
+            # odd part −ad_ξ/2 vanishes on ξ)
+            "dtau_inv_along_vs_matrix": _maxabs(retraction.dtau_inv_along(group, xi) - Di @ xi),
+            "dtau_inv_along_from_minus_xi": _maxabs(retraction.dtau_inv_along(group, xi) - Dim @ xi),
         }
         finite = [T, D, Di]
         if gname in FULL:
@@ -202,6 +206,8 @@ BASIC = {
     "eq_dtauAd": 1e-13,
     "eq_dtauinverseAd": 1e-13,
     "dtau_inv_jump_vs_difference": 1e-13,
+    "dtau_inv_along_vs_matrix": 1e-13,
+    "dtau_inv_along_from_minus_xi": 1e-13,
 }
 DERIVATIVES = {
     "tau_inv_of_tau_rel": 1e-13,
@@ -281,6 +287,9 @@ def generic_report():
             out[f"cayley_SO3_{f}"] = _maxabs(getattr(cay, f)(so3, xi) - getattr(cay, f)(PlainSO3(), xi))
         g = cay.tau(so3, xi)
         out["cayley_SO3_tau_inv"] = _maxabs(cay.tau_inv(so3, g) - cay.tau_inv(PlainSO3(), g))
+        # dcay⁻¹_ξ ξ: the SO(3) and SE(2) closed forms against the generic x − x³/4
+        out["cayley_SO3_dtau_inv_along"] = _maxabs(cay.dtau_inv_along(so3, xi) - cay.dtau_inv_along(PlainSO3(), xi))
+        out["cayley_SE2_dtau_inv_along"] = _maxabs(cay.dtau_inv_along(se2, xi) - cay.dtau_inv_along(PlainSE2(), xi))
         # exp: the closed forms (SO(3), SE(2)) against the paper's series (Appendix a)
         for gname, group in (("SO3", so3), ("SE2", se2)):
             out[f"series_{gname}_dexp"] = _maxabs(ex.dtau(group, xi) - dexp_series(group, xi))
@@ -295,12 +304,13 @@ def generic_report():
 
 
 def test_closed_forms_match_generic_paths_and_series():
-    """SO(3) Cayley (Appendix closed forms) = generic matrix Cayley; SO(3)/SE(2) exp closed forms =
+    """SO(3) Cayley (Appendix closed forms) = generic matrix Cayley (and dcay⁻¹_ξ ξ on SO(3) and SE(2));
+    SO(3)/SE(2) exp closed forms =
     the paper's series Σ ad^j/(j+1)! and Σ B_j/j! ad^j (|ξ| ≤ 1) = the generic fallback of Exp."""
     res = generic_report()
     bad = {k: float(v.max()) for k, v in res.items() if not v.max() <= 1e-14}
     assert not bad, bad
-    assert len(res) == 4 + 4 + 3
+    assert len(res) == 4 + 2 + 4 + 3
 
 
 def test_series_converge_beyond_unit_ball_with_more_terms():

@@ -508,3 +508,32 @@ def test_help_lists_every_option():
     options += "--max-chunks --yes --connect-timeout"
     for option in [*options.split(), "--out"]:
         assert option in res.output, option
+
+
+def test_every_member_has_its_own_verdicts_and_labels(client, tmp_path):
+    """A sleigh sweep saving only its first and last nodes: each member's verdicts are those of
+    its own in-memory run (every node checked), the report counts the members that went wrong,
+    one QualitativeFailureWarning says so, and the store says how the runs started."""
+    out = tmp_path / "sleigh.zarr"
+    with pytest.warns(gnipy.QualitativeFailureWarning, match="2 of 2 members"):
+        report = run_sweep("chaplygin-sleigh", ["q0.x=0:1:2"], out=out, h=0.01, steps=4000, save_every=4000,
+                           method="gni-trapezoid", client=client, progress=False)
+    assert report.unhealthy_members == 2 and report.failed_members == 0
+    ds = open_sweep(out)
+    with pytest.warns(gnipy.QualitativeFailureWarning):
+        one = gnipy.simulate(gnipy.make_system("chaplygin-sleigh"), "gni-trapezoid", h=0.01, steps=4000,
+                             save_every=4000)
+    assert not ds["healthy"].values.any()
+    np.testing.assert_allclose(ds["hidden_momentum_first_time"].values, one.hidden_verdict.first_time, atol=1e-9)
+    np.testing.assert_allclose(ds["hidden_momentum_max_band_ratio"].values, one.hidden_verdict.max_band_ratio,
+                               rtol=1e-9)
+    assert ds.attrs["start"].startswith("consistent") and "Trapezoid" in ds.attrs["method_settings"]
+    assert ds["native"].dtype == bool
+    # a healthy sweep: no warning, every member healthy (the ball store above)
+
+
+def test_a_healthy_sweep_is_healthy(ball_store):
+    out, report = ball_store
+    ds = open_sweep(out)
+    assert report.unhealthy_members == 0 and ds["healthy"].values.all()
+    assert np.isnan(ds["energy_drift_first_time"].values).all()

@@ -54,7 +54,8 @@ from .sweep import open_sweep, run_sweep  # noqa: E402
 from .io import read_netcdf, verify_netcdf, write_netcdf  # noqa: E402
 from .solution import RESULTS, Solution  # noqa: E402
 from .saveat import SaveAt  # noqa: E402
-from .errors import InputError, MethodError, OutputBusy, OutputError, SolverFailure  # noqa: E402
+from .errors import (InputError, MethodError, OutputBusy, OutputError, QualitativeFailure,  # noqa: E402
+                     QualitativeFailureWarning, SolverFailure)
 from .private_cache import CacheWarning  # noqa: E402
 from .spaces import EuclideanSpace, GroupSpace, Point  # noqa: E402
 from .system import System  # noqa: E402
@@ -96,6 +97,8 @@ __all__ = [
     "open_sweep",
     "OutputError",
     "OutputBusy",
+    "QualitativeFailure",
+    "QualitativeFailureWarning",
     "CacheWarning",
     "write_netcdf",
     "read_netcdf",

@@ -58,9 +58,11 @@ __all__ = [
     "hidden_momentum_band",
     "node_diagnostics",
     "saved_node_diagnostics",
-    "StreamedVerdicts",
     "hidden_momentum_verdict",
     "conserved_quantity",
+    "DIAGNOSTIC_ARRAYS",
+    "diagnostic_fields",
+    "member_conservation",
     "energy_is_invariant",
     "energy_theorem_applies",
 ]
@@ -91,14 +93,19 @@ def node_diagnostics(system, b, v, p, hidden, h, t=None):
         of the post-momentum $E^+ = \\tfrac12 p^{+T}\\mathbb{G}^{-1}p^+ + V$, the quantity of the
         paper's energy theorem.
     """
-    from .equations import lagrange_dalembert_acceleration
+    from .equations import constraint_terms
+    from .linalg import solve
 
-    G = system.metric(b)
-    _, lam = lagrange_dalembert_acceleration(system, b, v, t)
-    impulse = system.mu(b).T @ lam
+    # one elimination of G for the multiplier and the three norms (the run-time monitor evaluates
+    # this at every node: gnipy.monitor); |mu^T lam|^2 in G^-1 is lam^T C lam, C = mu G^-1 mu^T
+    G, F, mu, c = constraint_terms(system, b, v, t)
+    m = mu.shape[0]
+    X = solve_spd(G, jnp.concatenate([F[:, None], mu.T, p[:, None], hidden[:, None]], axis=1))
+    XF, Xmu, Xp, Xh = X[:, 0], X[:, 1:1 + m], X[:, 1 + m], X[:, 2 + m]
+    C = mu @ Xmu
+    lam = solve(C, c - mu @ XF) if m else jnp.zeros(0, dtype=p.dtype)
     p_plus = p + hidden
-    X = solve_spd(G, jnp.stack([p, hidden, impulse, p_plus], axis=1))
-    sq = jnp.sum(jnp.stack([p, hidden, impulse, p_plus], axis=1) * X, axis=0)
+    sq = jnp.stack([p @ Xp, hidden @ Xh, lam @ C @ lam, p_plus @ (Xp + Xh)])
     norm_p, norm_hidden, norm_impulse = jnp.sqrt(jnp.maximum(sq[:3], 0.0))
     tiny = jnp.finfo(p.dtype).tiny
 
@@ -290,73 +297,6 @@ def energy_verdict(t, energy, kinetic, *, e0=None, kmax0: float = 0.0) -> Energy
     return EnergyVerdict(False, float(t[out[0]]), max_drift)
 
 
-class StreamedVerdicts:
-    """The verdicts of a run read chunk by chunk (:func:`gnipy.simulate_to_file`): the same rules
-    as for a whole run, with the running maxima carried from chunk to chunk.
-
-    Arguments:
-        h: the step size.
-        span: the run's whole time span.
-        energy_invariant: whether the energy is a constant of the motion.
-    """
-
-    def __init__(self, h: float, span: float, energy_invariant: bool):
-        self.h, self.span, self.energy_invariant = float(h), float(span), bool(energy_invariant)
-        self._e0 = self._E0 = None
-        self._running = self._kmax = 0.0
-        self.hidden: HiddenMomentumVerdict | None = None
-        self.energy: EnergyVerdict | None = None
-
-    def update(self, t, energy, kinetic, ratio=None, expected=None) -> None:
-        """Add one chunk's saved nodes (times, energies, kinetic energies, and for the GNI family
-        the hidden-momentum ratios and their expected sizes)."""
-        t = np.asarray(t, dtype=np.float64)
-        if t.size == 0:
-            return
-        if ratio is not None:
-            e = np.asarray(expected, dtype=np.float64)
-            self._e0 = e[0] if self._e0 is None else self._e0
-            v = hidden_momentum_verdict(t, ratio, e, self.h, span=self.span, e0=self._e0, running0=self._running)
-            self._running = max(self._running, float(np.max(np.where(np.isfinite(e), e, 0.0))))
-            old = self.hidden
-            if old is None:
-                self.hidden = v
-            else:
-                first = old if not old.in_band else v
-                self.hidden = HiddenMomentumVerdict(
-                    old.in_band and v.in_band, first.first_time, None, max(old.max_ratio, v.max_ratio),
-                    max(old.max_band_ratio, v.max_band_ratio))
-        if self.energy_invariant:
-            E = np.asarray(energy, dtype=np.float64)
-            self._E0 = E[0] if self._E0 is None else self._E0
-            v = energy_verdict(t, E, kinetic, e0=self._E0, kmax0=self._kmax)
-            k = np.asarray(kinetic, dtype=np.float64)
-            self._kmax = max(self._kmax, float(np.max(np.where(np.isfinite(k), np.abs(k), np.inf))))
-            old = self.energy
-            if old is None:
-                self.energy = v
-            else:
-                first = old if not old.in_band else v
-                self.energy = EnergyVerdict(old.in_band and v.in_band, first.first_time, max(old.max_drift, v.max_drift))
-
-    def attrs(self, method: str, system: str) -> dict:
-        """The verdicts as file attributes (as :meth:`gnipy.Solution.to_xarray` writes them)."""
-        out = {}
-        for prefix, v, largest in (("hidden_momentum", self.hidden, "max_ratio"), ("energy_drift", self.energy, "max_drift")):
-            if v is None:
-                continue
-            out[f"{prefix}_verdict"] = "in band" if v.in_band else "out of band"
-            out[f"{prefix}_max"] = getattr(v, largest)
-            if not v.in_band:
-                out[f"{prefix}_first_time"] = v.first_time
-                out[f"{prefix}_warning"] = v.warning(method, system)
-        return out
-
-    def warnings(self, method: str, system: str) -> list[str]:
-        """The warnings (as :meth:`gnipy.Solution.warnings`)."""
-        return [v.warning(method, system) for v in (self.hidden, self.energy) if v is not None and not v.in_band]
-
-
 def conserved_quantity(system, b0, *, gni_family: bool, invariants=(), conserves_energy: bool = False) -> str:
     """Which reported quantity the run should conserve, as a sentence for `summary()`.
 
@@ -368,19 +308,76 @@ def conserved_quantity(system, b0, *, gni_family: bool, invariants=(), conserves
     where one is registered. `conserves_energy`: the method conserves the energy exactly
     (`method.conserves_energy`, the discrete-gradient method).
     """
-    names = tuple(invariants)
-    if system.is_forced:
+    invariant = energy_is_invariant(system, b0)
+    theorem = gni_family and invariant and not conserves_energy and energy_theorem_applies(system, b0)
+    return _sentence(system.is_forced, invariant, theorem, tuple(invariants), conserves_energy, gni_family)
+
+
+def _sentence(forced: bool, invariant: bool, theorem: bool, names: tuple, conserves_energy: bool,
+              gni_family: bool) -> str:
+    if forced:
         return "external forces act: the energy is not conserved (the force F(q, v, u, t) does work)"
-    if not energy_is_invariant(system, b0):
+    if not invariant:
         if "jacobi" in names:
             return "affine constraints: neither energy is conserved; the Jacobi integral is (gnipy.get_model(...).invariants['jacobi'])"
         return "affine constraints: neither energy is conserved (the constraint forces do work)"
     if conserves_energy:
         return "the energy is conserved by the motion (linear constraints) and by the scheme, to round-off"
-    if gni_family and energy_theorem_applies(system, b0):
+    if gni_family and theorem:
         return ("the energy of p+ (energy_plus) is conserved exactly by the GNI (energy theorem: V = 0 and a "
                 "constant or bi-invariant metric); the reported energy is conserved by the motion, not exactly by the scheme")
     return "the energy is conserved by the motion (linear constraints); the scheme conserves it only approximately"
+
+
+def member_conservation(system, core, batched_system: bool, b0, *, gni_family: bool, invariants=(),
+                        conserves_energy: bool = False) -> tuple[tuple[str, ...], np.ndarray]:
+    """Each member's :func:`conserved_quantity` sentence and whether its energy is a constant of
+    its motion (:func:`energy_is_invariant`), for a batch: `system` its first member, `core` the
+    members' systems stacked when `batched_system` (else the one system), `b0` the members' start
+    points (leading axis B). One vectorized program: a parameter batch's members may differ (a
+    turning table at Ω = 0 and Ω = 1)."""
+    import jax
+
+    B = int(np.shape(jax.tree_util.tree_leaves(b0)[0])[0])
+    names = tuple(invariants)
+    if system.is_forced:
+        return (_sentence(True, False, False, names, conserves_energy, gni_family),) * B, np.zeros(B, dtype=bool)
+    G, gradV, Y, dG = (np.asarray(a) for a in _member_values(core, batched_system, b0))
+    invariant = np.ones(B, dtype=bool) if not system.is_affine else ~np.any(Y.reshape(B, -1) != 0.0, axis=1)
+    theorem = invariant & ~np.any(dG.reshape(B, -1) != 0.0, axis=1) & ~np.any(gradV.reshape(B, -1) != 0.0, axis=1)
+    if system.group is not None:
+        from .lie_groups import SO3
+
+        n = system.n
+        scale = np.maximum(np.max(np.abs(G.reshape(B, -1)), axis=1), 1e-300)
+        if isinstance(system.group, SO3):
+            Gg = G[:, n:, n:]
+            theorem &= (np.max(np.abs(G[:, :n, n:]).reshape(B, -1), axis=1, initial=0.0) <= 1e-14 * scale) & (
+                np.max(np.abs(Gg - Gg[:, :1, :1] * np.eye(3)).reshape(B, -1), axis=1) <= 1e-14 * scale)
+        else:
+            theorem &= False
+    sentences = tuple(_sentence(False, bool(inv), bool(th), names, conserves_energy, gni_family)
+                      for inv, th in zip(invariant, theorem))
+    return sentences, invariant
+
+
+@jit
+def _member_values(system, batched_system, b):
+    import equinox as eqx
+    import jax
+
+    ws = jnp.asarray(0.3 * np.random.default_rng(1).standard_normal((2, system.dim)))
+
+    def one(s, bb):
+        G, gradV, Y = _values_at(s, bb)
+
+        def dmetric(w):
+            c = s.space.move(bb, w)
+            return jax.jacfwd(lambda u: s.metric(s.space.move(c, u)))(jnp.zeros(s.dim))
+
+        return G, gradV, Y, jax.vmap(dmetric)(ws)
+
+    return eqx.filter_vmap(one, in_axes=(eqx.if_array(0) if batched_system else None, 0))(system, b)
 
 
 def energy_theorem_applies(system, b0) -> bool:
@@ -416,15 +413,49 @@ def energy_is_invariant(system, b0) -> bool:
     return not np.any(np.asarray(_sampled_values(system, b0)[2]) != 0.0)
 
 
-@jit
-def _values(system, b):
+def _values_at(system, b):
     w = jnp.asarray(np.random.default_rng(0).standard_normal((3, system.dim)), dtype=jnp.float64)
     points = [b] + [system.space.move(b, wi) for wi in w]
     return (system.metric(b), jnp.stack([system.potential_gradient(c) for c in points]),
             jnp.stack([system.Y(c) for c in points]))
 
 
+_values = jit(_values_at)
+
+
 def _sampled_values(system, b0):
     """The metric at b0, and $\\partial V$ and $Y$ at b0 and at three fixed nearby points (one
     compile per system structure)."""
     return _values(system.without_metadata(), b0)
+
+
+#: The Solution's arrays of the GNI family's node diagnostics.
+DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
+
+
+def diagnostic_fields(system, core, b0, nodes, h, *, batched_system: bool = False, batch: bool = False,
+                     cached: dict | None = None, prepared=None, conserves_energy: bool = False, times=None) -> dict:
+    """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
+    the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved (kept in
+    `cached`, per system and start, when given)."""
+    from .registry import registered_invariants
+
+    gni_family = nodes[3] is not None
+    key = ("conserved", gni_family, conserves_energy)
+    if cached is not None and key in cached:
+        out = dict(cached[key])
+    else:
+        out = {"conserved": conserved_quantity(system, b0, gni_family=gni_family,
+                                               invariants=registered_invariants(system.name),
+                                               conserves_energy=conserves_energy),
+               "energy_invariant": energy_is_invariant(system, b0)}
+        if cached is not None:
+            cached[key] = dict(out)
+    if gni_family and prepared is not None:  # a single run: its nodes come padded from the run's program
+        diag = prepared[0].node_diagnostics(prepared[1], h, int(np.shape(nodes[1])[0]), times=times)
+        out |= dict(zip(DIAGNOSTIC_ARRAYS, diag))
+    elif gni_family:
+        diag = saved_node_diagnostics(core, *nodes, h, batched_system=batched_system, batch=batch,
+                                      times=times if system.is_forced else None)
+        out |= dict(zip(DIAGNOSTIC_ARRAYS, diag))
+    return out

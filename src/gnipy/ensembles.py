@@ -338,33 +338,33 @@ def member_params(systems: Sequence[System]) -> dict[str, np.ndarray]:
 # ------------------------------------------------------------------------------------------------
 @jit
 def _run_batch(method, system, system_batched: bool, state0, h, lengths, tail, h_last, partial: bool,
-               save_final: bool, save_states: bool, progress: bool, progress_stride, devices: tuple = ()):
-    """:func:`gnipy.stepping.run_nodes` vmapped over the members (states, and systems when batched);
-    with several `devices` (:func:`member_devices`), the members split into one chunk per device,
-    each chunk vmapped on its own (no communication between them)."""
-    def one(s, st):
+               save_final: bool, save_states: bool, progress: bool, progress_stride, monitor0, devices: tuple = ()):
+    """:func:`gnipy.stepping.run_nodes` vmapped over the members (states, monitors, and systems when
+    batched); with several `devices` (:func:`member_devices`), the members split into one chunk
+    per device, each chunk vmapped on its own (no communication between them)."""
+    def one(s, st, mon):
         return run_nodes(method, s, st, h, lengths, tail, h_last, partial=partial, save_final=save_final,
-                         save_states=save_states, progress=progress, progress_stride=progress_stride)
+                         save_states=save_states, progress=progress, progress_stride=progress_stride, monitor0=mon)
 
-    def members(s, st):
-        return eqx.filter_vmap(one, in_axes=(eqx.if_array(0) if system_batched else None, 0))(s, st)
+    def members(s, st, mon):
+        return eqx.filter_vmap(one, in_axes=(eqx.if_array(0) if system_batched else None, 0, 0))(s, st, mon)
 
     if not devices:
-        return members(system, state0)
+        return members(system, state0, monitor0)
     from jax.sharding import Mesh, PartitionSpec
 
     B = jax.tree_util.tree_leaves(state0)[0].shape[0]
     n = len(devices)
     padded = -(-B // n) * n
-    state0 = pad_members(state0, B, padded)
+    state0, monitor0 = pad_members((state0, monitor0), B, padded)
     arrays, static = eqx.partition(system, eqx.is_array)
     if system_batched:
         arrays = pad_members(arrays, B, padded)
     chunk, whole = PartitionSpec("members"), PartitionSpec()
-    specs = (jax.tree_util.tree_map(lambda _: chunk if system_batched else whole, arrays), chunk)
-    run = shard_map()(lambda a, st: members(eqx.combine(a, static), st), mesh=Mesh(np.array(devices), ("members",)),
-                       in_specs=specs, out_specs=chunk)
-    out = run(arrays, state0)
+    specs = (jax.tree_util.tree_map(lambda _: chunk if system_batched else whole, arrays), chunk, chunk)
+    run = shard_map()(lambda a, st, mon: members(eqx.combine(a, static), st, mon),
+                      mesh=Mesh(np.array(devices), ("members",)), in_specs=specs, out_specs=chunk)
+    out = run(arrays, state0, monitor0)
     return jax.tree_util.tree_map(lambda a: a[:B], out)
 
 
@@ -373,8 +373,6 @@ def _init_batch(method, system, system_batched: bool, b0, v0, h):
     return eqx.filter_vmap(
         lambda s, b, v: method.init(s, b, v, h), in_axes=(eqx.if_array(0) if system_batched else None, 0, 0)
     )(system, b0, v0)
-
-
 
 
 def is_batch(system: System, q0, v0, R0) -> bool:
@@ -397,10 +395,10 @@ def is_batch(system: System, q0, v0, R0) -> bool:
 
 
 def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0, throw, meta, reporter,
-                   backend_asked: str = "auto"):
+                   backend_asked: str = "auto", every_node: bool = True):
     """The batched run of :func:`gnipy.simulate` (B members: initial conditions and/or systems),
     one vmapped program; a failed member's nodes after its failure are NaN."""
-    from .simulate import _DIAGNOSTIC_ARRAYS, _diagnostic_meta
+    from .diagnostics import DIAGNOSTIC_ARRAYS, diagnostic_fields
 
     system = systems[0]
     size = len(systems) if len(systems) > 1 else None
@@ -416,6 +414,16 @@ def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, 
     method = method.prepare(system, first_b0)
     hj = np.float64(h)
     state0 = _init_batch(method, core, sys_batched, b0, v0, hj)
+    from .diagnostics import member_conservation
+    from .monitor import initial
+    from .registry import registered_invariants
+
+    gni_family = jax.eval_shape(lambda: method.hidden_momentum(
+        system.without_metadata(), jax.tree_util.tree_map(lambda a: a[0], state0), hj)) is not None
+    conserved, invariant = member_conservation(system, core, sys_batched, b0, gni_family=gni_family,
+                                               invariants=registered_invariants(system.name),
+                                               conserves_energy=bool(getattr(method, "conserves_energy", False)))
+    monitor0 = initial(h, (n + partial) * h, t0, energy_applies=invariant, members=B)
     out = None
     if meta.get("backend") == "native":
         from .native.backend import native_loop, run_native
@@ -426,7 +434,8 @@ def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, 
                            params=sys_batched)
         if hasattr(loop, "run"):
             out = run_native(loop, method, core, state0, hj, plan.lengths, plan.tail, partial * h, partial=bool(partial),
-                             save_final=plan.save_final, save_states=False, batched=True, system_batched=sys_batched,
+                             save_final=plan.save_final, save_states=False, monitor0=monitor0, batched=True,
+                             system_batched=sys_batched,
                              progress_stride=reporter.stride if reporter.active else None)
         else:
             meta = dict(meta, backend="xla")
@@ -436,12 +445,18 @@ def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, 
     if out is None:
         out = _run_batch(method, core, sys_batched, state0, hj, np.asarray(plan.lengths, np.int32),
                          np.int32(plan.tail), np.float64(partial * h), bool(partial), plan.save_final, False,
-                         reporter.active, np.int32(reporter.stride), member_devices() if B > 1 else ())
+                         reporter.active, np.int32(reporter.stride), monitor0 if every_node else None,
+                         member_devices() if B > 1 else ())
     if reporter.active:
         jax.block_until_ready(out)
-    batch_diag = _diagnostic_meta(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
+    batch_diag = diagnostic_fields(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
                                   batched_system=sys_batched, batch=True,
                                   conserves_energy=bool(getattr(method, "conserves_energy", False)), times=times)
+    # each member's own: what its motion conserves, and its verdicts (the monitor)
+    same = all(c == conserved[0] for c in conserved)
+    batch_diag.update(conserved=conserved[0] if same else "differs by member: see Solution.member(i).conserved",
+                      energy_invariant=bool(np.any(invariant)), member_conserved=None if same else conserved,
+                      monitor=None if out["monitor"] is None else np.asarray(out["monitor"]))
     space = system.space
     q, R = space.coordinates(out["b"]), space.orientation(out["b"])
     v, p, energy, residual = out["v"], out["p"], out["energy"], out["residual"]
@@ -461,9 +476,9 @@ def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, 
             return jnp.asarray(a)
 
         q, v, p, energy, residual, R = (blank(a) for a in (q, v, p, energy, residual, R))
-        batch_diag |= {k: blank(batch_diag[k]) for k in _DIAGNOSTIC_ARRAYS if batch_diag.get(k) is not None}
+        batch_diag |= {k: blank(batch_diag[k]) for k in DIAGNOSTIC_ARRAYS if batch_diag.get(k) is not None}
     its = np.asarray(out["iterations"])
-    batch_meta = dict(meta)
+    batch_meta = dict(meta, method_settings=tuple(method.settings().items()))
     if sys_batched:
         batch_meta["params"] = ()
     sol = Solution(

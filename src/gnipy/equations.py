@@ -21,7 +21,7 @@ import jax.numpy as jnp
 
 from .linalg import solve
 
-__all__ = ["lagrange_dalembert_acceleration"]
+__all__ = ["lagrange_dalembert_acceleration", "constraint_terms"]
 
 
 def _along(f, space, b, v):
@@ -30,11 +30,12 @@ def _along(f, space, b, v):
     return jax.jvp(lambda s: f(space.move(b, s * v)), (zero,), (jnp.ones_like(zero),))
 
 
-def lagrange_dalembert_acceleration(system, b, v, t=None):
-    """The constrained acceleration $\\dot v$ and the multipliers λ at `(b, v)`.
-
-    A forced system's force enters at time `t` with the input held over the step containing it
-    (None: at the start of the step the system's drive is at, with that step's input)."""
+def constraint_terms(system, b, v, t=None):
+    """`(G, F, mu, c)` at `(b, v)`: the metric, the force $F$ of the module docstring, the
+    constraints' $\\mu$ and $c = \\mu D_v Y - (D_v\\mu)(v - Y)$, from which
+    $\\lambda = C^{-1}(c - \\mu\\mathbb{G}^{-1}F)$, $C = \\mu\\mathbb{G}^{-1}\\mu^T$ (the acceleration here,
+    the run-time diagnostics in :mod:`gnipy.diagnostics`). A forced system's force enters at time
+    `t` (see :func:`lagrange_dalembert_acceleration`)."""
     space = system.space
     G = system.metric(b)
     p = system.momentum(b, v)
@@ -45,7 +46,15 @@ def lagrange_dalembert_acceleration(system, b, v, t=None):
         F = F + (system.external_force(b, v) if t is None else system.external_force_continuous(b, v, t))
     mu, dmu = _along(system.mu, space, b, v)
     Y, dY = _along(system.Y, space, b, v)
-    c = mu @ dY - dmu @ (v - Y)
+    return G, F, mu, mu @ dY - dmu @ (v - Y)
+
+
+def lagrange_dalembert_acceleration(system, b, v, t=None):
+    """The constrained acceleration $\\dot v$ and the multipliers λ at `(b, v)`.
+
+    A forced system's force enters at time `t` with the input held over the step containing it
+    (None: at the start of the step the system's drive is at, with that step's input)."""
+    G, F, mu, c = constraint_terms(system, b, v, t)
     # gnipy.linalg.solve, not jnp.linalg.solve: vmapped over many nodes (the run-time diagnostics of
     # a batch), jaxlib 0.10's LAPACK triangular solves share XLA's CPU thread pool with the program
     # that calls them, and two of them at once waited on each other for ever on a 2-core machine

@@ -41,8 +41,11 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-__all__ = ["Drive", "discrete_forces", "FORCE_RULES", "InputForce", "input_force"]
+from .errors import InputError
+
+__all__ = ["Drive", "discrete_forces", "FORCE_RULES", "InputForce", "input_force", "drive", "check_forced_run"]
 
 FORCE_RULES: dict[str, tuple[tuple[tuple[float, float], ...], tuple[tuple[float, float], ...]]] = {
     "trapezoid": (((0.0, 0.5),), ((1.0, 0.5),)),
@@ -220,3 +223,49 @@ def _key(section: str, name: str) -> str:
     import re
 
     return f"{section}.{name}" if re.fullmatch(r"[A-Za-z0-9_-]+", name) else f"{section}.{json.dumps(name)}"
+
+
+def drive(system, controls, h, t0, steps):
+    """The forced `system` with its inputs attached (a :class:`gnipy.forcing.Drive` on the grid
+    t0 + k h); the controls' shape checked where it is concrete (their number against the steps:
+    :func:`check_forced_run`)."""
+    m = system.inputs
+    values = signal = None
+    if controls is None:
+        if m:
+            raise InputError(f"controls: the system has {m} input{'s' if m > 1 else ''} u; give controls= "
+                             f"(an array (steps, {m}) of per-step values, or a function u(t))")
+    elif callable(controls) and not hasattr(controls, "shape"):
+        if not m:
+            raise InputError("controls: the system's force takes no inputs (inputs=0)")
+        signal = controls
+    else:
+        if not m:
+            raise InputError("controls: the system's force takes no inputs (inputs=0)")
+        if not isinstance(controls, jax.core.Tracer):
+            arr = np.asarray(controls)
+            if arr.dtype == object or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+                raise InputError(f"controls: expected a real array (steps, {m}) or a function u(t), got {arr.dtype}")
+            if arr.ndim == 1 and m == 1:
+                arr = arr[:, None]
+            if arr.ndim != 2 or arr.shape[1] != m or arr.shape[0] < 1:
+                raise InputError(f"controls: expected shape (steps, {m}), got {np.shape(controls)}")
+            if not np.all(np.isfinite(arr)):
+                raise InputError("controls: contains NaN or infinite values")
+            values = arr.astype(np.float64)
+        else:
+            values = jnp.asarray(controls, jnp.float64)
+            if values.ndim == 1 and m == 1:
+                values = values[:, None]
+            if values.ndim != 2 or values.shape[1] != m:
+                raise InputError(f"controls: expected shape (steps, {m}), got {tuple(values.shape)}")
+    return system.driven(Drive.make(values, signal, t0=t0, h=h, inputs=m))
+
+
+def check_forced_run(system, h, total_steps):
+    """A forced run's checks once its length is known: forward in time, and enough per-step controls."""
+    if h < 0:
+        raise InputError("h: a forced system runs forward in time (h > 0); its force is not reversible in general")
+    values = system.drive.values
+    if values is not None and values.shape[0] < total_steps:
+        raise InputError(f"controls: {values.shape[0]} per-step values for {total_steps} steps")

@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from .integrators.base import MethodError
+from .registry import set_method_lookup
 
 __all__ = ["get_method", "method_names", "is_method_name", "METHOD_DESCRIPTIONS"]
 
@@ -129,3 +130,6 @@ def get_method(name: str):
         raise MethodError(f"method: unknown method {name!r} (known: {', '.join(_METHODS)}; compositions "
                           "'<scheme>-<symmetric method>' with scheme yoshida4, suzuki4, yoshida6, kahanli6)")
     return _METHODS[name][1]()
+
+
+set_method_lookup(get_method)  # the registry's default passes over methods that cannot run a system

@@ -107,11 +107,12 @@ class Prepared:
                 jax.tree_util.tree_map(jnp.asarray, self.b0), jnp.asarray(self.v0, jnp.float64))
 
     def run(self, state0, h: float, lengths, tail: int, h_last: float, times, *, partial: bool, save_final: bool,
-            save_states: bool, progress: bool, progress_stride: int):
+            save_states: bool, progress: bool, progress_stride: int, monitor0):
         """:func:`gnipy.stepping.run_nodes` from `state0` (None: `method.init` at the checked start,
         in the same program); also the saved nodes' coordinates `q`, orientations `R`, their
         `times` as a device array `t`, and for the GNI family the saved nodes padded for
-        :meth:`node_diagnostics` (`out["padded"]`)."""
+        :meth:`node_diagnostics` (`out["padded"]`). Every node is checked from `monitor0`
+        (:mod:`gnipy.monitor`; None: no check in the loop)."""
         self._split()
         from_state = state0 is not None
         config = (len(lengths), bool(partial), bool(save_final), bool(save_states), bool(progress), from_state)
@@ -120,12 +121,12 @@ class Prepared:
             rebuild = self._rebuild
 
             def make():
-                def run(leaves, start, h, lengths, tail, h_last, stride, times):
+                def run(leaves, start, h, lengths, tail, h_last, stride, times, monitor0):
                     method, system = rebuild(leaves)
                     state = start if from_state else method.init(system, start[0], start[1], h)
                     out = run_nodes(method, system, state, h, lengths, tail, h_last, partial=config[1],
                                     save_final=config[2], save_states=config[3], progress=config[4],
-                                    progress_stride=stride)
+                                    progress_stride=stride, monitor0=monitor0)
                     return _complete(system, out, times)
 
                 return run
@@ -134,10 +135,11 @@ class Prepared:
             self._runs[config] = program
         start = state0 if from_state else self._start
         return program(self._leaves, start, np.float64(h), np.asarray(lengths, np.int32), np.int32(tail),
-                       np.float64(h_last), np.int32(progress_stride), np.asarray(times, np.float64))
+                       np.float64(h_last), np.int32(progress_stride), np.asarray(times, np.float64),
+                       None if monitor0 is None else np.asarray(monitor0, np.float64))
 
     def run_native(self, state0, h: float, lengths, tail: int, h_last: float, times, *, partial: bool,
-                   save_final: bool, save_states: bool, progress_stride: int | None = None):
+                   save_final: bool, save_states: bool, monitor0, progress_stride: int | None = None):
         """:meth:`run` on the native backend (:mod:`gnipy.native`): the same result, or None when
         the method's step does not lower (then `self.cache["native"]` holds the reason)."""
         from .native.backend import native_loop, run_native
@@ -163,7 +165,8 @@ class Prepared:
             self.cache["native"] = str(loop)
             return None
         return run_native(loop, self.method, self.core, state0, h, lengths, tail, h_last, partial=partial,
-                          save_final=save_final, save_states=save_states, times=times, complete=_complete,
+                          save_final=save_final, save_states=save_states, monitor0=monitor0, times=times,
+                          complete=_complete,
                           progress_stride=progress_stride)
 
     def node_diagnostics(self, padded, h: float, T: int, times=None):

@@ -152,6 +152,39 @@ class Retraction(eqx.Module):
     def _dtau_inv_jump(self, group, xi):
         return group.ad(xi)
 
+    def dtau_inv_along(self, group: MatrixLieGroup, xi):
+        """$\\mathrm{d}\\tau^{-1}_\\xi\\,\\xi$, the inverse tangent (eq:dtauinversedef) applied to its own base point.
+
+        The velocity on which discrete Lagrange–d'Alembert imposes its discrete constraint on a group
+        (:class:`~gnipy.DiscreteLagrangeDAlembert`): $\\mathrm{d}\\tau^{-1}_\\sigma\\sigma/h$, the same
+        matrix that carries $\\partial l_d/\\partial\\sigma$ into the momentum ((RedLegTr)). It is even in
+        the sense $\\mathrm{d}\\tau^{-1}_{-\\xi}\\xi = \\mathrm{d}\\tau^{-1}_\\xi\\xi$ (the odd part
+        $-\\tfrac12\\mathrm{ad}_\\xi$ of both retractions' $\\mathrm{d}\\tau^{-1}$ vanishes on ξ), so
+        left and right trivializations give the same vector. Closed forms:
+
+        - exp: $\\xi$ exactly (every term of the Bernoulli series but the first holds $\\mathrm{ad}_\\xi\\xi = 0$);
+        - Cayley: $\\hat\\xi - \\hat\\xi^3/4$ ((I − x/2) x (I + x/2), Appendix b), which is
+          $\\xi(1 + |\\xi|^2/4)$ on SO(3) and $\\xi(1 + \\omega^2/4)$ on SE(2) ($\\hat\\xi^3 = -|\\xi|^2\\hat\\xi$,
+          resp. $-\\omega^2\\hat\\xi$), $\\xi$ on $\\mathbb{R}^n$.
+
+        Arguments:
+            group: the group $G$.
+            xi: shape (d,).
+
+        Returns:
+            shape (d,).
+        """
+        _check_group(group)
+        xi = _check_vector(xi, group.dim)
+        if isinstance(group, ProductGroup):
+            return jnp.concatenate([self.dtau_inv_along(f, x) for f, x in zip(group.factors, group.split(xi))])
+        if group.dim == 0:
+            return xi
+        return self._dtau_inv_along(group, xi)
+
+    def _dtau_inv_along(self, group, xi):
+        return self._dtau_inv(group, xi) @ xi
+
     def tau_inv(self, group: MatrixLieGroup, g):
         """The local inverse $\\tau^{-1}(g)$, e.g. to recover $\\sigma_k = \\tau^{-1}(R_k^{-1}R_{k+1})$.
 
@@ -236,6 +269,16 @@ class Cayley(Retraction):
         A, B = eye - 0.5 * X, eye + 0.5 * X
         # dcay⁻¹_x y = (I − x/2) y (I + x/2)  (Appendix b)
         return jax.vmap(lambda E: group.vee(A @ E @ B))(group.basis()).T
+
+    def _dtau_inv_along(self, group, xi):
+        if isinstance(group, SO3):
+            return xi * (1.0 + 0.25 * (xi @ xi))  # (I − ω̂/2 + ωωᵀ/4) ω
+        if isinstance(group, SE2):
+            return xi * (1.0 + 0.25 * (xi[2] * xi[2]))  # ξ̂³ = −ω²ξ̂ on se(2)
+        if isinstance(group, Rn):
+            return xi
+        X = group.hat(xi)
+        return group.vee(X - 0.25 * (X @ X @ X))  # (I − x/2) x (I + x/2) = x − x³/4
 
     def _tau_inv(self, group, g):
         if isinstance(group, SO3):
@@ -350,6 +393,9 @@ class Exp(Retraction):
         if isinstance(group, Rn):
             return jnp.eye(group.dim, dtype=xi.dtype)
         return dexp_inv_series(group, xi)
+
+    def _dtau_inv_along(self, group, xi):
+        return xi  # dexp⁻¹_ξ ξ = ξ: ad_ξ ξ = 0
 
     def _tau_inv(self, group, g):
         return group.log(g)

@@ -139,6 +139,17 @@ VARIABLES: Mapping[str, Variable] = _variables(
     Variable("failed_step", (), "first failed step or -1", dtype="int32"),
     Variable("failed_time", (), "time at the start of the failed step, or NaN", TIME_UNITS, "float64"),
     Variable("failed_residual", (), "residual of the failed step's solve, or NaN", dtype="float64"),
+    # the verdicts of each member's run, every node checked (gnipy.monitor; a sweep)
+    Variable("healthy", (), "every step converged and every verdict stayed in band", dtype="bool"),
+    Variable("native", (), "the run's loop was compiled by the native backend (else by XLA)", dtype="bool"),
+    Variable("hidden_momentum_first_time", (), "time the hidden momentum left its O(h) band, or NaN",
+             TIME_UNITS, "float64"),
+    Variable("hidden_momentum_max_band_ratio", (), "largest hidden momentum over its band (> 1: out of band; "
+             "NaN: no hidden momentum)", "1", "float64"),
+    Variable("energy_drift_first_time", (), "time the conserved energy drifted out of its band, or NaN",
+             TIME_UNITS, "float64"),
+    Variable("energy_drift_max", (), "largest energy drift over the kinetic energy (> 1/2: out of band; NaN: "
+             "the energy is not conserved)", "1", "float64"),
     # the inputs of a controlled run (gni control, gnipy.control), one per step, held over the step
     Variable("control_step", ("control_step",), "step index k of the inputs", dtype="int64"),
     Variable("control_time", ("control_step",), "time t_k at which the step's input starts", TIME_UNITS,

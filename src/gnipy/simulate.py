@@ -28,7 +28,10 @@ from .saveat import GRID_RTOL, SaveAt, schedule
 from .solution import RESULTS, Solution
 from .ensembles import is_batch, simulate_batch
 from .preparation import prepare
-from .stepping import progress_reporter
+from .stepping import Progress
+from . import monitor
+from .diagnostics import DIAGNOSTIC_ARRAYS, diagnostic_fields, energy_is_invariant
+from .forcing import check_forced_run, drive
 from .system import System, describe_orientations
 
 __all__ = ["simulate", "resolve_steps", "resolve_run", "SaveAt", "MAX_STEPS", "MAX_TOTAL_STEPS", "MIN_STEP_SIZE"]
@@ -168,7 +171,6 @@ def default_initial_condition(system: System, q0, v0, R0):
     return q0, v0, R0
 
 
-
 @jit
 def _init_one(method, system, b0, v0, h):
     return method.init(system, b0, v0, h)
@@ -193,6 +195,8 @@ def simulate(
     progress=False,
     controls=None,
     backend: str = "auto",
+    monitor0=None,
+    check_every_node: bool = True,
 ) -> Solution:
     """Integrate a nonholonomic system, or an ensemble of them.
 
@@ -202,16 +206,23 @@ def simulate(
         method: an integrator object (e.g. `GNI(Midpoint())`) or a method name (see
             :func:`~gnipy.method_names`), including `"reference"` for the continuous reference.
             Default: for a zoo model, its measured default (`gnipy.get_model(name).default_method`,
-            shown by `gni models`); for other systems `"gni-trapezoid"`.
+            shown by `gni models`); for other systems `"sgni-trapezoid"` (`gnipy.registry.FALLBACK_METHOD`),
+            the method that qualifies on every zoo model by the atlas's rule (`gni-trapezoid` fails it
+            on the Chaplygin sleighs and Suslov), or the next of `gnipy.registry.FALLBACK_METHODS`
+            that can run the system.
         q0, v0: the initial coordinates and velocity (default: the system's documented ones); on
             $\\mathbb{R}^n \\times G$, `q0` holds x and `v0` the velocity $(\\dot x, \\xi)$.
             Arrays with a leading batch axis, (B, n) and (B, N), run B trajectories at once.
         R0: the initial orientation on $\\mathbb{R}^n \\times G$ (default: the system's, or the
             identity); (k, k), or (B, k, k) for a batch.
-        h: step size; h < 0 runs backward in time (`t_final` before `t0`): a symmetric method
-            (`method.symmetric_on(system)`) then runs its exact inverse $\\sigma\\circ\\Phi_{h}\\circ\\sigma$
-            (:mod:`gnipy.integrators.reversal`), so that N steps forward and N back return to the
-            start to round-off; other methods run their own formula at h < 0.
+        h: step size; h < 0 runs backward in time (`t_final` before `t0`): a method symmetric on
+            the system (`method.symmetric_on(system)`) then runs its exact inverse
+            $\\sigma\\circ\\Phi_{h}\\circ\\sigma$ (:mod:`gnipy.integrators.reversal`), so that N steps
+            forward and N back return to the start to round-off. Any other method is refused with an
+            :class:`~gnipy.InputError` (`h: ...`) that lists the methods symmetric on the system
+            (its formula at h < 0 is not the inverse of its forward steps); under `jax.jit`, with a
+            traced h of unknown sign, its steps fail at run time if h is negative. The continuous
+            `"reference"` integrates backward directly.
         steps / t_final: the number of steps, or the final time. When `t_final - t0` is not a
             whole number of steps, the last step is shortened to end at `t_final` where the method
             allows it (`method.can_change_step`: the GNI family rescales its hidden impulse to
@@ -227,7 +238,9 @@ def simulate(
         throw: raise :class:`~gnipy.SolverFailure` if a step fails; with `False`, return the
             solution up to the last good saved node with `result = RESULTS.solve_failed` (in a batch:
             a failed member's nodes after its failure are NaN; :meth:`Solution.failures` gives each
-            failure's member, step, time and residual).
+            failure's member, step, time and residual). With `"strict"`, also raise
+            :class:`~gnipy.QualitativeFailure` when the steps converged but the motion went
+            qualitatively wrong (see Returns).
         progress: `True` shows a progress bar (rich) updated as the steps advance; a callable is
             called as `progress(steps_done, steps_total)` instead.
         controls: the inputs u of a forced system with inputs (`System(..., force=F, inputs=m)`,
@@ -243,6 +256,13 @@ def simulate(
             of at least :data:`gnipy.native.backend.NATIVE_MIN_STEPS` trajectory-steps, when the
             step lowers; otherwise XLA). Forced systems and runs under a JAX transformation
             (gradients) run on XLA. `Solution.backend` says which ran.
+        monitor0: with `state0`, the final `Solution.monitor` of the run this call continues, so
+            that the verdicts (:mod:`gnipy.monitor`: every node checked) are those of the whole
+            run rather than of this call alone.
+        check_every_node: check the verdicts at every node (the default). `False` checks the saved
+            nodes only, on XLA (the native loop always checks every node): the check is then not
+            compiled into the loop (0.5-2.5 s per GNI-family program) nor run (BENCHMARKS.md), a
+            failure between saved nodes can be missed, and `sol.health` says so.
 
     Returns:
         A :class:`~gnipy.Solution` (`sol.success`, `sol.result`, `sol.message` say how it ended). For a
@@ -250,6 +270,12 @@ def simulate(
         broadcast against each other) the arrays carry a leading member axis, `sol.member(i)` is
         the i-th trajectory, and `sol.results`, `sol.failed_steps` hold each member's result code and
         failed step.
+
+        Every node of the run is checked, whatever is saved (:mod:`gnipy.monitor`): when the
+        steps converged but a verdict left its band (the GNI's hidden momentum outside its O(h)
+        band, a conserved energy drifting away; :mod:`gnipy.diagnostics`), a
+        :class:`~gnipy.QualitativeFailureWarning` names the time, the quantity and what to use
+        instead, and `sol.healthy` is False (`sol.success` says only that every step converged).
 
     **Differentiation.** `jax.grad`, `jax.jacrev` and `jax.jacfwd` of a function of the solution
     work with respect to `q0`, `v0`, `h`, `t0` and the system's parameters (a System is a pytree:
@@ -260,9 +286,8 @@ def simulate(
     must then be given (or `t_final` with a concrete `h`). Inside `jax.jit` the values of the
     initial condition cannot be checked (shapes are); a failed step raises at run time.
 
-    Compilation is shared between runs that save the same number of nodes: the step count, h and
-    the parameter values are traced, so convergence studies (one saved node per run, varying h)
-    and parameter scans compile once.
+    Runs that save as many nodes share their compiled program (the step count, h and the
+    parameter values are traced): convergence studies and parameter scans compile once.
 
     Raises:
         InputError: bad arguments or initial conditions (the message names the argument and,
@@ -278,7 +303,11 @@ def simulate(
     from .native.backend import check_backend
 
     backend = check_backend(backend)
-    project_v0, throw = flag("project_v0", project_v0), flag("throw", throw)
+    project_v0 = flag("project_v0", project_v0)
+    strict = isinstance(throw, str) and throw == "strict"
+    if not strict and not isinstance(throw, (bool, np.bool_)):
+        raise InputError(f"throw: expected True, False or 'strict', got {throw!r}")
+    throw = True if strict else bool(throw)
     systems = None
     if isinstance(system, (list, tuple)):
         systems = list(system)
@@ -305,7 +334,7 @@ def simulate(
         raise InputError(f"progress: expected True, False or a callable(steps_done, steps_total), got {progress!r}")
     if systems is None and system.is_forced:
         if controls is None and system.inputs:
-            _drive(system, controls, 1.0, 0.0, None)  # the error that names `controls`
+            drive(system, controls, 1.0, 0.0, None)  # the error that names `controls`
     elif controls is not None:
         raise InputError(
             "controls: the system has no force to drive (give System(..., force=F, inputs=m) or system.with_force(F, m))"
@@ -320,12 +349,12 @@ def simulate(
         from .transformed import simulate_traced
 
         if system.is_forced:
-            system = _drive(system, controls, h, t0, steps)
+            system = drive(system, controls, h, t0, steps)
             # the checks of an untransformed call, where the values are known at trace time
             h_c, t0_c = concrete_value(h), concrete_value(t0)
             if h_c is not None and t0_c is not None:
                 _, n_c, part_c = resolve_run(h_c, steps, t_final, float(t0_c), backward=True)
-                _check_forced_run(system, float(h_c), n_c + (1 if part_c else 0))
+                check_forced_run(system, float(h_c), n_c + (1 if part_c else 0))
 
         method = backward(method, h, system)
         if backend == "native":
@@ -338,8 +367,8 @@ def simulate(
     t0 = _number("t0", t0, positive=False)
     h, n, partial = resolve_run(h, steps, t_final, t0, backward=True)
     if system.is_forced:
-        system = _drive(system, controls, h, t0, None)
-        _check_forced_run(system, h, n + (1 if partial else 0))
+        system = drive(system, controls, h, t0, None)
+        check_forced_run(system, h, n + (1 if partial else 0))
     method = backward(method, h, system)
     if n > MAX_STEPS:
         raise InputError(
@@ -359,8 +388,10 @@ def simulate(
     q0, v0, R0 = (q0, v0, R0) if state0 is not None else default_initial_condition(
         systems if systems and len(systems) > 1 else system, q0, v0, R0)
     meta = dict(system=system.name, method=method.name, h=h, coordinates=system.coordinates,
-                velocities=system.velocities, params=system.params)
-    reporter = _Progress(progress, n + (1 if partial else 0))
+                velocities=system.velocities, params=system.params,
+                start=getattr(method, "start_label", "continuous"),
+                method_settings=tuple(method.settings().items()) if isinstance(method, Integrator) else ())
+    reporter = Progress(progress, n + (1 if partial else 0))
     from .native.backend import choose
 
     B = None if state0 is not None else _batch_size(systems, system, q0, v0, R0)
@@ -377,23 +408,31 @@ def simulate(
             raise MethodError("method: the continuous reference has no integrator state (state0, saveat.states)")
         b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
         with reporter:
-            return method.solve(system, b0, jnp.asarray(v0), times, h=h, t0=t0)
+            sol = method.solve(system, b0, jnp.asarray(v0), times, h=h, t0=t0)
+        return monitor.announce(sol, strict)
     if batched:
         if state0 is not None:
             raise InputError("state0: continuing from a state is for single trajectories")
+        if monitor0 is not None:
+            raise InputError("monitor0: continuing a run's verdicts is for single trajectories (with state0)")
         with reporter:
-            return simulate_batch(systems or [system], method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0,
-                                   throw, meta, reporter, backend)
+            sol = simulate_batch(systems or [system], method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0,
+                                 throw, meta, reporter, backend, flag("check_every_node", check_every_node))
+        return monitor.announce(sol, strict)
 
     prep = prepare(system, method, q0, v0, R0, project_v0, state0)
     if "orientation" not in prep.cache:
         prep.cache["orientation"] = describe_orientations([system])
+        prep.cache["energy_invariant"] = energy_is_invariant(system, prep.b0)
     meta["orientation"] = prep.cache["orientation"]
+    meta["method_settings"] = tuple(prep.method.settings().items())  # prepared: e.g. whether the step is explicit
+    watch0 = monitor.start(monitor0, state0, h, n + partial, t0, prep.cache["energy_invariant"])
+    every = flag("check_every_node", check_every_node)
     with reporter:
         out = None
         if use == "native":
             out = prep.run_native(state0, h, plan.lengths, plan.tail, partial * h, times, partial=bool(partial),
-                                  save_final=plan.save_final, save_states=saveat.states,
+                                  save_final=plan.save_final, save_states=saveat.states, monitor0=watch0,
                                   progress_stride=reporter.stride if reporter.active else None)
             if out is None:
                 meta["backend"] = "xla"
@@ -403,22 +442,22 @@ def simulate(
         if out is None:
             out = prep.run(state0, h, plan.lengths, plan.tail, partial * h, times, partial=bool(partial),
                            save_final=plan.save_final, save_states=saveat.states, progress=reporter.active,
-                           progress_stride=reporter.stride)
+                           progress_stride=reporter.stride, monitor0=watch0 if every else None)
         if reporter.active:
             jax.block_until_ready(out)
-    meta |= _diagnostic_meta(system, prep.core, prep.b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
+    meta |= diagnostic_fields(system, prep.core, prep.b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
                              cached=prep.cache, prepared=(prep, out.get("padded")),
                              conserves_energy=bool(getattr(method, "conserves_energy", False)), times=times)
     fail_k = int(out["fail_k"])
     q = out["q"]
     common = dict(iterations=out["iterations"], R=out["R"], final_state=out["final_state"], states=out["states"],
-                  **meta)
+                  monitor=None if out["monitor"] is None else np.asarray(out["monitor"]), **meta)
     if fail_k < 0:
-        return Solution.of(t=out["t"], q=q, v=out["v"], p=out["p"], energy=out["energy"],
-                           constraint_residual=out["residual"], **common)
+        return monitor.announce(Solution.of(t=out["t"], q=q, v=out["v"], p=out["p"], energy=out["energy"],
+                                    constraint_residual=out["residual"], **common), strict)
     good = int(np.searchsorted(np.asarray(plan.nodes), fail_k, side="right"))  # saved nodes with index <= fail_k
     cut = {k: (None if common.get(k) is None else jax.tree_util.tree_map(lambda a: a[:good], common[k]))
-           for k in ("R", "states", *_DIAGNOSTIC_ARRAYS)}
+           for k in ("R", "states", *DIAGNOSTIC_ARRAYS)}
     fail_res = float(out["fail_res"])
     partial_sol = Solution(
         jnp.asarray(times[:good]), q[:good], out["v"][:good], out["p"][:good], out["energy"][:good],
@@ -446,53 +485,6 @@ def _batch_size(systems, system, q0, v0, R0) -> int | None:
     return max(sizes, default=1)
 
 
-def _drive(system, controls, h, t0, steps):
-    """The forced `system` with its inputs attached (a :class:`gnipy.forcing.Drive` on the grid
-    t0 + k h); the controls' shape checked where it is concrete (their number against the steps:
-    :func:`_check_forced_run`)."""
-    from .forcing import Drive
-
-    m = system.inputs
-    values = signal = None
-    if controls is None:
-        if m:
-            raise InputError(f"controls: the system has {m} input{'s' if m > 1 else ''} u; give controls= "
-                             f"(an array (steps, {m}) of per-step values, or a function u(t))")
-    elif callable(controls) and not hasattr(controls, "shape"):
-        if not m:
-            raise InputError("controls: the system's force takes no inputs (inputs=0)")
-        signal = controls
-    else:
-        if not m:
-            raise InputError("controls: the system's force takes no inputs (inputs=0)")
-        if not _traced(controls):
-            arr = np.asarray(controls)
-            if arr.dtype == object or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
-                raise InputError(f"controls: expected a real array (steps, {m}) or a function u(t), got {arr.dtype}")
-            if arr.ndim == 1 and m == 1:
-                arr = arr[:, None]
-            if arr.ndim != 2 or arr.shape[1] != m or arr.shape[0] < 1:
-                raise InputError(f"controls: expected shape (steps, {m}), got {np.shape(controls)}")
-            if not np.all(np.isfinite(arr)):
-                raise InputError("controls: contains NaN or infinite values")
-            values = arr.astype(np.float64)
-        else:
-            values = jnp.asarray(controls, jnp.float64)
-            if values.ndim == 1 and m == 1:
-                values = values[:, None]
-            if values.ndim != 2 or values.shape[1] != m:
-                raise InputError(f"controls: expected shape (steps, {m}), got {tuple(values.shape)}")
-    return system.driven(Drive.make(values, signal, t0=t0, h=h, inputs=m))
-
-
-def _check_forced_run(system, h, total_steps):
-    if h < 0:
-        raise InputError("h: a forced system runs forward in time (h > 0); its force is not reversible in general")
-    values = system.drive.values
-    if values is not None and values.shape[0] < total_steps:
-        raise InputError(f"controls: {values.shape[0]} per-step values for {total_steps} steps")
-
-
 def _method(system, method):
     from .methods import get_method
     from .reference import ContinuousReference
@@ -500,88 +492,9 @@ def _method(system, method):
     if method is None:
         from .registry import default_method_for
 
-        method = default_method_for(system.name)
+        method = default_method_for(system.name, system)
     if isinstance(method, str):
         method = get_method(method)
     if not isinstance(method, (Integrator, ContinuousReference)):
         raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
     return method
-
-
-class _Progress:
-    """The `progress=` of a call: a rich bar, a callable, or nothing; a context manager around the run."""
-
-    def __init__(self, progress, total: int):
-        self.total = max(1, int(total))
-        self.active = bool(progress)
-        self.stride = max(1, self.total // 200)
-        self.fn = progress if callable(progress) else None
-        self.bar = None
-
-    def __enter__(self):
-        if not self.active:
-            return self
-        if self.fn is None:
-            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
-
-            self.bar = Progress("simulate", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                                TimeRemainingColumn(), transient=False)
-            task = self.bar.add_task("steps", total=self.total)
-            self.bar.start()
-            self.fn = lambda done, total: self.bar.update(task, completed=done)
-        self._done = 0
-
-        def advance(done):  # monotone: the chunks of a batch split across devices report on their own
-            done = min(int(done), self.total)
-            if done > self._done:
-                self._done = done
-                self.fn(done, self.total)
-
-        self._ctx = progress_reporter(advance)
-        self._ctx.__enter__()
-        return self
-
-    def __exit__(self, *exc):
-        if not self.active:
-            return False
-        if exc[0] is None and self._done < self.total:
-            self._done = self.total
-            self.fn(self.total, self.total)
-        self._ctx.__exit__(*exc)
-        if self.bar is not None:
-            self.bar.stop()
-        return False
-
-
-_DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
-
-
-def _diagnostic_meta(system, core, b0, nodes, h, *, batched_system: bool = False, batch: bool = False,
-                     cached: dict | None = None, prepared=None, conserves_energy: bool = False, times=None) -> dict:
-    """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
-    the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved (kept in
-    `cached`, per system and start, when given)."""
-    from .diagnostics import conserved_quantity, energy_is_invariant, saved_node_diagnostics
-    from .registry import registered_invariants
-
-    gni_family = nodes[3] is not None
-    key = ("conserved", gni_family, conserves_energy)
-    if cached is not None and key in cached:
-        out = dict(cached[key])
-    else:
-        out = {"conserved": conserved_quantity(system, b0, gni_family=gni_family,
-                                               invariants=registered_invariants(system.name),
-                                               conserves_energy=conserves_energy),
-               "energy_invariant": energy_is_invariant(system, b0)}
-        if cached is not None:
-            cached[key] = dict(out)
-    if gni_family and prepared is not None:  # a single run: its nodes come padded from the run's program
-        diag = prepared[0].node_diagnostics(prepared[1], h, int(np.shape(nodes[1])[0]), times=times)
-        out |= dict(zip(_DIAGNOSTIC_ARRAYS, diag))
-    elif gni_family:
-        diag = saved_node_diagnostics(core, *nodes, h, batched_system=batched_system, batch=batch,
-                                      times=times if system.is_forced else None)
-        out |= dict(zip(_DIAGNOSTIC_ARRAYS, diag))
-    return out
-
-

@@ -5,7 +5,6 @@ from __future__ import annotations
 import dataclasses
 import datetime as _dt
 import enum
-import html as _html
 from typing import Any
 
 import equinox as eqx
@@ -94,6 +93,15 @@ class Solution(eqx.Module):
         orientation: what R is (how it was reconstructed, and whether it is a physical attitude),
             a sentence (:attr:`gnipy.System.orientation_description`); empty on $\\mathbb{R}^n$.
         backend: which compiler ran the step loop: `"xla"` or `"native"` (:mod:`gnipy.native`).
+        monitor: the verdicts' running values, checked at every node of the run whatever was
+            saved (:mod:`gnipy.monitor`), (S,) or (B, S); pass it as `monitor0` to continue the
+            run. None where the run was not monitored (under a JAX transformation, the
+            continuous reference): the verdicts then read the saved nodes.
+        member_conserved: in a batch, each member's own :attr:`conserved` sentence.
+        start: how the first node was set up (e.g. the GNI's consistent start
+            `p+ = G v0 - (h/2) mu^T lambda0`; :attr:`gnipy.integrators.base.Integrator.start_label`).
+        method_settings: the method's parameters, `(name, value)` pairs
+            (:meth:`gnipy.integrators.base.Integrator.settings`): what ran beyond its name.
         system, method, h, coordinates: metadata.
 
     **Batches.** A solution of B trajectories (from :func:`gnipy.simulate` with batched
@@ -120,7 +128,7 @@ class Solution(eqx.Module):
     coordinates: tuple[str, ...] = eqx.field(static=True, default=())
     velocities: tuple[str, ...] = eqx.field(static=True, default=())
     params: tuple[tuple[str, float], ...] = eqx.field(static=True, default=())
-    start: str = eqx.field(static=True, default="p+ = G v0")
+    start: str = eqx.field(static=True, default="(q0, v0) as given")
     results: jax.Array | None = None
     failed_steps: jax.Array | None = None
     failed_residuals: jax.Array | None = None
@@ -135,6 +143,9 @@ class Solution(eqx.Module):
     orientation: str = eqx.field(static=True, default="")
     energy_invariant: bool = eqx.field(static=True, default=False)
     backend: str = eqx.field(static=True, default="xla")
+    monitor: Any = None
+    method_settings: tuple[tuple[str, Any], ...] = eqx.field(static=True, default=())
+    member_conserved: tuple[str, ...] | None = eqx.field(static=True, default=None)
 
     @classmethod
     def of(cls, **fields) -> "Solution":
@@ -152,10 +163,17 @@ class Solution(eqx.Module):
     @property
     def energy_verdict(self):
         """The :class:`~gnipy.diagnostics.EnergyVerdict` where the energy is a constant of the motion
-        (None otherwise, and for a batch: read it per member)."""
+        (None otherwise, and for a batch: read it per member). From every node of the run when it
+        was monitored (:attr:`monitor`), else from the saved nodes."""
         from .diagnostics import energy_verdict
 
-        if not self.energy_invariant or self.batch_size is not None:
+        if self.batch_size is not None:
+            return None
+        if self.monitor is not None:
+            from .monitor import energy_verdict as from_monitor
+
+            return from_monitor(self.monitor)
+        if not self.energy_invariant:
             return None
         with np.errstate(over="ignore", invalid="ignore"):  # a run that blew up: inf/NaN nodes
             kinetic = 0.5 * np.sum(np.asarray(self.v) * np.asarray(self.p), axis=-1)
@@ -164,11 +182,16 @@ class Solution(eqx.Module):
     @property
     def hidden_verdict(self):
         """The :class:`~gnipy.diagnostics.HiddenMomentumVerdict` of a GNI-family run (None for other
-        methods; for a batch, read it per member: ``sol.member(i).hidden_verdict``)."""
+        methods; for a batch, read it per member: ``sol.member(i).hidden_verdict``). From every
+        node of the run when it was monitored (:attr:`monitor`), else from the saved nodes."""
         from .diagnostics import hidden_momentum_verdict
 
         if self.hidden_momentum is None or self.batch_size is not None:
             return None
+        if self.monitor is not None:
+            from .monitor import hidden_verdict
+
+            return hidden_verdict(self.monitor, self.t)
         return hidden_momentum_verdict(self.t, self.hidden_momentum, self.hidden_expected, self.h)
 
     @property
@@ -223,6 +246,13 @@ class Solution(eqx.Module):
         def row(a):
             return None if a is None else a[i, :good]
 
+        conserved = self.conserved if self.member_conserved is None else self.member_conserved[i]
+        watch = None if self.monitor is None else np.asarray(self.monitor)[i]
+        invariant = self.energy_invariant
+        if watch is not None:
+            from .monitor import energy_verdict as from_monitor
+
+            invariant = from_monitor(watch) is not None
         return Solution(
             self.t[:good], self.q[i, :good], self.v[i, :good], self.p[i, :good], self.energy[i, :good],
             self.constraint_residual[i, :good], its,
@@ -230,9 +260,10 @@ class Solution(eqx.Module):
             result=int(np.asarray(self.results)[i]), failed_step=fs, failed_residual=fr, system=self.system,
             method=self.method,
             h=self.h, coordinates=self.coordinates, velocities=self.velocities, params=params, start=self.start,
+            method_settings=self.method_settings,
             hidden_momentum=row(self.hidden_momentum), hidden_expected=row(self.hidden_expected),
-            energy_plus=row(self.energy_plus), conserved=self.conserved,
-            orientation=self.orientation, energy_invariant=self.energy_invariant, backend=self.backend,
+            energy_plus=row(self.energy_plus), conserved=conserved,
+            orientation=self.orientation, energy_invariant=invariant, backend=self.backend, monitor=watch,
         )
 
     def failures(self) -> list[dict[str, Any]]:
@@ -340,6 +371,10 @@ class Solution(eqx.Module):
             ds.attrs[f"param_{k}"] = float(v)
         if self.conserved:
             ds.attrs["conserved"] = self.conserved
+        if self.method_settings:
+            import json
+
+            ds.attrs["method_settings"] = json.dumps(dict(self.method_settings), sort_keys=True)
         if self.R is not None and self.orientation:
             ds.attrs["orientation"] = self.orientation
         ds.attrs.update(self._verdict_attrs())
@@ -347,43 +382,84 @@ class Solution(eqx.Module):
             ds.attrs.update(attrs)
         return ds
 
-    def _member_verdicts(self, kind: str = "hidden"):
-        """The per-member verdicts of one kind ("hidden" or "energy"); [] where not diagnosed."""
-        if (self.hidden_momentum is None) if kind == "hidden" else (not self.energy_invariant):
-            return []
+    def _member_verdicts(self, kind: str = "hidden") -> dict:
+        """The verdicts of one kind ("hidden" or "energy") by member index (a single trajectory:
+        index 0); a member without one (not the GNI family, or an energy that its motion does not
+        conserve) is left out."""
         attr = f"{kind}_verdict"
         if self.batch_size is None:
-            return [getattr(self, attr)]
-        return [getattr(self.member(i), attr) for i in range(self.batch_size)]
+            v = getattr(self, attr)
+            return {} if v is None else {0: v}
+        if kind == "hidden" and self.hidden_momentum is None:
+            return {}
+        if self.monitor is not None:
+            from . import monitor
+
+            rows = np.asarray(self.monitor)
+            found = ((i, monitor.hidden_verdict(r, self.t) if kind == "hidden" else monitor.energy_verdict(r))
+                     for i, r in enumerate(rows))
+        else:
+            found = ((i, getattr(self.member(i), attr)) for i in range(self.batch_size))
+        return {i: v for i, v in found if v is not None}
+
+    def _verdicts_out(self, kind: str):
+        """`(verdicts, out, first)`: the verdicts of one kind by member, the members out of band,
+        and the one that left first (None when none did)."""
+        verdicts = self._member_verdicts(kind)
+        out = [i for i, v in verdicts.items() if not v.in_band]
+        first = min(out, key=lambda i: verdicts[i].first_time) if out else None
+        return verdicts, out, first
 
     def _verdict_attrs(self) -> dict:
-        """The hidden-momentum verdict as file attributes."""
+        """The verdicts as file attributes."""
         attrs = {}
         for kind, prefix, largest in (("hidden", "hidden_momentum", "max_ratio"), ("energy", "energy_drift", "max_drift")):
-            verdicts = self._member_verdicts(kind)
+            verdicts, out, first = self._verdicts_out(kind)
             if not verdicts:
                 continue
-            out = [i for i, v in enumerate(verdicts) if not v.in_band]
             attrs[f"{prefix}_verdict"] = "in band" if not out else "out of band"
-            attrs[f"{prefix}_max"] = max(getattr(v, largest) for v in verdicts)
+            attrs[f"{prefix}_max"] = max(getattr(v, largest) for v in verdicts.values())
             if out:
-                first = min(out, key=lambda i: verdicts[i].first_time)
                 attrs[f"{prefix}_first_time"] = verdicts[first].first_time
                 attrs[f"{prefix}_warning"] = verdicts[first].warning(self.method, self.system)
                 if self.batch_size is not None:
                     attrs[f"{prefix}_members_out_of_band"] = len(out)
+        attrs["health"] = "healthy" if self.healthy else ("failed" if not self.success else "qualitatively wrong")
         return attrs
+
+    @property
+    def healthy(self) -> bool:
+        """Whether the run can be trusted: every step converged (:attr:`success`) and every
+        verdict stayed in band, at every node of the run (of every member of a batch). A run that
+        converged but whose motion went qualitatively wrong is successful and not healthy; its
+        :meth:`warnings` say from when and what to use instead."""
+        return self.success and not any(self._verdicts_out(kind)[1] for kind in ("hidden", "energy"))
+
+    @property
+    def health(self) -> str:
+        """:attr:`healthy` in words: what went wrong first, or that nothing did."""
+        if not self.success:
+            return f"FAILED: {self.message}"
+        texts = []
+        for kind, what in (("hidden", "the hidden momentum left its O(h) band"),
+                           ("energy", "the conserved energy drifted out of its band")):
+            verdicts, out, first = self._verdicts_out(kind)
+            if out:
+                who = f" (member {first}; {len(out)} of {self.batch_size} members)" if self.batch_size is not None else ""
+                texts.append(f"{what} at t = {verdicts[first].first_time:.6g}{who}")
+        if texts:
+            return "QUALITATIVELY WRONG: " + "; ".join(texts)
+        checked = "every node checked" if self.monitor is not None else "saved nodes checked"
+        return f"healthy: every step converged, every verdict in band ({checked})"
 
     def warnings(self) -> list[str]:
         """The run-time warnings of this solution: the GNI's hidden momentum out of its O(h) band,
         and an energy that the motion conserves drifting away (:mod:`gnipy.diagnostics`)."""
         texts = []
         for kind in ("hidden", "energy"):
-            verdicts = self._member_verdicts(kind)
-            out = [i for i, v in enumerate(verdicts) if not v.in_band]
+            verdicts, out, first = self._verdicts_out(kind)
             if not out:
                 continue
-            first = min(out, key=lambda i: verdicts[i].first_time)
             text = verdicts[first].warning(self.method, self.system)
             if self.batch_size is not None:
                 text = f"{len(out)} of {self.batch_size} members (first: member {first}): " + text
@@ -395,9 +471,9 @@ class Solution(eqx.Module):
         if self.energy_plus is not None and self.batch_size is None:
             ep = np.asarray(self.energy_plus)
             lines.append(f"  energy of p+: initial {ep[0]:.12g}, max |E+ - E+0| = {np.max(np.abs(ep - ep[0])):.3e}")
-        verdicts = self._member_verdicts("hidden")
-        if verdicts and all(v.in_band for v in verdicts):
-            lines.append(f"  hidden momentum |p+ - p̄|/|p̄|: max {max(v.max_ratio for v in verdicts):.3e}, "
+        verdicts, out, _ = self._verdicts_out("hidden")
+        if verdicts and not out:
+            lines.append(f"  hidden momentum |p+ - p̄|/|p̄|: max {max(v.max_ratio for v in verdicts.values()):.3e}, "
                          "in its O(h) band")
         if self.conserved:
             lines.append(f"  conserved: {self.conserved}")
@@ -405,71 +481,18 @@ class Solution(eqx.Module):
         return lines
 
     def summary(self) -> str:
-        """A short human-readable summary (with the warnings of :meth:`warnings`)."""
-        if self.batch_size is not None:
-            e = np.asarray(self.energy)
-            valid = self.valid
-            dev = np.where(valid, np.abs(e - e[:, :1]), 0.0)
-            r = np.abs(np.asarray(self.constraint_residual))
-            r = np.where(valid[..., None], r, 0.0) if r.size else r
-            failures = self.failures()
-            lines = [
-                f"{self.system} with {self.method}: {self.batch_size} members, h = {self.h:g}, {self.steps} steps, "
-                f"t = {float(self.t[0]):g} .. {float(self.t[-1]):g}",
-                f"  failed members: {len(failures)}",
-            ]
-            for f in failures[:5]:
-                lines.append(f"    member {f['member']}: step {f['step']} (t = {f['time']:.6g}) failed, "
-                             f"residual {f['residual']:.3e}; NaN after it")
-            if len(failures) > 5:
-                lines.append(f"    ... and {len(failures) - 5} more")
-            return "\n".join([
-                *lines,
-                f"  max |E - E0| over members = {np.max(dev):.3e}",
-                f"  max constraint residual = {np.max(r) if r.size else 0.0:.3e}",
-                f"  Newton iterations: total {int(np.asarray(self.iterations)[0])}, max per step {int(np.asarray(self.iterations)[1])}",
-                *self._diagnostic_lines(),
-            ])
-        e = np.asarray(self.energy)
-        r = np.asarray(self.constraint_residual)
-        lines = [
-            f"{self.system} with {self.method}: h = {self.h:g}, {self.steps} steps, t = {float(self.t[0]):g} .. {float(self.t[-1]):g}",
-            f"  final q = {np.array2string(np.asarray(self.q[-1]), precision=6)}",
-            f"  energy: initial {e[0]:.12g}, max |E - E0| = {np.max(np.abs(e - e[0])):.3e}",
-            f"  max constraint residual = {np.max(np.abs(r)) if r.size else 0.0:.3e}",
-            f"  Newton iterations: total {int(np.asarray(self.iterations)[0])}, max per step {int(np.asarray(self.iterations)[1])}",
-            *self._diagnostic_lines(),
-        ]
-        if not self.success:
-            lines.insert(1, f"  result: {self.message}")
-        return "\n".join(lines)
+        """A short human-readable summary: how healthy the run is first, then what ran, its
+        energy and constraints, and the warnings of :meth:`warnings`."""
+        from .solution_text import summary
+
+        return summary(self)
 
     def _repr_html_(self) -> str:
-        """The solution as an HTML table (Jupyter): what ran, how it ended, the diagnostics."""
-        esc = _html.escape
-        batch = self.batch_size
-        rows = [("system", self.system), ("method", self.method), ("h", f"{self.h:g}"),
-                ("steps", f"{self.steps}"),
-                ("t", f"{float(self.t[0]):g} .. {float(self.t[-1]):g} ({len(self.t)} saved nodes)" if len(self.t) else "none"),
-                ("members", str(batch)) if batch is not None else None,
-                ("result", f"{'success' if self.success else 'FAILED'}: {self.message}")]
-        e = np.asarray(self.energy)
-        r = np.abs(np.asarray(self.constraint_residual))
-        if e.size and batch is None:
-            with np.errstate(over="ignore", invalid="ignore"):
-                drift = np.max(np.abs(e - e[0]))
-            rows.append(("energy", f"initial {e[0]:.12g}, max |E − E0| = {drift:.3e}"))
-        if r.size:
-            rows.append(("constraint residual", f"max {np.nanmax(r):.3e}"))
-        rows.append(("Newton iterations", f"total {int(np.asarray(self.iterations)[0])}, "
-                                          f"max per step {int(np.asarray(self.iterations)[1])}"))
-        if self.conserved:
-            rows.append(("conserved", self.conserved))
-        body = "".join(f"<tr><th style='text-align:left'>{esc(k)}</th><td style='text-align:left'>{esc(v)}</td></tr>"
-                       for k, v in (row for row in rows if row is not None))
-        warn = "".join(f"<li>{esc(w)}</li>" for w in self.warnings())
-        warn = f"<p><b>Warnings</b></p><ul>{warn}</ul>" if warn else ""
-        return f"<div><p><b>gnipy.Solution</b></p><table>{body}</table>{warn}</div>"
+        """The solution as an HTML table (Jupyter): its health first, what ran, how it ended, the
+        diagnostics."""
+        from .solution_text import html
+
+        return html(self)
 
 
 _FIELDS = dataclasses.fields(Solution)

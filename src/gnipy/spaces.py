@@ -12,6 +12,8 @@ of operations, so the core (integrators, discrete Lagrangians, the continuous re
 once against them:
 
 - `step_points(b0, z, h)`: the end point, the midpoint and the step velocity;
+- `constraint_velocity(z, h)`: the step velocity of a discrete constraint, consistent with the
+  discrete Legendre transforms ($\\Delta x/h$, $\\mathrm{d}\\tau^{-1}_\\sigma\\sigma/h$ on a group);
 - `end_coordinates(b0, z)`: the unknowns with $x_{k+1}$ in place of $\\Delta x$ (user-supplied $l_d$);
 - `advance`, `initial_guess`: the step map and a first guess of the unknowns;
 - `legendre_minus`, `legendre_plus`: the discrete Legendre transforms $FL^\\mp$ ((RedLegTr); the docs' conventions page, "The group
@@ -77,6 +79,11 @@ class EuclideanSpace(eqx.Module):
         `velocity` is the step's velocity $\\Delta q/h$ and `b_mid` the midpoint.
         """
         return b0 + z, b0 + 0.5 * z, z / h
+
+    def constraint_velocity(self, z, h):
+        """The step velocity on which a discrete constraint is imposed (discrete Lagrange–d'Alembert):
+        $\\Delta q/h$, the velocity of :meth:`step_points`."""
+        return z / h
 
     def end_coordinates(self, b0, z):
         """$q_{k+1} = q_k + \\Delta q$."""
@@ -203,6 +210,20 @@ class GroupSpace(eqx.Module):
         b1 = Point(b0.x + dx, self.reconstruct(b0.R, self.tau(sigma)))
         bm = Point(b0.x + 0.5 * dx, self.reconstruct(b0.R, self.tau(0.5 * sigma)))
         return b1, bm, z / h
+
+    def constraint_velocity(self, z, h):
+        """The step velocity on which a discrete constraint is imposed (discrete Lagrange–d'Alembert):
+        $(\\Delta x/h,\\ \\mathrm{d}\\tau^{-1}_\\sigma\\sigma/h)$
+        (:meth:`gnipy.retractions.Retraction.dtau_inv_along`), consistent with the momenta of
+        :meth:`legendre_minus` and :meth:`legendre_plus`, which carry $\\partial l_d/\\partial\\sigma$ by
+        $(\\mathrm{d}\\tau^{-1}_{\\pm\\sigma})^T$ ((RedLegTr)): on $\\mathbb{R}^n \\times SO(3)$ with a
+        kinetic energy $\\tfrac12\\dot x^TM\\dot x + \\tfrac c2|\\xi|^2$, their group part is c times this
+        velocity's. The plain $\\sigma/h$ is not: for
+        the Cayley map and a rotation at rate ω it is $\\omega(1 + h^2|\\omega|^2/12)$ where the momentum
+        holds $c\\,\\omega(1 + h^2|\\omega|^2/3)$ (to $O(h^4)$). With the exponential map it is
+        $(\\Delta x, \\sigma)/h$, the velocity of :meth:`step_points`."""
+        dx, sigma = self._split(z)
+        return jnp.concatenate([dx / h, self.retraction.dtau_inv_along(self.group, sigma) / h])
 
     def end_coordinates(self, b0, z):
         """$(x_{k+1}, \\sigma_k)$ from $(\\Delta x, \\sigma_k)$."""

@@ -30,7 +30,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["run_nodes", "run_nodes_checkpointed", "finish_native", "checkpoint_blocks", "progress_reporter", "residual_bytes",
+from . import monitor
+
+__all__ = ["run_nodes", "run_nodes_checkpointed", "finish_native", "checkpoint_blocks", "progress_reporter", "Progress",
+           "residual_bytes",
            "GRADIENT_MEMORY_BYTES"]
 
 _INT = jnp.int32
@@ -72,17 +75,27 @@ class progress_reporter:
 
 
 def _stepper(method, system):
+    """One step of the loop on the carry of :func:`_carry0`; with a monitor in the carry (its 7th
+    entry), the node the step starts from is checked first (:func:`gnipy.monitor.update`), and
+    the iteration k = k_end (the monitor's) only checks: the loop's one extra iteration checks the
+    last node, so that the check is compiled once."""
     def one_step(carry, h):
-        state, k, fail_k, fail_res, it_tot, it_max = carry
-        new, info = method.step(system.at_step(k), state, h)  # a forced system's input and time at step k
-        ok = info.ok & _tree_finite(new) & (fail_k < 0)
-        newly_failed = (~ok) & (fail_k < 0)
+        state, k, fail_k, fail_res, it_tot, it_max = carry[:6]
+        sys_k = system.at_step(k)  # a forced system's input and time at step k
+        watched, go = (), True
+        if len(carry) > 6:
+            watched = (monitor.update(method, sys_k, carry[6], state, h, k, fail_k < 0),)
+            go = monitor.stepping(carry[6], k)
+        new, info = method.step(sys_k, state, h)
+        ok = info.ok & _tree_finite(new) & (fail_k < 0) & go
+        newly_failed = (~ok) & (fail_k < 0) & go
         state = jax.tree_util.tree_map(lambda a, b: jnp.where(ok, a, b), new, state)
         res = jnp.where(jnp.isfinite(info.residual), info.residual, jnp.inf)
         fail_k = jnp.where(newly_failed, k, fail_k)
         fail_res = jnp.where(newly_failed, res, fail_res)
         it = jnp.where(ok, info.iterations, 0).astype(_INT)
-        return state, k + 1, fail_k, fail_res, it_tot + it, jnp.maximum(it_max, it)
+        k_next = k + jnp.asarray(go, _INT)
+        return (state, k_next, fail_k, fail_res, it_tot + it, jnp.maximum(it_max, it)) + watched
 
     return one_step
 
@@ -95,9 +108,12 @@ def _observer(method, system, save_states: bool):
     return observe
 
 
-def _carry0(state0):
-    return (state0, jnp.asarray(0, _INT), jnp.asarray(-1, _INT), jnp.asarray(0.0), jnp.asarray(0, _INT),
-            jnp.asarray(0, _INT))
+def _carry0(state0, monitor0=None):
+    """The loop's carry: the state, the step index, the first failed step and its residual, the
+    Newton iterations (total, max), and the monitor (:mod:`gnipy.monitor`) when given."""
+    carry = (state0, jnp.asarray(0, _INT), jnp.asarray(-1, _INT), jnp.asarray(0.0), jnp.asarray(0, _INT),
+             jnp.asarray(0, _INT))
+    return carry if monitor0 is None else carry + (jnp.asarray(monitor0, jnp.float64),)
 
 
 def _final_step(method, system, carry, h, h_last):
@@ -106,13 +122,33 @@ def _final_step(method, system, carry, h, h_last):
     return _stepper(method, system)((state,) + carry[1:], h_last)
 
 
-def _finish(method, system, carry, obs):
+def watched_run(monitor0, lengths, tail, partial: bool):
+    """`(monitor0, tail)` for a loop that checks every node: the monitor told how many steps the
+    loop takes, and the tail one iteration longer (the check of the last node) unless the run
+    ends with a shortened step (whose node :func:`_finish` checks)."""
+    total = jnp.sum(jnp.asarray(lengths, _INT)) + jnp.asarray(tail, _INT)
+    return monitor.with_end(monitor0, total + (1 if partial else 0)), tail + (0 if partial else 1)
+
+
+def _finish(method, system, carry, obs, h, h_last, partial: bool):
     b, v, p, hidden, states = obs
     energy = jax.vmap(system.energy)(b, v)
     residual = jax.vmap(system.constraint_residual)(b, v)
-    _, _, fail_k, fail_res, it_tot, it_max = carry
-    return dict(b=b, v=v, p=p, hidden=hidden, states=states, energy=energy, residual=residual, fail_k=fail_k,
-                fail_res=fail_res, iterations=jnp.stack([it_tot, it_max]), final_state=carry[0])
+    _, _, fail_k, fail_res, it_tot, it_max = carry[:6]
+    out = dict(b=b, v=v, p=p, hidden=hidden, states=states, energy=energy, residual=residual, fail_k=fail_k,
+               fail_res=fail_res, iterations=jnp.stack([it_tot, it_max]), final_state=carry[0],
+               monitor=None if len(carry) == 6 else carry[6])
+    if len(carry) > 6 and partial:  # the node after the shortened step, which no iteration starts from
+        out["monitor"] = _watch_last(method, system, carry, h, h_last)
+    return out
+
+
+def _watch_last(method, system, carry, h, h_last):
+    """The monitor after the node that ends the shortened last step (at t0 + (k-1) h + h_last)."""
+    state, k, fail_k, mon = carry[0], carry[1], carry[2], carry[6]
+    shifted = mon.at[monitor.SLOTS.index("t0")].add(h_last - h)
+    out = monitor.update(method, system.at_step(k), shifted, state, h_last, k, fail_k < 0)
+    return out.at[monitor.SLOTS.index("t0")].set(mon[monitor.SLOTS.index("t0")])
 
 
 def _concat(obs, last):
@@ -120,7 +156,7 @@ def _concat(obs, last):
 
 
 def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool, save_final: bool,
-              save_states: bool = False, progress: bool = False, progress_stride=1):
+              save_states: bool = False, progress: bool = False, progress_stride=1, monitor0=None):
     """Run from `state0`, observing after each `lengths[i]` steps, then `tail` steps more and (with
     `partial`) one shortened step of `h_last`, observed if `save_final`.
 
@@ -128,10 +164,13 @@ def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool
     compiled program. With `progress` (static: one more program), every `progress_stride` steps
     (traced) the steps done are reported to the active :class:`progress_reporter`.
 
+    With `monitor0` (:func:`gnipy.monitor.initial`), every node is checked as the loop runs and
+    the result's `monitor` holds the verdicts of the whole run (:mod:`gnipy.monitor`).
+
     Returns:
         A dict: `b, v, p` (saved nodes), `hidden` (the GNI family's p⁺ − p̄, else None), `states`
         (if `save_states`), `energy`, `residual`, `fail_k` (first failed step, -1 if none),
-        `fail_res`, `iterations` (total, max), `final_state`.
+        `fail_res`, `iterations` (total, max), `final_state`, `monitor` (None without `monitor0`).
     """
     step = _stepper(method, system)
     observe = _observer(method, system, save_states)
@@ -151,7 +190,9 @@ def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool
 
     # the tail runs as one more block, its observation dropped: the step is traced (and compiled)
     # once, not once for the blocks and again for the tail
-    carry = _carry0(state0)
+    if monitor0 is not None:
+        monitor0, tail = watched_run(monitor0, lengths, tail, partial)
+    carry = _carry0(state0, monitor0)
     blocks = jnp.concatenate([jnp.asarray(lengths, _INT).reshape(-1), jnp.asarray(tail, _INT).reshape(1)])
     carry, obs = jax.lax.scan(block, carry, blocks)
     obs = jax.tree_util.tree_map(lambda a: a[:-1], obs)
@@ -159,7 +200,7 @@ def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool
         carry = _final_step(method, system, carry, h, h_last)
         if save_final:
             obs = _concat(obs, observe(carry[0], h_last))
-    return _finish(method, system, carry, obs)
+    return _finish(method, system, carry, obs, h, h_last, partial)
 
 
 def finish_native(method, system, states, carry, h, h_last, *, partial: bool, save_final: bool,
@@ -175,7 +216,7 @@ def finish_native(method, system, states, carry, h, h_last, *, partial: bool, sa
         carry = _final_step(method, system, carry, h, h_last)
         if save_final:
             obs = _concat(obs, observe(carry[0], h_last))
-    return _finish(method, system, carry, obs)
+    return _finish(method, system, carry, obs, h, h_last, partial)
 
 
 def checkpoint_blocks(lengths, tail: int, block: int | None = None):
@@ -263,4 +304,50 @@ def run_nodes_checkpointed(method, system, state0, h, lengths: tuple, tail: int,
         carry = _final_step(method, system, carry, h, h_last)
         if save_final:
             obs = _concat(obs, observe(carry[0], h_last))
-    return _finish(method, system, carry, obs)
+    return _finish(method, system, carry, obs, h, h_last, partial)
+
+
+class Progress:
+    """The `progress=` of a :func:`gnipy.simulate` call: a rich bar, a callable, or nothing; a context
+    manager around the run that forwards the steps done (:class:`progress_reporter`)."""
+
+    def __init__(self, progress, total: int):
+        self.total = max(1, int(total))
+        self.active = bool(progress)
+        self.stride = max(1, self.total // 200)
+        self.fn = progress if callable(progress) else None
+        self.bar = None
+
+    def __enter__(self):
+        if not self.active:
+            return self
+        if self.fn is None:
+            from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
+
+            self.bar = Progress("simulate", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                                TimeRemainingColumn(), transient=False)
+            task = self.bar.add_task("steps", total=self.total)
+            self.bar.start()
+            self.fn = lambda done, total: self.bar.update(task, completed=done)
+        self._done = 0
+
+        def advance(done):  # monotone: the chunks of a batch split across devices report on their own
+            done = min(int(done), self.total)
+            if done > self._done:
+                self._done = done
+                self.fn(done, self.total)
+
+        self._ctx = progress_reporter(advance)
+        self._ctx.__enter__()
+        return self
+
+    def __exit__(self, *exc):
+        if not self.active:
+            return False
+        if exc[0] is None and self._done < self.total:
+            self._done = self.total
+            self.fn(self.total, self.total)
+        self._ctx.__exit__(*exc)
+        if self.bar is not None:
+            self.bar.stop()
+        return False

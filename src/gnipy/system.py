@@ -31,7 +31,7 @@ from .spaces import EuclideanSpace, GroupSpace, Point
 
 from .errors import InputError
 from .inputs import _as_vector, _fmt, _number, flag, real_array, require_float64
-from .system_checks import _metric_derivatives, _validation_values
+from .system_checks import _lagrangian_derivatives, _metric_derivatives, _validation_values
 
 __all__ = ["System"]
 
@@ -555,6 +555,44 @@ class System(eqx.Module):
         ws = jnp.asarray(0.3 * rng.standard_normal((2, self.dim)))
         dG = np.asarray(_metric_derivatives(self.without_metadata(), b0, ws))
         return not np.any(dG != 0.0)
+
+    def _default_point(self):
+        """The base point of the default initial condition (`defaults`), or the origin (and the
+        identity orientation) where the system has none: where probes such as
+        :meth:`lagrangian_depends_on` and the methods' `check` look at it."""
+        defaults = self.defaults or ()
+        concrete = all(d is None or all(isinstance(x, float) for x in d) for d in defaults)
+        x0 = defaults[0] if defaults and concrete and defaults[0] is not None else np.zeros(self.n)
+        R0 = defaults[2] if len(defaults) > 2 and concrete and defaults[2] is not None else None
+        try:
+            return self.initial_point(np.asarray(x0), None if R0 is None else np.asarray(R0))
+        except InputError:
+            return self.initial_point(np.zeros(self.n))
+
+    def lagrangian_depends_on(self, part: str = "configuration") -> bool:
+        """Whether $l(b, v)$ depends on the base point: `"configuration"`, on any of its coordinates
+        (x and, on $\\mathbb{R}^n \\times G$, R); `"orientation"`, on R.
+
+        Decided as :meth:`has_constant_metric` is: automatic differentiation returns exact zeros
+        for coordinates that $l$ does not use, and nonzero values almost surely at random points
+        and velocities otherwise (here 3 points near the default initial condition, compiled once
+        per system structure). A system whose parameters are traced (under `jax.jit` or
+        `jax.grad`) has no values to test: it is said to depend on them.
+        It decides which methods are symmetric on the system (:meth:`gnipy.integrators.base.Integrator.symmetric_on`).
+        """
+        if part not in ("configuration", "orientation"):
+            raise InputError(f"part: expected 'configuration' or 'orientation', got {part!r}")
+        if part == "orientation" and (self.group is None or not self.depends_on_orientation):
+            return False
+        core = self.without_metadata()
+        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(core)):
+            return True
+        rng = np.random.default_rng(2)
+        ws = 0.3 * rng.standard_normal((3, self.dim))
+        vs = rng.standard_normal((3, self.dim))
+        with jax.ensure_compile_time_eval():  # also when called while tracing (a traced h): values known
+            d = np.asarray(_lagrangian_derivatives(core, self._default_point(), ws, vs))
+        return bool(np.any(d[:, self.n:] != 0.0 if part == "orientation" else d != 0.0))
 
 
 def describe_orientations(systems) -> str:

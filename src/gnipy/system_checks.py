@@ -1,6 +1,7 @@
-"""The compiled evaluations behind :meth:`gnipy.System.check`, :meth:`~gnipy.System.check_mechanical`
-and :meth:`~gnipy.System.has_constant_metric`: a system's values and metric derivatives at sample
-points around $b_0$ (the system is an argument, so one compilation serves every system of a shape).
+"""The compiled evaluations behind :meth:`gnipy.System.check`, :meth:`~gnipy.System.check_mechanical`,
+:meth:`~gnipy.System.has_constant_metric` and :meth:`~gnipy.System.lagrangian_depends_on`: a system's
+values and derivatives at sample points around $b_0$ (the system is an argument, so one compilation
+serves every system of a shape).
 """
 
 from __future__ import annotations
@@ -34,3 +35,14 @@ def _metric_derivatives(system, b0, ws):
         return jax.jacfwd(lambda u: system.metric(system.space.move(b, u)))(jnp.zeros(system.dim))
 
     return jax.vmap(one)(ws)
+
+
+@jit
+def _lagrangian_derivatives(system, b0, ws, vs):
+    """$\\partial l/\\partial w$ at $(b_0 \\cdot w_i, v_i)$, w the base point's local coordinates
+    ($(x, \\xi)$ on $\\mathbb{R}^n \\times G$): exact zeros where l does not depend on them."""
+    def one(w, v):
+        b = system.space.move(b0, w)
+        return jax.grad(lambda u: system.L(system.space.move(b, u), v))(jnp.zeros(system.dim))
+
+    return jax.vmap(one)(ws, vs)

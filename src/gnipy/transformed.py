@@ -104,6 +104,7 @@ def simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, save
         R=system.space.orientation(out["b"]), final_state=out["final_state"], states=out["states"],
         system=system.name, method=method.name, h=float(hv) if hv is not None else float("nan"),
         coordinates=system.coordinates, velocities=system.velocities, params=system.params,
+        start=method.start_label, method_settings=tuple(method.settings().items()),
     )
 
 

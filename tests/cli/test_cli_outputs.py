@@ -121,3 +121,25 @@ def test_every_command_refuses_an_output_another_process_writes(tmp_path, comman
     p.wait(timeout=60)
     assert not out.exists()
     assert gnipy_leftovers(tmp_path) == []
+
+
+def test_a_qualitatively_wrong_run_is_written_and_exits_3(tmp_path):
+    """gni-trapezoid on the sleigh to t = 30, a node every 1100 steps (none near t = 21.3, where
+    the hidden momentum leaves its band): the file is written with health 'qualitatively wrong',
+    the warning is printed, the exit code is 3; --accept-out-of-band exits 0; a healthy run 0."""
+    import gnipy
+
+    base = ("run", "chaplygin-sleigh", "--method", "gni-trapezoid", "--h", "0.01", "--t-final", "30",
+            "--save-every", "1100")
+    res = invoke(*base, "--out", tmp_path / "a.nc")
+    assert res.exit_code == 3, res.output
+    assert "QUALITATIVELY" in res.output and "left its O(h) band at t = 21.3 " in res.output
+    assert "exit code 3" in res.output
+    assert gnipy.read_netcdf(tmp_path / "a.nc").attrs["health"] == "qualitatively wrong"
+    res = invoke(*base, "--out", tmp_path / "b.nc", "--accept-out-of-band")
+    assert res.exit_code == 0, res.output
+    assert verify_netcdf(tmp_path / "b.nc")[0]
+    res = invoke("run", "chaplygin-sleigh", "--method", "sgni-trapezoid", "--h", "0.01", "--t-final", "30",
+                 "--save-every", "1100", "--out", tmp_path / "c.nc")
+    assert res.exit_code == 0, res.output
+    assert gnipy.read_netcdf(tmp_path / "c.nc").attrs["health"] == "healthy"

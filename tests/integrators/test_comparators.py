@@ -15,6 +15,9 @@ from gnipy import EulerA, Midpoint, System, Trapezoid
 from gnipy.integrators.base import MethodError
 from gnipy.integrators.comparators import DiscreteLagrangeDAlembert, McLachlanPerlmutter
 
+#: numerics, not verdicts: simulate checks the saved nodes only (tests/conftest.py)
+CHECK_EVERY_NODE = False
+
 
 # ---------------------------------------------------------------------------------------------
 # Systems

@@ -22,7 +22,9 @@ def test_no_failure_at_round_off(model, method):
     system = gnipy.make_system(model)
     for h in HS:
         try:
-            sol = gnipy.simulate(system, method, h=h, steps=STEPS, save_every=STEPS)
+            # the solver's floor, not the verdicts, is under test here: the loop without the every-node
+            # check compiles in about half the time (270 programs)
+            sol = gnipy.simulate(system, method, h=h, steps=STEPS, save_every=STEPS, check_every_node=False)
         except gnipy.MethodError:
             return  # the method does not apply to this model (e.g. mp on a group)
         except gnipy.SolverFailure as e:

@@ -25,6 +25,9 @@ EPS = np.finfo(np.float64).eps
 
 from shared_systems import cached_runner, BALL, BALL_Q0, BALL_V0, CURVED, PARTICLE, PARTICLE_Q0, PARTICLE_V0  # noqa: E402
 
+#: numerics, not verdicts: simulate checks the saved nodes only (tests/conftest.py)
+CHECK_EVERY_NODE = False
+
 CASES = {"linear": (PARTICLE, PARTICLE_Q0, PARTICLE_V0), "affine": (BALL, BALL_Q0, BALL_V0)}
 
 

@@ -21,6 +21,9 @@ from gnipy.lie_groups import SO3
 from gnipy.models import rolling_ball as rb
 from gnipy.spaces import Point
 
+#: numerics, not verdicts: simulate checks the saved nodes only (tests/conftest.py)
+CHECK_EVERY_NODE = False
+
 H, N = 0.05, 200
 
 

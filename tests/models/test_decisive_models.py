@@ -20,6 +20,9 @@ import gnipy
 from gnipy.models import contact_oscillator_gauge, contact_oscillator_mp, nonholonomic_particle_gauge
 from gnipy.models.gauge import gauge_coordinate
 
+#: numerics, not verdicts: simulate checks the saved nodes only (tests/conftest.py)
+CHECK_EVERY_NODE = False
+
 GAUGE = {  # perturbed model -> (unperturbed model, its parameters from the perturbed one's, S, the energy)
     "contact-oscillator-gauge": ("contact-oscillator", lambda p: {"epsilon": p["epsilon"]}, contact_oscillator_gauge.S, "H"),
     "nonholonomic-particle-gauge": ("nonholonomic-particle", lambda p: {"k": p["k"]}, nonholonomic_particle_gauge.S,

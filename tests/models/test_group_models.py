@@ -18,6 +18,9 @@ import gnipy
 from gnipy.lie_groups import SO3
 from gnipy.models import chaplygin_sleigh, chaplygin_sphere, chaplygin_top, suslov
 
+#: numerics, not verdicts: simulate checks the saved nodes only (tests/conftest.py)
+CHECK_EVERY_NODE = False
+
 EPS = np.finfo(np.float64).eps
 NEWTON_TOL = 1e-12  # the GNI root finder's tolerance (integrators.base.default_root_finder)
 GROUP_MODELS = ["chaplygin-sphere", "chaplygin-top", "suslov", "veselova", "chaplygin-sleigh-se2"]

@@ -57,8 +57,8 @@ def atlas(
     Per (model, method that applies): one run of N steps of h = 0.01 measuring the error against the
     continuous reference up to t_ref, the energy and invariant errors and their growth, the
     constraint residual, the run-time verdicts (hidden momentum, energy), reversibility (N steps
-    back) and the cost per step (compiled). The recommendation is the rule of the recorded defaults
-    (gnipy.experiments.method_choice). Writes OUT/atlas.md, OUT/atlas.html, the heat maps,
+    back, for the methods symmetric on the model) and the cost per step (compiled). The
+    recommendation is the rule of the recorded defaults (gnipy.experiments.method_choice). Writes OUT/atlas.md, OUT/atlas.html, the heat maps,
     OUT/atlas.json and OUT/default_methods.py, and prints each model's recommendation beside its
     recorded default. Exits with 1 if a file cannot be written, 2 on bad input or if --out may not
     be written.

@@ -10,12 +10,16 @@ import typer
 
 from ..text import safe
 
-__all__ = ["EXIT_FAILURE", "EXIT_USAGE", "cell", "console", "fail", "report_result", "safe", "table", "warn"]
+__all__ = ["EXIT_FAILURE", "EXIT_QUALITATIVE", "EXIT_USAGE", "exit_for_health", "cell", "console", "fail", "report_result", "safe", "table", "warn"]
 
 #: Exit code of bad input (the message names the option).
 EXIT_USAGE = 2
 #: Exit code of a solver failure or a file that cannot be written.
 EXIT_FAILURE = 1
+#: Exit code of a run whose steps converged but whose motion went qualitatively wrong (a verdict
+#: out of band at some node, :attr:`gnipy.Solution.healthy`); the files are written all the same.
+#: `--accept-out-of-band` makes it 0.
+EXIT_QUALITATIVE = 3
 
 def cell(text):
     """A table cell that shows `text` literally (no rich markup, control characters escaped)."""
@@ -57,6 +61,15 @@ def report_result(command: str, name: str, result, written: str, seconds: float)
     con.print(safe(f"wrote {written} in {seconds:.1f} s"))
     if not result.success:
         raise typer.Exit(EXIT_FAILURE)
+
+
+def exit_for_health(healthy: bool, accept: bool) -> None:
+    """Exit with :data:`EXIT_QUALITATIVE` when a run converged but is not healthy, unless the
+    user accepted it (`--accept-out-of-band`)."""
+    if not healthy and not accept:
+        console(stderr=True).print("exit code 3: the run is qualitatively wrong (see the warnings above; "
+                                   "--accept-out-of-band exits 0)", markup=False)
+        raise typer.Exit(EXIT_QUALITATIVE)
 
 
 def warn(text: str) -> None:

@@ -17,6 +17,7 @@ from . import resources
 from .app import app
 from .config import CONFIG_KEYS, load_config
 from .errors import UsageError, WriteFailure, guarded, writing
+from .output import exit_for_health
 from .parsing import parse_R0, prepare
 from .held import hold
 from .paths import check_output, check_plot, same_file
@@ -91,6 +92,11 @@ def run(
         False, "--yes", help="Run even when the memory or the file the run needs is estimated beyond gnipy's "
         "bounds (memory: the smaller of 8 GiB and half the RAM; file: 64 GiB, and the free disk space), which "
         "are otherwise refused before anything is compiled. Not read from --config.",
+    ),
+    accept_out_of_band: bool = typer.Option(
+        False, "--accept-out-of-band", help="Exit 0 even when the run went qualitatively wrong (a verdict out "
+        "of band at some step: the hidden momentum, a conserved energy), which otherwise exits with code 3 "
+        "after writing the files. Not read from --config.",
     ),
 ):
     """Integrate MODEL with METHOD and write the trajectory to a netCDF file.
@@ -206,9 +212,8 @@ def run(
                 extra["config_file"] = str(config)
             if R0_ is not None:
                 extra["R0"] = list(R0_)
-            run_streamed(spec, params, method_, q0, v0_, R0_, h_, steps_, t_final_, project, stride, chunk,
-                         resume, out_, extra, overwrite=overwrite, yes=yes)
-            return
+            return run_streamed(spec, params, method_, q0, v0_, R0_, h_, steps_, t_final_, project, stride, chunk,
+                                resume, out_, extra, overwrite=overwrite, yes=yes)
         sol, v0_used, seconds = simulate_model(
             spec, params, method_, q0, v0_, h_, steps_, t_final_, project, stride, R0=R0_
         )
@@ -227,8 +232,9 @@ def run(
             write_plot(sol, plot_, overwrite)
             written += f", {plot_}"
         run_report("gni run", spec, params, sol, exact, drifts, seconds, written)
+        return sol.healthy
 
-    guarded(go, origins)
+    exit_for_health(guarded(go, origins), accept_out_of_band)
 
 
 def simulate_model(spec, params, method, q0, v0, h, steps, t_final, project_v0, save_every, R0=None):
@@ -258,8 +264,9 @@ def simulate_model(spec, params, method, q0, v0, h, steps, t_final, project_v0, 
 
 
 def run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, save_every, chunk, resume, out,
-                 extra, *, overwrite: bool = False, yes: bool = False) -> None:
-    """`gni run` in chunks through :func:`gnipy.streaming.simulate_to_file`, with its progress."""
+                 extra, *, overwrite: bool = False, yes: bool = False) -> bool:
+    """`gni run` in chunks through :func:`gnipy.streaming.simulate_to_file`, with its progress;
+    returns whether the run is healthy (or failed, which has its own exit code)."""
     from gnipy.streaming import simulate_to_file
 
     system = spec.build(params)
@@ -278,6 +285,7 @@ def run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, s
                 progress=progress, **more,
             )
     streamed_report(spec, params, method, h, result, time.perf_counter() - t0, out)
+    return result.healthy or bool(result.result)
 
 
 def write_plot(sol, path: Path, overwrite: bool = False, plot=None, **kwargs) -> None:

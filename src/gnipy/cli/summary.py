@@ -27,13 +27,14 @@ def run_report(title: str, spec, params, sol, exact, drifts, seconds: float, out
     t = table(title=title, show_header=False, title_justify="left")
     t.add_column(style="bold")
     t.add_column(overflow="fold")
+    t.add_row("health", sol.health)
     t.add_row("model", _params_text(spec, params))
     span = f"t = {float(sol.t[0]):g} .. {float(sol.t[-1]):g}"
     t.add_row("method", f"{sol.method}, h = {sol.h:g}, {sol.steps} steps, {span}")
     t.add_row("final q", ", ".join(f"{c} = {x:.10g}" for c, x in zip(spec.coordinates, np.asarray(sol.q[-1]))))
     vnames = sol.velocities or tuple(f"d{c}" for c in spec.coordinates)
     t.add_row("final v", ", ".join(f"{c} = {x:.10g}" for c, x in zip(vnames, np.asarray(sol.v[-1]))))
-    t.add_row("energy", f"initial {e[0]:.12g}, max |E - E0| = {np.max(np.abs(e - e[0])):.3e}")
+    t.add_row("energy", f"initial {e[0]:.12g}, max |E - E0| = {np.max(np.abs(e - e[0])):.3e} (at the saved nodes)")
     t.add_row("constraint residual", f"max |mu(q)(v - Y)| = {np.max(np.abs(r)) if r.size else 0.0:.3e}")
     for name, d in drifts.items():
         t.add_row(f"invariant {name}", f"max drift {d:.3e}")
@@ -67,6 +68,9 @@ def streamed_report(spec, params, method: str, h, result, seconds: float, out) -
     t = table(title="gni run (streamed)", show_header=False, title_justify="left")
     t.add_column(style="bold")
     t.add_column(overflow="fold")
+    health = ("healthy: every step converged, every verdict in band (every node checked)" if result.healthy
+              else "FAILED: a step did not converge" if result.result else "QUALITATIVELY WRONG (see the warnings)")
+    t.add_row("health", health)
     t.add_row("model", _params_text(spec, params))
     t.add_row("method", f"{method}, h = {float(h):g}, {result.steps} steps, {result.nodes} saved nodes, "
               f"{result.chunks} chunks ({result.chunks_resumed} from an earlier run)")

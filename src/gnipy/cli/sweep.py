@@ -11,7 +11,7 @@ import typer
 
 from .app import app
 from .errors import ARGUMENT_OPTIONS, UsageError, guarded, option_message
-from .output import EXIT_FAILURE, EXIT_USAGE, console, fail, safe
+from .output import EXIT_FAILURE, EXIT_USAGE, console, exit_for_health, fail, safe, warn
 from .parsing import check_positive, parse_set
 from .progress import Progress, on_terminal
 from .held import hold
@@ -69,6 +69,11 @@ def sweep_report(report, spec: dict[str, Any]) -> None:
     if repaired:
         con.print(f"  damaged chunks found and computed again: {repaired}", markup=False)
     con.print(f"  failed members: {report.failed_members}", markup=False)
+    unhealthy = getattr(report, "unhealthy_members", 0)
+    con.print(f"  qualitatively wrong members (converged, a verdict out of band): {unhealthy}", markup=False)
+    if unhealthy:
+        warn(f"WARNING: {unhealthy} of {report.members} members went qualitatively wrong (see the store's "
+             "variables healthy, hidden_momentum_first_time and energy_drift_first_time)")
     rate = ""
     if report.members_computed:
         rate = (f"; {report.members_computed / report.wall_time:.3g} members/s, "
@@ -141,6 +146,10 @@ def sweep(
         ..., "--out", "-o", help="Output zarr store, a directory (e.g. sweep.zarr); its parent must exist.",
         show_default=False,
     ),
+    accept_out_of_band: bool = typer.Option(
+        False, "--accept-out-of-band", help="Exit 0 even when members went qualitatively wrong (a verdict out of "
+        "band at some step), which otherwise exits with code 3 (the store is written all the same).",
+    ),
 ):
     """Run MODEL over a grid of parameters and initial conditions on a dask cluster; write zarr.
 
@@ -154,7 +163,8 @@ def sweep(
     Exit codes: 0 when every member ran; 1 when members failed (the store is written, and the
     first failed members are listed), a chunk failed on the cluster or the store cannot be
     written; 2 for bad input (also a store that holds another sweep or is damaged, a sweep over
-    the size bound, or a scheduler that cannot be reached).
+    the size bound, or a scheduler that cannot be reached); 3 when members converged but went
+    qualitatively wrong (the store's variable `healthy`; --accept-out-of-band: 0).
     """
 
     def go():
@@ -208,8 +218,9 @@ def sweep(
         sweep_report(report, report.spec)
         if report.failed_members:
             fail(failures_message(report), EXIT_FAILURE)
+        return getattr(report, "unhealthy_members", 0) == 0
 
-    guarded(go)
+    exit_for_health(guarded(go), accept_out_of_band)
 
 
 def failures_message(report) -> str:

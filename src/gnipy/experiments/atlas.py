@@ -22,8 +22,10 @@ over the rest. Measured (:class:`PairResult`):
 - the run-time **verdicts** (:mod:`gnipy.diagnostics`: the GNI family's hidden momentum, an energy
   drifting away) and solver failures;
 - **reversibility**: from the last state, `steps` steps of $-h$ (`simulate(..., h=-h,
-  state0=sol.final_state)`: a symmetric method runs its exact inverse there, other methods their own
-  formula), then the largest difference of $(q, v, R)$ from the start, relative to max(1, |start|);
+  state0=sol.final_state)`: a symmetric method runs its exact inverse there), then the largest
+  difference of $(q, v, R)$ from the start, relative to max(1, |start|); measured for the methods
+  symmetric on the model only (`simulate` refuses h < 0 for the others, whose formula at $-h$ is not
+  their inverse: the table says "not symmetric");
 - **cost per step**: the wall time of the long run divided by its steps, measured after a short run
   that compiles the same program (a run's compiled program depends only on how many nodes it saves),
   so it excludes compilation (reported apart: the first call's time).
@@ -47,6 +49,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from ..errors import verdicts_reported_by_caller
 from .method_choice import H, T_FINAL
 
 __all__ = ["H", "QUICK_MODELS", "LONG_NODES", "Plan", "plan", "PairResult", "ModelResult", "AtlasResult",
@@ -123,7 +126,8 @@ class PairResult:
         constraint_residual: the largest constraint residual.
         hidden_max, hidden_in_band: the hidden-momentum ratio's maximum and verdict (GNI family).
         energy_verdict_max, energy_in_band: the energy verdict (largest |E - E0| / max K).
-        reversibility: the distance to the start after `steps` steps back (None: not measured).
+        reversibility: the distance to the start after `steps` steps back (None: not measured, e.g.
+            for a method that is not symmetric on this model, which cannot run back).
         cost_us: microseconds per step (after compilation); compile_s: the first call's time.
         iterations: Newton iterations per step (mean).
         note: what went wrong, when something did.
@@ -299,8 +303,9 @@ def _reversibility(system, method, sol, p: Plan) -> float:
     """(q, v, R) after `steps` steps back from the run's last state, against the start."""
     import gnipy
 
-    back = gnipy.simulate(system, method, h=-p.h, steps=p.steps, state0=sol.final_state, t0=float(sol.t[-1]),
-                          saveat=gnipy.SaveAt(t1=True), throw=False)
+    with verdicts_reported_by_caller():  # a run back over a motion that went wrong may go wrong too
+        back = gnipy.simulate(system, method, h=-p.h, steps=p.steps, state0=sol.final_state, t0=float(sol.t[-1]),
+                              saveat=gnipy.SaveAt(t1=True), throw=False)
     if back.result != 0:
         return math.inf
     parts = [(back.q[-1], sol.q[0]), (back.v[-1], sol.v[0])]
@@ -321,12 +326,14 @@ def _measure_pair(system, method: str, p: Plan, ref, ref_inv, energy_scale, func
     saveat = gnipy.SaveAt(ts=tuple(ts))
     try:
         t = time.perf_counter()  # a short run that saves as many nodes: the same compiled program
-        gnipy.simulate(system, method, h=p.h, steps=len(ts) - 1, throw=False)
+        with verdicts_reported_by_caller():
+            gnipy.simulate(system, method, h=p.h, steps=len(ts) - 1, throw=False)
         out.compile_s = time.perf_counter() - t
     except gnipy.MethodError as e:
         return str(e)
     t = time.perf_counter()
-    sol = gnipy.simulate(system, method, h=p.h, steps=p.steps, saveat=saveat, throw=False)
+    with verdicts_reported_by_caller():  # the atlas reports every verdict in its table
+        sol = gnipy.simulate(system, method, h=p.h, steps=p.steps, saveat=saveat, throw=False)
     q = np.asarray(sol.q)
     out.cost_us = (time.perf_counter() - t) / p.steps * 1e6
     out.completed = sol.result == 0
@@ -356,7 +363,7 @@ def _measure_pair(system, method: str, p: Plan, ref, ref_inv, energy_scale, func
         out.hidden_max, out.hidden_in_band = float(hv.max_ratio), bool(hv.in_band)
     if ev is not None:
         out.energy_verdict_max, out.energy_in_band = float(ev.max_drift), bool(ev.in_band)
-    if p.reverse and out.completed:
+    if p.reverse and out.completed and out.symmetric:  # h < 0 is refused for the others (no inverse)
         try:
             out.reversibility = _reversibility(system, method, sol, p)
         except Exception as e:  # reported, never fatal: the forward measurements stand

@@ -169,6 +169,11 @@ def _growth(g) -> str:
     return "—" if g is None or (isinstance(g, float) and math.isnan(g)) else f"{g:.2g}"
 
 
+def _reversibility(p) -> str:
+    """The distance back to the start; for a method not symmetric on the model, why it is not measured."""
+    return "not symmetric" if p.reversibility is None and not p.symmetric else _e(p.reversibility)
+
+
 def _hidden(p) -> str:
     if p.hidden_max is None:
         return "—"
@@ -184,7 +189,7 @@ def pair_row(p) -> list[str]:
     """One method's row of a model's table (:data:`PAIR_HEADER`)."""
     inv = "; ".join(f"{k}: {_e(e)}, {_growth(g)}" for k, (e, g) in p.invariants.items()) or "—"
     return [p.method, str(p.order or "?"), _e(p.symmetric), p.verdict, _e(p.error), _e(p.energy_error),
-            _growth(p.energy_growth), inv, _e(p.constraint_residual), _hidden(p), _e(p.reversibility),
+            _growth(p.energy_growth), inv, _e(p.constraint_residual), _hidden(p), _reversibility(p),
             f"{p.cost_us:.3g}", f"{p.compile_s:.2g}",
             "; ".join(x for x in (_short(p.note, 160), *(_short(w, 130) for w in p.warnings)) if x)]
 

@@ -26,6 +26,7 @@ import numpy as np
 
 from ..compilation import jit
 from ..discrete_lagrangians import EulerA, Trapezoid
+from ..errors import verdicts_reported_by_caller
 from ..integrators.gni import GNI
 from ..lie_groups import SO3
 from ..methods import get_method
@@ -84,7 +85,8 @@ def five_equations(p: dict, x, y, w, h: float) -> np.ndarray:
 def _rolling_ball_nodes(system, q0, v0, h: float, steps: int):
     """`(x, R, v)` at the nodes 0..steps of the GNI (Euler A l_d, Cayley) on a rolling-ball System,
     from v0 projected onto the constraints."""
-    sol = simulate(system, GNI(EulerA(), start="rest"), q0, v0, h=h, steps=steps, project_v0=True)
+    with verdicts_reported_by_caller():
+        sol = simulate(system, GNI(EulerA(), start="rest"), q0, v0, h=h, steps=steps, project_v0=True)
     return np.asarray(sol.q), np.asarray(sol.R), np.asarray(sol.v)
 
 

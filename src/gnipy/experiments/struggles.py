@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import verdicts_reported_by_caller
+
 __all__ = ["struggle_figures", "sleigh_figure", "suslov_figure", "oscillator_figure", "STRUGGLES"]
 
 Progress = Callable[[float, str], None] | None
@@ -38,7 +40,8 @@ Progress = Callable[[float, str], None] | None
 def _run(model: str, method: str, h: float, t_final: float, every: int):
     import gnipy
 
-    return gnipy.simulate(gnipy.make_system(model), method, h=h, t_final=t_final, save_every=every, throw=False)
+    with verdicts_reported_by_caller():  # the struggles are shown on purpose, with their verdicts
+        return gnipy.simulate(gnipy.make_system(model), method, h=h, t_final=t_final, save_every=every, throw=False)
 
 
 def _hidden_panel(ax, sol, label: str, color: str) -> None:

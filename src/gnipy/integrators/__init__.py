@@ -6,7 +6,7 @@ from .composition import COMPOSITIONS, Composition
 from .discrete_gradient import DiscreteGradient, DiscreteGradientState
 from .gni import GNI, GNIState
 from .paper_schemes import EulerABComposition, NonholonomicEulerA, NonholonomicEulerB, Rattle, Shake
-from .reversal import Reversed
+from .reversal import ForwardOnly, Reversed
 
 __all__ = [
     "Integrator",
@@ -26,4 +26,5 @@ __all__ = [
     "Composition",
     "COMPOSITIONS",
     "Reversed",
+    "ForwardOnly",
 ]

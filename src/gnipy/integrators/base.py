@@ -295,6 +295,38 @@ class Integrator(eqx.Module):
         """The state at the first node from a configuration and a velocity on the constraints."""
         raise NotImplementedError
 
+    @property
+    def start_label(self) -> str:
+        """How :meth:`init` sets up the first node, in words (the `start` attribute of a Solution
+        and of its files)."""
+        return "(q0, v0) as given"
+
+    def settings(self) -> dict:
+        """The method's parameters, name -> value (numbers and words; nested methods and discrete
+        Lagrangians as `name.field`), for the `method_settings` attribute of a Solution and its
+        files: what ran, beyond the method's name."""
+        import dataclasses as _dc
+
+        out = {}
+
+        def walk(obj, prefix):
+            for f in _dc.fields(obj):
+                v = getattr(obj, f.name)
+                key = prefix + f.name
+                if isinstance(v, Integrator):
+                    out[key] = v.name
+                    walk(v, key + ".")
+                elif _dc.is_dataclass(v):
+                    out[key] = type(v).__name__
+                    walk(v, key + ".")
+                elif v is None:
+                    out[key] = "default"
+                elif isinstance(v, (bool, int, float, str)):
+                    out[key] = v
+
+        walk(self, "")
+        return out
+
     def step(self, system, state, h):
         """Advance one step: returns `(state, StepInfo)`."""
         raise NotImplementedError
@@ -305,15 +337,20 @@ class Integrator(eqx.Module):
 
     #: Whether the method is symmetric (self-adjoint, hence time-reversible): its step with $-h$,
     #: conjugated by the involution :meth:`reverse`, is the exact inverse of its step with $h$,
-    #: $\Phi_h^{-1} = \sigma\circ\Phi_{-h}\circ\sigma$. `simulate` with h < 0 runs that inverse
-    #: (a run of N steps forward and N back returns to the start to round-off; tested for every
-    #: symmetric method); a non-symmetric method runs backward with its own formula at $-h$.
+    #: $\Phi_h^{-1} = \sigma\circ\Phi_{-h}\circ\sigma$, on every system (:meth:`symmetric_on` decides
+    #: per system). `simulate` with h < 0 runs that inverse (a run of N steps forward and N back
+    #: returns to the start to round-off; tested for every symmetric method) and refuses the
+    #: methods not symmetric on the system (:func:`gnipy.integrators.reversal.backward`).
     symmetric: ClassVar[bool] = False
 
     def symmetric_on(self, system) -> bool:
-        """Whether the method is symmetric on `system` (:attr:`symmetric`, unless the method says
-        otherwise for some systems, e.g. the midpoint $l_d$ on an orientation-dependent system with
-        the Cayley retraction)."""
+        """Whether the method is symmetric on `system`: what `simulate` reads to run h < 0.
+
+        :attr:`symmetric`, unless the method says otherwise for some systems: the GNI's midpoint $l_d$
+        is not where the Lagrangian depends on the orientation and the retraction is Cayley's, Euler
+        A and B are where the Lagrangian does not depend on the base point
+        (:meth:`gnipy.discrete_lagrangians.DiscreteLagrangian.symmetric_on`). Host side, cheap (a
+        probe compiled once per system structure)."""
         return bool(self.symmetric)
 
     def reverse(self, system, state):

@@ -157,6 +157,11 @@ class Composition(Integrator):
     def prepare(self, system, q0):
         return dataclasses.replace(self, base=self._base().prepare(system, q0))
 
+    @property
+    def start_label(self) -> str:
+        """The base method's start (for the GNI, always the consistent one, :meth:`init`)."""
+        return self._base().start_label
+
     def init(self, system, q0, v0, h):
         """The base method's start for the first substep, $\\gamma_1 h$ (a consistent impulse for the GNI)."""
         return self._base().init(system, q0, v0, self.coefficients[0] * h)
@@ -191,6 +196,7 @@ class Composition(Integrator):
         return self._base().change_step(system, state, g * h_old, g * h_new)
 
     def symmetric_on(self, system) -> bool:
+        """The base method's (a palindromic composition of a method symmetric on the system is)."""
         return self.base.symmetric_on(system)
 
     def reverse(self, system, state):

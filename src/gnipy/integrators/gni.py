@@ -42,6 +42,9 @@ class GNIState(NamedTuple):
 
 #: The GNI's starting impulses (:meth:`GNI.init`).
 START_OPTIONS = ("rest", "consistent")
+#: The `start` attribute of a run of each start (:attr:`GNI.start_label`).
+START_LABELS = {"rest": "rest: p+ = G v0 (no hidden impulse)",
+                "consistent": "consistent: p+ = G v0 - (h/2) mu^T lambda0"}
 
 
 def consistent_impulse(system, b, v, h):
@@ -106,6 +109,11 @@ class GNI(Integrator):
             )  # a force F(q, v, u, t) makes FL⁻ − f⁻ non-affine in general: Newton
         return dataclasses.replace(self, explicit=explicit)
 
+    @property
+    def start_label(self) -> str:
+        """`"consistent: p+ = G v0 - (h/2) mu^T lambda0"` or `"rest: p+ = G v0"` (:meth:`init`)."""
+        return START_LABELS[self.start]
+
     def init(self, system, q0, v0, h):
         """$(b_0, p^+_0)$: with `start="rest"` (the paper's) $p^+_0 = \\bar p_0 = \\mathbb{G}(b_0)v_0$, no
         hidden impulse; with `start="consistent"` $p^+_0 = \\bar p_0 - \\tfrac h2\\mu(b_0)^T\\lambda_0$,
@@ -162,9 +170,12 @@ class GNI(Integrator):
         return bool(getattr(self.discrete_lagrangian, "symmetric", False))
 
     def symmetric_on(self, system) -> bool:
-        """:attr:`symmetric`, and the discrete Lagrangian symmetric on this system (see :class:`~gnipy.Midpoint`)."""
+        """Whether the discrete Lagrangian is symmetric on this system
+        (:meth:`~gnipy.discrete_lagrangians.DiscreteLagrangian.symmetric_on`: the midpoint is not
+        where l depends on the orientation and the retraction is Cayley; Euler A and B are where
+        l does not depend on the base point)."""
         ld = self.discrete_lagrangian
-        return self.symmetric and (not hasattr(ld, "symmetric_on") or ld.symmetric_on(system))
+        return bool(ld.symmetric_on(system)) if hasattr(ld, "symmetric_on") else self.symmetric
 
     def reverse(self, system, state):
         """The reflection (Comb) $p^+ \\mapsto p^- = \\bar p - (p^+ - \\bar p)$: the hidden impulse of a

@@ -105,9 +105,17 @@ class SymmetricImpulseGNI(Integrator):
         return bool(getattr(self.discrete_lagrangian, "symmetric", False))
 
     def symmetric_on(self, system) -> bool:
-        """:attr:`symmetric`, and the discrete Lagrangian symmetric on this system (see :class:`~gnipy.Midpoint`)."""
+        """Whether the discrete Lagrangian is symmetric on this system
+        (:meth:`~gnipy.discrete_lagrangians.DiscreteLagrangian.symmetric_on`: the midpoint is not
+        where l depends on the orientation and the retraction is Cayley; Euler A and B are where
+        l does not depend on the base point)."""
         ld = self.discrete_lagrangian
-        return self.symmetric and (not hasattr(ld, "symmetric_on") or ld.symmetric_on(system))
+        return bool(ld.symmetric_on(system)) if hasattr(ld, "symmetric_on") else self.symmetric
+
+    @property
+    def start_label(self) -> str:
+        """`"p = G v0 projected onto the constraints"` (:meth:`init`)."""
+        return "p = G v0 projected onto the constraints (no hidden impulse)"
 
     def init(self, system, q0, v0, h):
         """$(b_0, \\bar p_0)$: $\\mathbb{G}v_0$ projected onto the constraints (a no-op up to round-off

@@ -360,6 +360,14 @@ class _TildeScheme(Integrator):
         """Raise :class:`~gnipy.MethodError` unless the metric is constant (paper §5)."""
         require_constant_metric(self.name, system, q0)
 
+    def symmetric_on(self, system) -> bool:
+        """:attr:`symmetric` (RATTLE); Euler A, Euler B and their composition too where V is constant
+        and there is no force (l does not depend on q, :meth:`gnipy.System.lagrangian_depends_on`): their
+        discrete constraints, $\\mu M^{-1}(\\tilde p \\pm \\tfrac h2 V_q - \\Pi) = 0$, are then RATTLE's."""
+        if self.symmetric:
+            return True
+        return system.force is None and not system.lagrangian_depends_on("configuration")
+
     def init(self, system, q0, v0, h):
         """$(q_0, \\tilde p_0, \\tilde\\lambda_0)$ from the GNI start $p^+_0 = M v_0$.
 

@@ -33,6 +33,8 @@ import numpy as np
 
 from ..compilation import jit
 from ..errors import InputError
+from ..monitor import SIZE
+from ..stepping import watched_run
 from .lowering import Unsupported
 from .program import available, build_loop
 
@@ -121,6 +123,7 @@ def native_loop(method, system, state0, *, batch: bool = False, params: bool = F
     :class:`Unsupported` reason. With `params`, the system's array leaves (its parameter values,
     :func:`system_params`) are inputs of the loop, so one program runs every value: `system` is
     then an example (one member of a parameter batch)."""
+    from ..monitor import initial
     from ..stepping import _carry0, _stepper
     from .program import default_lanes
 
@@ -130,13 +133,14 @@ def native_loop(method, system, state0, *, batch: bool = False, params: bool = F
     hit = _LOOPS.get(key) if key is not None else None
     if hit is not None:
         return hit
+    carry0 = _carry0(state0, initial(0.01, 1.0, 0.0))  # every native run checks every node (gnipy.monitor)
     try:
         if params:
             values, rebuild = system_params(system)
-            loop = build_loop(lambda c, hh, vs: _stepper(method, rebuild(vs))(c, hh), _carry0(state0), 0.01,
+            loop = build_loop(lambda c, hh, vs: _stepper(method, rebuild(vs))(c, hh), carry0, 0.01,
                               lanes=lanes, params=values)
         else:
-            loop = build_loop(_stepper(method, system), _carry0(state0), 0.01, lanes=lanes)
+            loop = build_loop(_stepper(method, system), carry0, 0.01, lanes=lanes)
     except Unsupported as e:
         loop = e
     if key is not None:
@@ -166,7 +170,7 @@ def _post(method, system, layout, saved, carry, h, h_last, times, partial: bool,
         states = _flat_state(treedef, shapes, sv)
         i32 = jnp.int32
         cy = (_flat_state(treedef, shapes, c[:S]), c[S].astype(i32), c[S + 1].astype(i32), c[S + 2],
-              c[S + 3].astype(i32), c[S + 4].astype(i32))
+              c[S + 3].astype(i32), c[S + 4].astype(i32), c[S + 5:S + 5 + SIZE])
         out = finish_native(method, system, states, cy, h, h_last, partial=partial, save_final=save_final,
                             save_states=save_states)
         return out if complete is None else complete(system, out, times)
@@ -211,14 +215,15 @@ def _run_reporting(loop, carry, h, blocks, stride: int):
 
 
 def run_native(loop, method, system, state0, h, lengths, tail, h_last, *, partial: bool, save_final: bool,
-               save_states: bool, batched: bool = False, system_batched: bool = False, times=None,
+               save_states: bool, monitor0, batched: bool = False, system_batched: bool = False, times=None,
                complete=None, progress_stride: int | None = None) -> dict:
     """The run of :func:`gnipy.stepping.run_nodes` (same arguments and result; `state0` with a
     leading member axis when `batched`) on the compiled `loop`; `complete(system, out, times)`
     adds fields inside the same XLA program. With `system_batched`, `system` is a stack of
     systems (:func:`gnipy.stack_systems`), one per member, and `loop` was built with `params`.
     With `progress_stride`, the steps done are reported every `progress_stride` steps or so (the
-    loop then runs in pieces)."""
+    loop then runs in pieces). `monitor0` is the monitor at the start (:func:`gnipy.monitor.initial`:
+    (SIZE,), or (B, SIZE) for a batch)."""
     leaves, treedef = jax.tree_util.tree_flatten(state0)
     shapes = tuple(tuple(np.shape(x))[1 if batched else 0:] for x in leaves)
     S = int(sum(int(np.prod(s, dtype=np.int64)) for s in shapes))
@@ -227,7 +232,10 @@ def run_native(loop, method, system, state0, h, lengths, tail, h_last, *, partia
     else:
         flat = np.concatenate([np.ravel(np.asarray(x, dtype=np.float64)) for x in leaves])
     counters = np.array([0.0, -1.0, 0.0, 0.0, 0.0])
-    carry0 = np.concatenate([flat, np.broadcast_to(counters, flat.shape[:-1] + (5,))], axis=-1)
+    # the loop's last iteration only checks the last node (gnipy.stepping.watched_run)
+    monitor0, tail = watched_run(monitor0, lengths, tail, bool(partial))
+    watch = np.broadcast_to(np.asarray(monitor0, np.float64), flat.shape[:-1] + (SIZE,))
+    carry0 = np.concatenate([flat, np.broadcast_to(counters, flat.shape[:-1] + (5,)), watch], axis=-1)
     if system_batched:  # each member's parameter values after its counters (build_loop's params)
         values, _ = system_params(system)
         carry0 = np.concatenate([carry0] + [np.reshape(np.asarray(v, np.float64), (flat.shape[0], -1))

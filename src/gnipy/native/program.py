@@ -413,7 +413,7 @@ def build_loop(step, carry0, h, lanes: int = 1, params=None) -> NativeLoop:
     import jax
 
     t0 = time.perf_counter()
-    n_state_leaves = len(jax.tree_util.tree_leaves(carry0)) - 5
+    n_state_leaves = len(jax.tree_util.tree_leaves(carry0[0]))  # the state; then counters (and a monitor)
     if params is not None:
         inner, params = step, tuple(params)
         carry0 = (carry0, params)
@@ -449,7 +449,7 @@ def build_loop(step, carry0, h, lanes: int = 1, params=None) -> NativeLoop:
 
     for i, (ty, x) in enumerate(zip(types, leaves)):
         if ty not in ("double", "i32", "i64"):
-            what = "the state" if i < n_state_leaves + 5 else "a parameter of the system"
+            what = "a parameter of the system" if params is not None and i >= len(leaves) - len(params) else "the state"
             raise Unsupported(f"{what} has a leaf of dtype {np.asarray(x).dtype} (the loop carries float64, "
                               "int32 and int64)")
     t1 = time.perf_counter()

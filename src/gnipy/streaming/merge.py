@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .. import schema
-from ..diagnostics import StreamedVerdicts
+from ..monitor import RunVerdicts
 from ..files import DataChecksum, OutputError, atomic_write, remove_owned_dir
 from .interrupts import _DeferredInterrupt
 from .parts import _DATA_DIMS, _OWN_FILES, _Plan, _check_part, _own_temporaries, _part_path
@@ -23,7 +23,7 @@ from .result import SPEC_ATTR, StreamResult, _failure
 _merge_hook: Callable[[int], None] | None = None
 
 
-def _global_attrs(system, method, h, steps, result, it_tot, it_max, n_chunks, attrs) -> dict:
+def _global_attrs(system, method, h, steps, result, it_tot, it_max, n_chunks, attrs, backend: str) -> dict:
     """The destination's global attributes, as :func:`gnipy.io.write_netcdf` writes them."""
     import datetime as _dt
 
@@ -34,7 +34,8 @@ def _global_attrs(system, method, h, steps, result, it_tot, it_max, n_chunks, at
     created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     out = {
         **cf_attributes(system.name, method.name, created=created),
-        "model": system.name, "method": method.name, "h": float(h), "steps": int(steps), "start": "p+ = G v0",
+        "model": system.name, "method": method.name, "h": float(h), "steps": int(steps), "start": method.start_label,
+        "method_settings": json.dumps(method.settings(), sort_keys=True), "backend": backend,
         "result": int(result), "newton_iterations_total": int(it_tot), "newton_iterations_max": int(it_max),
         "streamed_chunks": int(n_chunks), "params": json.dumps(dict(system.params)),
         **{f"param_{k}": float(v) for k, v in system.params},
@@ -142,7 +143,7 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
 
     files = [_part_path(parts, c) for c in range(n_chunks)]
     stats = []
-    verdicts = StreamedVerdicts(h, h * steps, energy_invariant)
+    watch = []  # the last part's monitor: the verdicts of the whole run (gnipy.monitor)
 
     def load(c: int) -> dict:
         part, why = _check_part(files[c], c, plan)
@@ -151,10 +152,9 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
                               "it again")
         d, a = part["data"], part["attrs"]
         e = d["energy"]
-        kinetic = 0.5 * np.sum(d["v"] * d["p"], axis=-1)
-        hidden = (d["hidden_momentum"], d["hidden_momentum_expected"]) if "hidden_momentum" in d else (None, None)
-        verdicts.update(d["time"], e, kinetic, *hidden)
+        watch[:] = [d["monitor"]]
         stats.append(dict(result=part["result"], failed=part["failed"], residual=float(a["residual"]),
+                          backend=str(a.get("backend", "unknown")),
                           it_tot=int(a["iterations_total"]), it_max=int(a["iterations_max"]),
                           e_min=float(e.min()) if e.size else np.inf, e_max=float(e.max()) if e.size else -np.inf,
                           res=float(np.max(np.abs(d["constraint_residual"]), initial=0.0)),
@@ -170,20 +170,27 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
             raise OutputError(f"{f} does not verify (it cannot be read: {e}); rerun with resume=True "
                               "to compute it again") from None
     first = load(0)
+    gni_family = "hidden_momentum" in first["data"]
+
+    def verdicts() -> RunVerdicts:
+        return RunVerdicts(watch[0], gni_family)
 
     def write(tmp: Path) -> None:
         nc, checksum = _write_destination(tmp, files, counts, system, first, load, interrupt)
         try:
             result = max(s["result"] for s in stats)
             failed_step = next((s["failed"] for s in stats if s["result"]), -1)
-            extra = dict(attrs, **verdicts.attrs(method.name, system.name))
+            found = verdicts()
+            health = "failed" if result else ("healthy" if found.in_band else "qualitatively wrong")
+            extra = dict(attrs, **found.attrs(method.name, system.name), health=health)
             if result:  # as Solution.to_xarray records a failure
                 s = next(s for s in stats if s["result"])
                 extra = {"failed_step": int(failed_step), "failed_residual": float(s["residual"]),
                          "failed_time": float(t0 + h * failed_step), **extra}
             extra[SPEC_ATTR] = json.dumps(spec, sort_keys=True)
+            backends = sorted({s["backend"] for s in stats})
             nc.setncatts(_global_attrs(system, method, h, steps, result, sum(s["it_tot"] for s in stats),
-                                       max(s["it_max"] for s in stats), n_chunks, extra))
+                                       max(s["it_max"] for s in stats), n_chunks, extra, " and ".join(backends)))
             nc.setncattr(CHECKSUM_ATTR, checksum.hexdigest())
         finally:
             nc.close()
@@ -208,7 +215,8 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
         constraint_residual=max(s["res"] for s in stats),
         iterations=(int(sum(s["it_tot"] for s in stats)), int(max(s["it_max"] for s in stats))),
         final_q=np.asarray(last["q"][-1]), final_v=np.asarray(last["v"][-1]),
-        warnings=[*notes, *verdicts.warnings(method.name, system.name)],
+        warnings=[*notes, *verdicts().warnings(method.name, system.name)],
+        healthy=not result and verdicts().in_band,
     )
     if result and throw:
         s = next(s for s in stats if s["result"])

@@ -153,7 +153,7 @@ def _check_contents(attrs: dict, data: dict, c: int, plan: _Plan) -> tuple[dict 
     actual = _checksum_of(data)
     if actual != attrs["gnipy_checksum"]:
         return None, f"its data do not match its checksum ({attrs['gnipy_checksum']}; computed {actual})"
-    missing = [v for v in (*_REQUIRED, *(("R",) if plan.group else ())) if v not in data]
+    missing = [v for v in (*_REQUIRED, "monitor", *(("R",) if plan.group else ())) if v not in data]
     if missing:
         return None, f"it lacks the variable(s) {', '.join(missing)}"
     result = int(attrs["result"])
@@ -178,6 +178,10 @@ def _check_contents(attrs: dict, data: dict, c: int, plan: _Plan) -> tuple[dict 
     for v, dims in (*_DATA_DIMS.items(), ("time", ("time",)), ("step", ("time",))):
         if v in data and (data[v].ndim != len(dims) or data[v].shape[0] != n):
             return None, f"its variable {v} has shape {data[v].shape}, not {len(dims)} dimensions along {n} nodes"
+    from ..monitor import SIZE
+
+    if data["monitor"].shape != (SIZE,) or data["monitor"].dtype != np.float64:
+        return None, f"its monitor has shape {data['monitor'].shape}, expected ({SIZE},)"
     failed = int(attrs["failed_step"])
     if result == 0:
         if n != len(want_steps) or failed != -1:

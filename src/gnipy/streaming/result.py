@@ -41,6 +41,8 @@ class StreamResult:
         warnings: the run-time warnings (:meth:`gnipy.Solution.warnings`; the verdicts are also
             file attributes), and those about checkpoints that did not verify and were computed
             again.
+        healthy: every step converged and every verdict stayed in band, at every node of the
+            whole run (:attr:`gnipy.Solution.healthy`; the file's `health` attribute).
     """
 
     path: Path
@@ -57,6 +59,7 @@ class StreamResult:
     final_q: np.ndarray
     final_v: np.ndarray
     warnings: list = dataclasses.field(default_factory=list)
+    healthy: bool = True
 
 
 def _failure(method: str, failed_step: int, t0: float, h: float, residual: float, path: Path) -> SolverFailure:
@@ -119,12 +122,13 @@ def _finished_result(path: Path, spec: dict, method, system, h, t0, throw, overw
             iterations = (int(a.get("newton_iterations_total", 0)), int(a.get("newton_iterations_max", 0)))
             warnings = [str(a[k]) for k in ("hidden_momentum_warning", "energy_drift_warning") if k in a]
             steps = int(a["steps"]) if not result else failed
+            healthy = str(a.get("health", "")) == "healthy"
     except Exception as e:  # noqa: BLE001
         raise as_output_error(e, path, "read") or OutputError(f"cannot read {path}: {type(e).__name__}: {e}") from None
     out = StreamResult(
         path=path, complete=True, nodes=n, steps=steps, chunks=chunks, chunks_resumed=chunks, result=result,
         failed_step=failed, energy_error=e_err, constraint_residual=res, iterations=iterations,
-        final_q=final_q, final_v=final_v, warnings=warnings,
+        final_q=final_q, final_v=final_v, warnings=warnings, healthy=healthy,
     )
     if result and throw:
         raise _failure(method.name, failed, t0, h, residual, path)
@@ -135,5 +139,5 @@ def _partial_result(path, parts, c, steps, n_chunks, resumed, notes=()):
     return StreamResult(
         path=path, complete=False, nodes=0, steps=0, chunks=n_chunks, chunks_resumed=resumed, result=0, failed_step=-1,
         energy_error=float("nan"), constraint_residual=float("nan"), iterations=(0, 0),
-        final_q=np.zeros(0), final_v=np.zeros(0), warnings=list(notes),
+        final_q=np.zeros(0), final_v=np.zeros(0), warnings=list(notes), healthy=False,
     )

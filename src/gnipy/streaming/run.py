@@ -8,6 +8,7 @@ import contextlib
 import hashlib
 import json
 import os
+import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any
@@ -17,7 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..diagnostics import conserved_quantity, energy_is_invariant
-from ..errors import InputError
+from .. import monitor
+from ..errors import InputError, QualitativeFailureWarning
 from ..inputs import finite_number, flag
 from ..files import (
     OutputError,
@@ -136,7 +138,7 @@ def simulate_to_file(
     if method is None:  # as simulate: the model's measured default
         from ..registry import default_method_for
 
-        method = default_method_for(system.name if isinstance(system, System) else "")
+        method = default_method_for(system.name, system) if isinstance(system, System) else default_method_for("")
     if isinstance(method, str):
         method = get_method(method)
     if isinstance(method, ContinuousReference):
@@ -207,7 +209,7 @@ def simulate_to_file(
                 if is_owned_dir(finished_parts):  # left by a process killed after the rename
                     _own_temporaries(finished_parts)
                     remove_owned_dir(finished_parts, _OWN_FILES)
-                return done_already
+                return _announce(done_already, method, system)
         path = check_destination(given, overwrite=overwrite, argument="path")
         parts = parts_directory(path)
 
@@ -225,7 +227,7 @@ def simulate_to_file(
         plan = _Plan(steps=steps, save_every=save_every, chunk_steps=chunk_steps, t0=t0, h=h, spec_hash=spec_hash,
                      leaves=[np.asarray(x) for x in leaves], group=system.group is not None)
 
-        done = 0
+        done, last = 0, None
         if resuming:
             try:
                 stored = json.loads((parts / "spec.json").read_text(encoding="utf-8"))
@@ -251,6 +253,9 @@ def simulate_to_file(
             atomic_write_text(parts / "spec.json", json.dumps(spec, indent=1), checked=True)
         state = jax.tree_util.tree_unflatten(treedef, leaves)
         resumed = done
+        # the verdicts of the whole run, every node checked (gnipy.monitor), carried from chunk to chunk
+        watch = (np.asarray(last["data"]["monitor"], dtype=np.float64) if last is not None
+                 else monitor.initial(h, h * steps, t0, energy_applies=energy_invariant))
 
         failed_step = -1
         computed = 0
@@ -259,9 +264,12 @@ def simulate_to_file(
                 return _partial_result(path, parts, c, steps, n_chunks, resumed, notes)
             k_start, length, n_blocks, remainder, k_local, keep = plan.chunk(c)
             # the chunk is one call of the driver, continuing from the previous chunk's state
-            sol = simulate(system, method, h=h, steps=length, saveat=SaveAt(every=save_every), state0=state,
-                           t0=plan.times(k_start, np.zeros(1))[0], throw=False)
-            state = sol.final_state
+            with warnings.catch_warnings():  # one warning for the whole run, when it is merged
+                warnings.simplefilter("ignore", QualitativeFailureWarning)
+                sol = simulate(system, method, h=h, steps=length, saveat=SaveAt(every=save_every), state0=state,
+                               t0=plan.times(k_start, np.zeros(1))[0], throw=False, monitor0=watch,
+                               check_every_node=True)
+            state, watch = sol.final_state, np.asarray(sol.monitor)
             fail_k, fail_res, its = sol.failed_step, sol.failed_residual, sol.iterations
             keep = keep[: len(sol.t)]  # a failed chunk stops at its last good node
             if fail_k >= 0:
@@ -285,6 +293,7 @@ def simulate_to_file(
                 for name, a in zip(("hidden_momentum", "hidden_momentum_expected", "energy_plus"),
                                    (sol.hidden_momentum, sol.hidden_expected, sol.energy_plus)):
                     variables[name] = (("time",), np.asarray(a)[keep])
+            variables["monitor"] = (("monitor_slot",), watch)
             for i, leaf in enumerate(jax.tree_util.tree_leaves(state)):
                 a = _storage(leaf)
                 variables[f"state_{i}"] = (tuple(f"state_{i}_d{j}" for j in range(a.ndim)), a)
@@ -292,7 +301,7 @@ def simulate_to_file(
             part_attrs = {
                 "result": RESULT_SOLVER_FAILED if fail_k >= 0 else 0, "failed_step": failed_step,
                 "residual": float(fail_res), "iterations_total": int(its[0]), "iterations_max": int(its[1]),
-                _CHUNK_ATTR: c, _SPEC_HASH_ATTR: spec_hash,
+                _CHUNK_ATTR: c, _SPEC_HASH_ATTR: spec_hash, "backend": sol.backend,
             }
             with _DeferredInterrupt() as interrupt:
                 atomic_write(_part_path(parts, c), lambda tmp: _write_part(tmp, variables, part_attrs), checked=True)
@@ -305,5 +314,17 @@ def simulate_to_file(
                 n_chunks = c + 1
                 break
 
-        return _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant,
-                       overwrite=overwrite, plan=plan, spec=canonical, notes=notes)
+        result = _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant,
+                         overwrite=overwrite, plan=plan, spec=canonical, notes=notes)
+        return _announce(result, method, system)
+
+
+def _announce(result: StreamResult, method, system) -> StreamResult:
+    """`result`, after one :class:`~gnipy.QualitativeFailureWarning` when its steps converged but
+    a verdict left its band (as :func:`gnipy.simulate` warns)."""
+    if result.complete and not result.result and not result.healthy:
+        texts = [w.removeprefix("WARNING: ") for w in result.warnings if w.startswith("WARNING: ")]
+        warnings.warn(QualitativeFailureWarning(
+            f"{system.name} with {method.name}: QUALITATIVELY WRONG ({result.path}, attribute 'health').\n"
+            + "\n".join(texts)), stacklevel=3)
+    return result

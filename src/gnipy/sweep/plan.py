@@ -23,17 +23,19 @@ __all__ = ["FORMAT", "OLD_FORMATS", "DEFAULT_MAX_BYTES", "MEMBER_VARS", "Plan", 
            "saved_steps", "positive_int"]
 
 #: The format tag stored in the `sweep_spec` attribute (and compared on resume). Stores of the
-#: earlier formats (`gnipy-sweep/1`, before checksums; `gnipy-sweep/2`, a flat `member` axis)
-#: are recognised as gnipy's (and may be replaced), not read or resumed.
-FORMAT = "gnipy-sweep/3"
-OLD_FORMATS = ("gnipy-sweep/1", "gnipy-sweep/2")
+#: earlier formats (`gnipy-sweep/1`, before checksums; `gnipy-sweep/2`, a flat `member` axis;
+#: `gnipy-sweep/3`, before the members' verdicts) are recognised as gnipy's (and may be replaced),
+#: not read or resumed.
+FORMAT = "gnipy-sweep/4"
+OLD_FORMATS = ("gnipy-sweep/1", "gnipy-sweep/2", "gnipy-sweep/3")
 
 #: The default bound on a store's estimated size, in bytes (`run_sweep(max_bytes=...)`): 100 GiB.
 DEFAULT_MAX_BYTES = 100 * 2**30
 
 #: The per-member variables of a store (`R` on Rⁿ × G only), as :mod:`gnipy.schema` states them.
 MEMBER_VARS = ("q", "v", "p", "energy", "constraint_residual", "R", "valid", "result", "failed_step",
-               "failed_time", "failed_residual")
+               "failed_time", "failed_residual", "native", "healthy", "hidden_momentum_first_time",
+               "hidden_momentum_max_band_ratio", "energy_drift_first_time", "energy_drift_max")
 
 # the names a grid axis cannot take: the store's variables and dimensions
 _RESERVED = frozenset({*schema.VARIABLES, "i", "j", "digest"})
@@ -197,9 +199,10 @@ def make_plan(model, grid, *, method, h, steps, t_final, save_every, set_params,
     n, N = len(coordinates), len(velocities)
     saved = len(saved_steps(steps, save_every))
     # bytes per member and saved node: q, v, p, energy, constraint_residual (at most N
-    # constraints), R, valid; per member: result, failed_step, failed_time, failed_residual
+    # constraints), R, valid; per member: result, failed_step, failed_time, failed_residual, the
+    # backend and the verdicts (healthy, two first times, two maxima)
     node_bytes = 8 * (n + 2 * N + 1 + N + (k or 0) ** 2) + 1
-    store_bytes = check_size(axes, layout=layout, saved=saved, node_bytes=node_bytes, member_bytes=24,
+    store_bytes = check_size(axes, layout=layout, saved=saved, node_bytes=node_bytes, member_bytes=58,
                              max_bytes=max_bytes, disk=disk)
     sweep_spec = {
         "format": FORMAT,

@@ -8,13 +8,14 @@ import math
 import os
 import time
 import uuid
+import warnings
 from collections.abc import Callable, Mapping
 from pathlib import Path
 
 import numpy as np
 
 from .. import files
-from ..errors import InputError
+from ..errors import InputError, QualitativeFailureWarning
 from . import plan as _plan
 from .cluster import DEFAULT_CONNECT_TIMEOUT, Cluster, default_workers, scheduler_address
 from .errors import SweepError, SweepFailure
@@ -56,6 +57,9 @@ class SweepReport:
         failures: the first failed members (at most 5), each a dict: `member` (its index),
             `grid` (its grid values, name -> value), `step`, `time` (the failed step and its
             start time) and `residual` (of the failed solve; NaN when not reported).
+        unhealthy_members: members whose steps converged but whose motion went qualitatively
+            wrong (a verdict out of band at some node; the store's `healthy` is False), over all
+            done chunks; a :class:`~gnipy.QualitativeFailureWarning` says how many.
     """
 
     path: Path
@@ -72,6 +76,7 @@ class SweepReport:
     spec: dict = dataclasses.field(repr=False, compare=False)
     chunks_repaired: int = 0
     failures: tuple = dataclasses.field(default=(), repr=False, compare=False)
+    unhealthy_members: int = 0
 
     @property
     def complete(self) -> bool:
@@ -266,9 +271,18 @@ def run_sweep(
                         create_store(path, plan, mode)
                     computed, members = _compute(path, plan, todo, c, bar)
         group, _ = open_group(path, "out")
-        arrays = {k: group[k] for k in ("chunk_done", "result", "failed_step", "failed_time", "failed_residual")}
+        arrays = {k: group[k] for k in ("chunk_done", "result", "failed_step", "failed_time", "failed_residual",
+                                        "healthy")}
         done = read_done("out", path, arrays, plan.chunks)
         failed, failures = _failures(arrays, plan, done)
+        unhealthy = int(np.sum(~np.asarray(arrays["healthy"][...]).reshape(-1).astype(bool)
+                               & (np.asarray(arrays["result"][...]).reshape(-1) == 0)
+                               & plan.layout.member_mask(done).reshape(-1)))
+        if unhealthy:
+            warnings.warn(QualitativeFailureWarning(
+                f"sweep of {plan.spec['model']} with {plan.spec['method']}: {unhealthy} of {plan.members} members "
+                "converged but went QUALITATIVELY WRONG (a verdict left its band; see the store's variables "
+                f"healthy, hidden_momentum_first_time and energy_drift_first_time in {path})"), stacklevel=2)
         return SweepReport(
             path=path,
             members=plan.members,
@@ -284,6 +298,7 @@ def run_sweep(
             spec=plan.spec,
             chunks_repaired=repaired,
             failures=failures,
+            unhealthy_members=unhealthy,
         )
 
 

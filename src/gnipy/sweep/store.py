@@ -78,6 +78,9 @@ def template(plan: Plan):
     ds["time"].encoding["_FillValue"] = None  # CF: a coordinate variable has no missing values
     schema.apply(ds, sweep=True)
     s = plan.spec
+    from ..methods import get_method
+
+    method_obj = get_method(s["method"])
     created = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
     title = f"sweep of {s['model']} with {s['method']} over {' '.join(str(a) for a in plan.axes)}"
     ds.attrs.update(cf_attributes(s["model"], s["method"], created=created, title=title))
@@ -101,7 +104,10 @@ def template(plan: Plan):
         "grid_dims": json.dumps(list(grid)),
         "set_params": json.dumps(s["set_params"]),
         "params": json.dumps(s["params"]),
-        "start": "p+ = G v0",
+        "start": method_obj.start_label,
+        "method_settings": json.dumps(method_obj.settings(), sort_keys=True),
+        "backend": "per member: the variable native (the native backend where the step lowers and a chunk "
+                   "has enough trajectory-steps, else XLA)",
         "gnipy_version": __version__,
         "jax_version": _jax_version(),
         "created": created,
@@ -279,8 +285,9 @@ def read_done(argument: str, path: Path, arrays, chunks: int) -> np.ndarray:
 def old_format(argument: str, path: Path, spec, action: str) -> SweepError:
     """The SweepError for a store of an earlier format, which this version cannot `action`."""
     fmt = spec.get("format")
-    what = ("with a flat member axis (the grid values in grid_NAME)" if fmt == "gnipy-sweep/2"
-            else "with a flat member axis and without chunk checksums")
+    what = {"gnipy-sweep/3": "without the members' verdicts",
+            "gnipy-sweep/2": "with a flat member axis (the grid values in grid_NAME)"}.get(
+        fmt, "with a flat member axis and without chunk checksums")
     return SweepError(
         f"{argument}: the sweep store {str(path)!r} was written by an earlier gnipy (format {fmt}, {what}) "
         f"and cannot be {action} by this version; its data can still be read with "

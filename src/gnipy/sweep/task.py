@@ -2,12 +2,13 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-from ..errors import InputError
+from ..errors import InputError, QualitativeFailureWarning
 from .errors import SweepError
 from .grid import describe_member
 
@@ -79,8 +80,8 @@ def run_chunk(job: Mapping[str, Any], first: int, columns: Mapping[str, np.ndarr
 
     Returns:
         numpy arrays with a leading member axis of length `size`: `q, v, p, energy,
-        constraint_residual, valid, result, failed_step, failed_time, failed_residual`,
-        and `R` on Rⁿ × G. A failed member's `q, v, p, energy, constraint_residual, R` are
+        constraint_residual, valid, result, failed_step, failed_time, failed_residual`, the
+        verdicts of :func:`member_verdicts`, and `R` on Rⁿ × G. A failed member's `q, v, p, energy, constraint_residual, R` are
         NaN after its last good node (where `valid` is False); `failed_time` is the time
         at the start of its failed step and `failed_residual` the residual of the failed
         solve (both NaN for a member that did not fail, and the residual NaN when the
@@ -98,8 +99,11 @@ def run_chunk(job: Mapping[str, Any], first: int, columns: Mapping[str, np.ndarr
     B = len(next(iter(columns.values())))
     systems, q0, v0, R0 = member_inputs(job, columns, B)
     try:
-        sol = simulate(systems, job["method"], q0, v0, R0=R0, h=job["h"], steps=job["steps"],
-                       save_every=job["save_every"], project_v0=job["project_v0"], throw=False)
+        with warnings.catch_warnings():  # the sweep says how many members went wrong, once (its report)
+            warnings.simplefilter("ignore", QualitativeFailureWarning)
+            sol = simulate(systems, job["method"], q0, v0, R0=R0, h=job["h"], steps=job["steps"],
+                           save_every=job["save_every"], project_v0=job["project_v0"], throw=False,
+                           check_every_node=True)
     except InputError:
         # name the member at fault: check them one by one (only on this error path)
         for i in range(B):
@@ -132,4 +136,29 @@ def run_chunk(job: Mapping[str, Any], first: int, columns: Mapping[str, np.ndarr
     }
     if sol.R is not None:
         out["R"] = blank(sol.R)
+    out["native"] = np.full(B, sol.backend == "native")
+    out.update(member_verdicts(sol, B))
     return {k: np.asarray(v)[:size] for k, v in out.items()}
+
+
+def member_verdicts(sol, B: int) -> dict[str, np.ndarray]:
+    """Each member's verdicts from every node of its run (:mod:`gnipy.monitor`): `healthy`, the
+    times a verdict left its band (NaN: never) and the largest ratios (NaN: not diagnosed)."""
+    from .. import monitor
+
+    rows = np.asarray(sol.monitor, dtype=np.float64).reshape(B, monitor.SIZE)
+    gni = sol.hidden_momentum is not None
+    hidden = [monitor.hidden_verdict(r) if gni else None for r in rows]
+    energy = [monitor.energy_verdict(r) for r in rows]
+
+    def field(verdicts, name):
+        return np.array([np.nan if v is None or getattr(v, name) is None else getattr(v, name) for v in verdicts],
+                        dtype=np.float64)
+
+    converged = np.asarray(sol.results).reshape(B) == 0
+    in_band = np.array([all(v is None or v.in_band for v in pair) for pair in zip(hidden, energy)], dtype=bool)
+    return {"healthy": converged & in_band,
+            "hidden_momentum_first_time": field(hidden, "first_time"),
+            "hidden_momentum_max_band_ratio": field(hidden, "max_band_ratio"),
+            "energy_drift_first_time": field(energy, "first_time"),
+            "energy_drift_max": field(energy, "max_drift")}
