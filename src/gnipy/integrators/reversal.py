@@ -32,7 +32,36 @@ from .base import Integrator, MethodError
 __all__ = ["Reversed", "ForwardOnly", "backward", "symmetric_methods"]
 
 
-class Reversed(Integrator):
+class _Wrapped(Integrator):
+    """A method run through a wrapper (:class:`Reversed`, :class:`ForwardOnly`): its name, order,
+    preparation, start and settings are the wrapped method's."""
+
+    method: Integrator
+
+    @property
+    def name(self) -> str:  # type: ignore[override]
+        return self.method.name
+
+    @property
+    def order(self):  # type: ignore[override]
+        return self.method.order
+
+    @property
+    def can_change_step(self) -> bool:  # type: ignore[override]
+        return self.method.can_change_step
+
+    def prepare(self, system, q0):
+        return dataclasses.replace(self, method=self.method.prepare(system, q0))
+
+    @property
+    def start_label(self) -> str:
+        return self.method.start_label
+
+    def settings(self) -> dict:
+        return self.method.settings()
+
+
+class Reversed(_Wrapped):
     """The exact inverse of a symmetric `method`: each step with h < 0 is $\\sigma\\circ\\Phi_h\\circ\\sigma$.
 
     Arguments:
@@ -45,20 +74,8 @@ class Reversed(Integrator):
     dynamic: bool = eqx.field(static=True, default=False)
 
     @property
-    def name(self) -> str:  # type: ignore[override]
-        return self.method.name
-
-    @property
-    def order(self):  # type: ignore[override]
-        return self.method.order
-
-    @property
     def symmetric(self) -> bool:  # type: ignore[override]
         return True
-
-    @property
-    def can_change_step(self) -> bool:  # type: ignore[override]
-        return self.method.can_change_step
 
     def _orient(self, system, state, h):
         flipped = self.method.reverse(system, state)
@@ -76,16 +93,6 @@ class Reversed(Integrator):
                 "F(q, v, u, t): forced systems run forward in time only (h > 0)"
             )
         self.method.check(system, q0)
-
-    def prepare(self, system, q0):
-        return dataclasses.replace(self, method=self.method.prepare(system, q0))
-
-    @property
-    def start_label(self) -> str:
-        return self.method.start_label
-
-    def settings(self) -> dict:
-        return self.method.settings()
 
     def init(self, system, q0, v0, h):
         """The method's start for a step of |h| (states keep the forward orientation)."""
@@ -113,38 +120,14 @@ class Reversed(Integrator):
         return self.method.hidden_momentum(system, state, jnp.abs(h))
 
 
-class ForwardOnly(Integrator):
+class ForwardOnly(_Wrapped):
     """A method that is not symmetric on the system, run with a traced h (under `jax.jit`): its
     steps are the method's own when h > 0 and fail when h < 0 (:func:`backward`: its formula at
     $-h$ is not the inverse of its steps with h). With `simulate(..., throw=True)`, the only
     choice under a transformation, the failed step is raised at run time."""
 
-    method: Integrator
-
-    @property
-    def name(self) -> str:  # type: ignore[override]
-        return self.method.name
-
-    @property
-    def order(self):  # type: ignore[override]
-        return self.method.order
-
-    @property
-    def can_change_step(self) -> bool:  # type: ignore[override]
-        return self.method.can_change_step
-
     def check(self, system, q0) -> None:
         self.method.check(system, q0)
-
-    def prepare(self, system, q0):
-        return dataclasses.replace(self, method=self.method.prepare(system, q0))
-
-    @property
-    def start_label(self) -> str:
-        return self.method.start_label
-
-    def settings(self) -> dict:
-        return self.method.settings()
 
     def init(self, system, q0, v0, h):
         return self.method.init(system, q0, v0, h)
