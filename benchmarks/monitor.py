@@ -36,7 +36,7 @@ def _loops(system, method_name, q0, v0, h):
     from gnipy.native.backend import native_loop
     from gnipy.native.program import build_loop
     from gnipy.preparation import prepare
-    from gnipy.stepping import _carry0, _stepper, run_nodes
+    from gnipy.stepping import initial_carry, loop_step, run_nodes
 
     prep = prepare(system, get_method(method_name), q0, v0, None, False, None)
     method, core = prep.method, prep.core
@@ -54,7 +54,7 @@ def _loops(system, method_name, q0, v0, h):
     leaves = [np.ravel(np.asarray(x, np.float64)) for x in jax.tree_util.tree_leaves(state0)]
     flat = np.concatenate(leaves)
     counters = np.array([0.0, -1.0, 0.0, 0.0, 0.0])
-    bare = build_loop(_stepper(method, core), _carry0(state0), h)
+    bare = build_loop(loop_step(method, core), initial_carry(state0), h)
     carries = {True: np.concatenate([flat, counters, watch0]), False: np.concatenate([flat, counters])}
     for watched, lp in ((False, bare), (True, loop)):
         runs[("native", watched)] = lambda S, lp=lp, c=carries[watched]: lp.run(c, h, np.array([S], np.int32))

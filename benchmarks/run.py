@@ -47,6 +47,9 @@ What is measured (all gnipy runs in float64, the step size is h = 0.01 unless sa
    backend (`backend="xla"`) explicitly.
 8. **monitor** -- what checking the verdicts at every node costs (issue 29): µs/step of the same
    loop without and with the check, on both backends (:mod:`benchmarks.monitor`).
+9. **startup** -- what `import gnipy` (net of the interpreter, target ≤ 1.5 s) and the `gni`
+   command (``gni --help``, ``gni methods``) cost in fresh processes, best of 5, and which optional
+   packages `import gnipy` loads (none; issue 30, :mod:`benchmarks.startup`).
 6. **GPU** -- if JAX sees a GPU, sections 1 and 2 are run on it as well (the CPU rows are always
    run on the CPU device); the subprocess sections (3, 4) run on the CPU (``JAX_PLATFORMS=cpu``).
 
@@ -121,7 +124,7 @@ QUICK = Config(
     accuracy_T=(100.0,), accuracy_h=(0.01,), dop_reps=3, idle_sample_s=0.3,
 )
 
-SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy", "native", "monitor")
+SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy", "native", "monitor", "startup")
 
 #: (case, method) of section 1; the case names are those of benchmarks.numpy_gni.
 PER_STEP_CASES = (
@@ -1077,6 +1080,9 @@ def targets(results: dict) -> list[list[str]]:
     from benchmarks.native import native_targets
 
     rows += native_targets(results, _how_far, LABELS, g, mrate)
+    from benchmarks.startup import startup_targets
+
+    rows += startup_targets(results, _how_far, g)
     return rows
 
 
@@ -1154,6 +1160,12 @@ def _bench_monitor(cfg, rep, results, load) -> None:
     bench_monitor(cfg, rep, results, load)
 
 
+def _bench_startup(cfg, rep, results, load) -> None:
+    from benchmarks.startup import bench_startup
+
+    bench_startup(cfg, rep, results, load)
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
@@ -1193,6 +1205,7 @@ def main(argv=None) -> int:
         "accuracy": lambda load: bench_accuracy(cfg, rep, devices, results, load),
         "native": lambda load: _bench_native(cfg, rep, results, load),
         "monitor": lambda load: _bench_monitor(cfg, rep, results, load),
+        "startup": lambda load: _bench_startup(cfg, rep, results, load),
     }
     for key in SECTIONS:
         if key not in args.sections:

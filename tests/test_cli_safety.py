@@ -180,13 +180,14 @@ def _stub_reproduction(monkeypatch):
     import gnipy.experiments.theorems as th
     from gnipy.experiments import figures as F
     from gnipy.experiments import reproduce as rp
+    from gnipy.experiments.figure_tools import write_figure
 
     def figure(name):
         def make(out_dir, quick, progress=None):
             fig = Figure(figsize=(1.0, 0.8))
             FigureCanvasAgg(fig)
             fig.subplots().plot([0, 1], [1, 0])
-            files = F._write(fig, out_dir, name)  # the real writer: atomic, ownership rules
+            files = write_figure(fig, out_dir, name)  # the real writer: atomic, ownership rules
             return F.FigureResult(name, name, "stub", files, {}, [], [])
 
         return make

@@ -20,6 +20,7 @@ import pytest
 
 import gnipy
 from gnipy import InputError, MethodError, SaveAt, make_system, simulate
+from gnipy.compilation import jit as gnipy_jit
 
 #: numerics, not verdicts: simulate checks the saved nodes only (tests/conftest.py)
 CHECK_EVERY_NODE = False
@@ -273,7 +274,12 @@ def test_backward_refused_with_traced_controls(sleigh):
 # ---------------------------------------------------------------------------------------------
 def test_gradient_with_respect_to_the_controls(sleigh):
     """jax.grad of a final-state cost through simulate(..., controls=U) (implicit steps: the
-    implicit function theorem) against central differences."""
+    implicit function theorem) against central differences of the cost (plain simulate runs).
+
+    The gradient is compiled as one program (gnipy's jit, as simulate's own programs): taken
+    eagerly, jax.grad costs 12 s of small compilations and 3 s of tracing per call; under a
+    transformation simulate takes the same path (gnipy.transformed) either way, and the refusals
+    of jax.grad outside jit are tested below."""
     n, h = 24, 0.05
     U0 = 0.5 * np.sin(np.arange(n) * 0.3)[:, None]
     target = np.array([0.8, 0.4, 0.9])
@@ -285,7 +291,7 @@ def test_gradient_with_respect_to_the_controls(sleigh):
         sol = simulate(sleigh, "gni-trapezoid", q0, v0, h=h, steps=n, controls=U, saveat=SaveAt(t1=True))
         return jnp.sum((sol.q[-1] - target) ** 2) + jnp.sum(sol.v[-1] ** 2)
 
-    g = np.asarray(jax.grad(cost)(jnp.asarray(U0)))
+    g = np.asarray(gnipy_jit(jax.grad(cost))(jnp.asarray(U0)))
     assert np.max(np.abs(g)) > 1e-3
     eps = 1e-5
     for k in (0, n // 2, n - 2):
@@ -308,7 +314,9 @@ def test_held_pushes_from_a_later_start_with_a_shortened_last_step_are_exact():
     q0 = np.array([0.1, -0.2, phi0])
     v0 = s0 * np.array([np.cos(phi0), np.sin(phi0), 0.0])
     t_final = t0 + 8.3 * h
-    sol = simulate(sysf, "gni-trapezoid", q0, v0, h=h, t_final=t_final, t0=t0, controls=c)
+    # every node and its integrator state (to continue from step 4 below without another compiled run)
+    sol = simulate(sysf, "gni-trapezoid", q0, v0, h=h, t_final=t_final, t0=t0, controls=c,
+                   saveat=SaveAt(steps=True, states=True))
     lengths = np.array([h] * 8 + [0.3 * h])  # the steps' durations
     speed = s0 + np.concatenate([[0.0], np.cumsum(c * lengths / m)])
     dist = np.concatenate([[0.0], np.cumsum(speed[:-1] * lengths + 0.5 * c / m * lengths**2)])
@@ -316,9 +324,9 @@ def test_held_pushes_from_a_later_start_with_a_shortened_last_step_are_exact():
     assert np.allclose(np.asarray(sol.t), t0 + np.concatenate([[0.0], np.cumsum(lengths)]), atol=1e-15)
     assert np.max(np.abs(np.asarray(sol.q) - q)) < 1e-14
     assert np.max(np.abs(np.asarray(sol.v)[:, 0] - np.cos(phi0) * speed)) < 1e-14
-    first = simulate(sysf, "gni-trapezoid", q0, v0, h=h, steps=4, t0=t0, controls=c[:4])
-    rest = simulate(sysf, "gni-trapezoid", h=h, t_final=t_final, t0=float(first.t[-1]), controls=c[4:],
-                    state0=first.final_state)
+    state4 = jax.tree_util.tree_map(lambda x: x[4], sol.states)
+    rest = simulate(sysf, "gni-trapezoid", h=h, t_final=t_final, t0=float(sol.t[4]), controls=c[4:],
+                    state0=state4)
     assert np.max(np.abs(np.asarray(rest.q) - np.asarray(sol.q)[4:])) < 1e-15
 
 

@@ -11,7 +11,7 @@ from test_doc_examples import PYTHON, RUNNABLE_PAGES, SHELL, _blocks
 README = pathlib.Path(__file__).resolve().parents[1] / "README.md"
 
 SET_UP = [
-    "python3 -m venv .venv && . .venv/bin/activate && pip install . && gni reproduce",
+    "python3 -m venv .venv && . .venv/bin/activate && pip install '.[all]' && gni reproduce",
     "python3 -m venv .venv && . .venv/bin/activate && pip install '.[test]' && pytest",
 ]
 

@@ -346,16 +346,11 @@ def member_conservation(system, core, batched_system: bool, b0, *, gni_family: b
     invariant = np.ones(B, dtype=bool) if not system.is_affine else ~np.any(Y.reshape(B, -1) != 0.0, axis=1)
     theorem = invariant & ~np.any(dG.reshape(B, -1) != 0.0, axis=1) & ~np.any(gradV.reshape(B, -1) != 0.0, axis=1)
     if system.group is not None:
-        from .lie_groups import SO3
-
         n = system.n
         scale = np.maximum(np.max(np.abs(G.reshape(B, -1)), axis=1), 1e-300)
-        if isinstance(system.group, SO3):
-            Gg = G[:, n:, n:]
-            theorem &= (np.max(np.abs(G[:, :n, n:]).reshape(B, -1), axis=1, initial=0.0) <= 1e-14 * scale) & (
-                np.max(np.abs(Gg - Gg[:, :1, :1] * np.eye(3)).reshape(B, -1), axis=1) <= 1e-14 * scale)
-        else:
-            theorem &= False
+        # no coupling to R^n, and a group block the group knows to be bi-invariant (cI on SO(3))
+        theorem &= (np.max(np.abs(G[:, :n, n:]).reshape(B, -1), axis=1, initial=0.0) <= 1e-14 * scale) & (
+            system.group.is_bi_invariant(G[:, n:, n:], 1e-14 * scale))
     sentences = tuple(_sentence(False, bool(inv), bool(th), names, conserves_energy, gni_family)
                       for inv, th in zip(invariant, theorem))
     return sentences, invariant
@@ -382,10 +377,9 @@ def _member_values(system, batched_system, b):
 
 def energy_theorem_applies(system, b0) -> bool:
     """Whether the hypotheses of the paper's energy theorem hold: V = 0, linear constraints, and a
-    metric that is constant on $\\mathbb{R}^n$ or, with a group part, constant with the group block
-    $c I$ on SO(3) (bi-invariant) and no coupling to $\\mathbb{R}^n$ (host side)."""
-    from .lie_groups import SO3
-
+    metric that is constant on $\\mathbb{R}^n$ or, with a group part, constant with a group block
+    the group knows to be bi-invariant (`group.is_bi_invariant`: $c I$ on SO(3)) and no coupling to
+    $\\mathbb{R}^n$ (host side)."""
     if not energy_is_invariant(system, b0) or not system.has_constant_metric(b0):
         return False
     G, gradV, _ = (np.asarray(a) for a in _sampled_values(system, b0))
@@ -393,13 +387,10 @@ def energy_theorem_applies(system, b0) -> bool:
         return False
     if system.group is None:
         return True
-    if not isinstance(system.group, SO3):
-        return False
     n = system.n
-    Gg = G[n:, n:]
     scale = max(float(np.max(np.abs(G))), 1e-300)
     return bool(np.max(np.abs(G[:n, n:]), initial=0.0) <= 1e-14 * scale
-                and np.max(np.abs(Gg - Gg[0, 0] * np.eye(3))) <= 1e-14 * scale)
+                and system.group.is_bi_invariant(G[n:, n:], 1e-14 * scale))
 
 
 def energy_is_invariant(system, b0) -> bool:
@@ -446,7 +437,7 @@ def diagnostic_fields(system, core, b0, nodes, h, *, batched_system: bool = Fals
         out = dict(cached[key])
     else:
         out = {"conserved": conserved_quantity(system, b0, gni_family=gni_family,
-                                               invariants=registered_invariants(system.name),
+                                               invariants=registered_invariants(system.model),
                                                conserves_energy=conserves_energy),
                "energy_invariant": energy_is_invariant(system, b0)}
         if cached is not None:

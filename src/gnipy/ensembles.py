@@ -28,6 +28,7 @@ from .sharding import member_devices, pad_members, shard_map
 from .spaces import Point
 from .errors import InputError, SolverFailure
 from .inputs import refuse_text_or_bool
+from .run_arguments import member_initial_conditions
 from .solution import RESULTS, Solution
 from .stepping import run_nodes
 from .system import System, real_array
@@ -221,15 +222,10 @@ def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
         bad = ~np.all(np.isfinite(R), axis=(1, 2))
         if bad.any():
             raise InputError(f"R0[{int(np.argmax(bad))}]: contains NaN or infinite values")
-        from .lie_groups import SO3
-
-        if isinstance(system.group, SO3):
-            err = np.max(np.abs(np.einsum("bji,bjk->bik", R, R) - np.eye(3)), axis=(1, 2))
-            det = np.linalg.det(R)
-            bad = (err > 1e-10) | (det <= 0)
-            if bad.any():
-                i = int(np.argmax(bad))
-                raise InputError(f"R0[{i}]: not a rotation matrix (|RᵀR − I| = {err[i]:.3e}, det = {det[i]:.3g})")
+        bad = ~system.group.is_element(R)  # e.g. rotation matrices on SO(3)
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise InputError(f"R0[{i}]: {system.group.why_not_element(R[i])}")
     return B, q0, v0, R
 
 
@@ -304,22 +300,6 @@ def check_batch(system: System, batched: bool, q0, v0, R0, *, project_v0: bool =
             )
         v0 = np.where(bad[:, None], d["projected"], v0)
     return b0, jnp.asarray(v0)
-
-
-def member_initial_conditions(systems: Sequence[System], q0, v0, R0):
-    """`(q0, v0, R0)` for a batch of systems: each of q0, v0, R0 that is None is filled with every
-    member's own documented default (its `System.defaults`, built for its parameter values, so on
-    its own constraints), stacked along a leading member axis; what is given is returned as given."""
-    from .simulate import default_initial_condition
-
-    filled = [default_initial_condition(s, q0, v0, R0) for s in systems]
-
-    def stacked(j):
-        return np.stack([np.asarray(ic[j], dtype=np.float64) for ic in filled])
-
-    R_missing = R0 is None and any(ic[2] is None for ic in filled)
-    return (stacked(0) if q0 is None else filled[0][0], stacked(1) if v0 is None else v0,
-            R0 if R0 is not None or R_missing else stacked(2))
 
 
 def member_params(systems: Sequence[System]) -> dict[str, np.ndarray]:
@@ -421,7 +401,7 @@ def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, 
     gni_family = jax.eval_shape(lambda: method.hidden_momentum(
         system.without_metadata(), jax.tree_util.tree_map(lambda a: a[0], state0), hj)) is not None
     conserved, invariant = member_conservation(system, core, sys_batched, b0, gni_family=gni_family,
-                                               invariants=registered_invariants(system.name),
+                                               invariants=registered_invariants(system.model),
                                                conserves_energy=bool(getattr(method, "conserves_energy", False)))
     monitor0 = initial(h, (n + partial) * h, t0, energy_applies=invariant, members=B)
     out = None

@@ -27,7 +27,12 @@ def concrete_value(x):
         return None
 
 
-def _number(x) -> float:
+def is_traced(*trees) -> bool:
+    """Whether any leaf of the pytrees `trees` is a JAX tracer (the call is under a transformation)."""
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
+
+
+def provenance_number(x) -> float:
     """A provenance number: `float(x)`, or for a value traced by JAX (a parameter being
     differentiated) its value where known now, else NaN (the arrays of the functions carry it)."""
     c = concrete_value(x)
@@ -100,6 +105,14 @@ def finite_number(name: str, x) -> float:
     return real_number(name, x)
 
 
+def positive_integer(name: str, x, error: type[InputError] = InputError) -> int:
+    """`x` as an int of at least 1; `error` (:class:`InputError` or a subclass) naming `name` otherwise:
+    a bool, a float (even a whole one) or a string is not an integer here."""
+    if isinstance(x, (bool, np.bool_)) or not isinstance(x, (int, np.integer)) or x < 1:
+        raise error(f"{name}: must be a positive integer, got {x!r}")
+    return int(x)
+
+
 def whole_number(name: str, x, low: int, high: int) -> int:
     """`x` as an int from `low` to `high`; :class:`InputError` naming `name` otherwise (a bool, a
     float or a string is not an integer here)."""
@@ -116,7 +129,8 @@ def _short(x, limit: int = 80) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
-def _fmt(x: float) -> str:
+def format_scientific(x: float) -> str:
+    """`x` in scientific notation with 4 significant digits (`1.234e-05`), as error messages quote values."""
     return f"{float(x):.3e}"
 
 
@@ -159,7 +173,8 @@ def require_float64() -> None:
         )
 
 
-def _as_vector(name: str, x, n: int) -> np.ndarray:
+def finite_vector(name: str, x, n: int) -> np.ndarray:
+    """`x` as a float64 vector of length `n` with finite entries; :class:`InputError` naming `name` otherwise."""
     a = real_array(name, x, f"{n} real numbers")
     if a.ndim != 1 or a.shape[0] != n:
         raise InputError(f"{name}: expected a vector of length {n}, got shape {a.shape}")

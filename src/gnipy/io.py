@@ -42,13 +42,14 @@ file never is.
 
 from __future__ import annotations
 
-import datetime as _dt
 import json
 import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from .extras import require
+from .file_attributes import attribute_value, cf_attributes, provenance
 from .files import OutputError, atomic_write, check_destination
 from .schema import (
     CONVENTIONS,
@@ -65,39 +66,6 @@ __all__ = ["OutputError", "check_writable", "write_netcdf", "read_netcdf", "veri
 
 #: The global attribute that holds a result file's data checksum.
 CHECKSUM_ATTR = "gnipy_checksum"
-
-
-def _attr_value(v):
-    """A netCDF-compatible attribute value (numbers, strings, lists of numbers; others as JSON)."""
-    import numpy as np
-
-    if isinstance(v, bool):
-        return int(v)
-    if isinstance(v, (int, float, str, np.integer, np.floating)):
-        return v
-    if isinstance(v, (list, tuple, np.ndarray)):
-        a = np.asarray(v)
-        if a.dtype.kind in "iuf" and a.ndim == 1 and a.size:
-            return a.astype(np.float64)
-        if a.dtype.kind in "iuf":
-            return json.dumps(a.tolist())
-    if isinstance(v, Mapping):
-        return json.dumps({str(k): (float(x) if isinstance(x, (int, float)) else str(x)) for k, x in v.items()})
-    return str(v)
-
-
-def cf_attributes(model: str, method: str, *, title: str | None = None, created: str | None = None) -> dict[str, str]:
-    """The CF global attributes of a result of `model` with `method`: `Conventions`, `title`,
-    `source` (gnipy and its version) and `history` (when and by what it was created)."""
-    from .version import __version__
-
-    created = created or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
-    return {
-        "Conventions": CONVENTIONS,
-        "title": title or f"{model} integrated with {method}",
-        "source": f"gnipy {__version__}",
-        "history": f"{created} gnipy {__version__}: {method} run of {model}",
-    }
 
 
 def result_times(ds):
@@ -127,30 +95,8 @@ def upgrade_layout(ds):
     return ds.drop_vars(["t", *(["time"] if "time" in ds.coords else [])]).assign_coords(coords)
 
 
-def _jax_version() -> str:
-    try:
-        import jax
-
-        return str(jax.__version__)
-    except Exception:  # pragma: no cover
-        return "unknown"
-
-
-def provenance(**extra) -> dict[str, Any]:
-    """Base provenance attributes: gnipy and JAX versions and creation time (UTC), plus `extra`."""
-    from .version import __version__
-
-    attrs = {
-        "gnipy_version": __version__,
-        "jax_version": _jax_version(),
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-    }
-    attrs.update(extra)
-    return attrs
-
-
 def _as_dataset(obj):
-    import xarray as xr
+    xr = require("xarray", extra="files")
 
     from .solution import Solution
 
@@ -176,7 +122,7 @@ def netcdf_checksum(path) -> str:
     """The :class:`gnipy.files.DataChecksum` of a netCDF file's variables as stored (raw values,
     no masking or scaling; by name; attributes not included), read in slices along the first
     axis so memory stays bounded whatever the file's size."""
-    import netCDF4
+    netCDF4 = require("netCDF4", extra="files")
     import numpy as np
 
     from .files import DataChecksum
@@ -203,7 +149,7 @@ def netcdf_checksum(path) -> str:
 def stamp_checksum(path) -> str:
     """Compute :func:`netcdf_checksum` of the netCDF file `path` and store it in its global
     attribute `gnipy_checksum` (in place); returns it."""
-    import netCDF4
+    netCDF4 = require("netCDF4", extra="files")
 
     digest = netcdf_checksum(path)
     with netCDF4.Dataset(os.fspath(path), "a") as nc:
@@ -252,7 +198,7 @@ def write_netcdf(solution_or_dataset, path, attrs: Mapping[str, Any] | None = No
         ds["time"].encoding["_FillValue"] = None  # CF: a coordinate variable has no missing values
     for k, v in (attrs or {}).items():
         ds.attrs[str(k)] = v
-    ds.attrs = {k: _attr_value(v) for k, v in ds.attrs.items()}
+    ds.attrs = {k: attribute_value(v) for k, v in ds.attrs.items()}
 
     ds.attrs.pop(CHECKSUM_ATTR, None)
 
@@ -273,7 +219,7 @@ def read_netcdf(path):
     Raises:
         OutputError: (an `OSError`) the file does not exist or cannot be read; the message names it.
     """
-    import xarray as xr
+    xr = require("xarray", extra="files")
 
     path = Path(os.fspath(path))
     if not path.is_file():
@@ -297,7 +243,7 @@ def verify_netcdf(path) -> tuple[bool, str]:
     Raises:
         OutputError: the file does not exist or cannot be read as netCDF.
     """
-    import netCDF4
+    netCDF4 = require("netCDF4", extra="files")
 
     path = Path(os.fspath(path))
     if not path.is_file():

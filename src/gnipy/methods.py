@@ -132,4 +132,4 @@ def get_method(name: str):
     return _METHODS[name][1]()
 
 
-set_method_lookup(get_method)  # the registry's default passes over methods that cannot run a system
+set_method_lookup(get_method, method_names)  # the registry's default passes over methods that cannot run a system

@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from .extras import require
 from .analysis.orders import ROUND_OFF, fit_points, fitted_order
 
 __all__ = [
@@ -57,7 +58,7 @@ def as_dataset(obj):
         ValueError: the Dataset has no times (a float coordinate `time`, or a variable `t`): it is
             not a gnipy result.
     """
-    import xarray as xr
+    xr = require("xarray", extra="plots")
 
     from .io import upgrade_layout
     from .solution import Solution
@@ -75,7 +76,7 @@ def as_dataset(obj):
 def _new_axes(ax, figsize=(5.5, 4.5)):
     if ax is not None:
         return ax
-    from matplotlib.figure import Figure
+    Figure = require("matplotlib.figure", extra="plots").Figure
 
     fig = Figure(figsize=figsize, layout="constrained")
     return fig.add_subplot()
@@ -224,7 +225,7 @@ def plot_solution(obj, path=None, *, title: str | None = None, overwrite: bool =
     Returns:
         The `matplotlib.figure.Figure`.
     """
-    from matplotlib.figure import Figure
+    Figure = require("matplotlib.figure", extra="plots").Figure
 
     ds = as_dataset(obj)
     fig = Figure(figsize=(15, 4.6), layout="constrained")
@@ -321,7 +322,7 @@ def plot_convergence(
 def _control_dataset(obj):
     """The result Dataset of a controlled run: a :class:`gnipy.control.ControlResult` (its
     solution and controls), or a Dataset with the inputs `u` (a file of `gni control`)."""
-    import xarray as xr
+    xr = require("xarray", extra="plots")
 
     if hasattr(obj, "controls") and hasattr(obj, "solution"):
         ds = obj.solution.to_xarray()
@@ -376,7 +377,7 @@ def plot_control(obj, path=None, *, title: str | None = None, overwrite: bool = 
     Returns:
         The `matplotlib.figure.Figure`.
     """
-    from matplotlib.figure import Figure
+    Figure = require("matplotlib.figure", extra="plots").Figure
 
     ds = _control_dataset(obj)
     has_R = "R" in ds and np.asarray(ds["R"].values).shape[-1] == 3 and not _is_se2(np.asarray(ds["R"].values))
@@ -428,7 +429,7 @@ def plot_fit(result, path=None, *, title: str | None = None, overwrite: bool = F
     Returns:
         The `matplotlib.figure.Figure`.
     """
-    from matplotlib.figure import Figure
+    Figure = require("matplotlib.figure", extra="plots").Figure
 
     obs = result.observations
     sol = result.solution

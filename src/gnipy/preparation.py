@@ -16,13 +16,12 @@ from __future__ import annotations
 
 import functools
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from .errors import InputError
-from .stepping import run_nodes
+from .stepping import run_nodes, split_arrays
 
 __all__ = ["Prepared", "prepare", "state_point", "node_padding"]
 
@@ -46,24 +45,6 @@ def _key_part(x):
     if a.dtype == object:
         raise TypeError
     return a.dtype.str, a.shape, a.tobytes()
-
-
-def _split(tree):
-    """`(leaves, structure_key, rebuild)`: the array leaves of `tree` (as jax arrays), a hashable
-    key of everything else (None when a static part cannot be hashed), and `rebuild(leaves)`."""
-    dyn, static = eqx.partition(tree, eqx.is_array)
-    leaves, treedef = jax.tree_util.tree_flatten(dyn)
-    static_leaves, static_def = jax.tree_util.tree_flatten(static)
-    key = (treedef, static_def, tuple(static_leaves))
-    try:
-        hash(key)
-    except TypeError:
-        key = None
-
-    def rebuild(ls):
-        return eqx.combine(jax.tree_util.tree_unflatten(treedef, ls), static)
-
-    return [jnp.asarray(a) for a in leaves], key, rebuild
 
 
 def _program(key, make):
@@ -101,8 +82,8 @@ class Prepared:
 
     def _split(self):
         if self._leaves is None:
-            self._leaves, self._key, self._rebuild = _split((self.method, self.core))
-            self._sys_leaves, self._sys_key, self._sys_rebuild = _split(self.core)
+            self._leaves, self._key, self._rebuild = split_arrays((self.method, self.core))
+            self._sys_leaves, self._sys_key, self._sys_rebuild = split_arrays(self.core)
             self._start = None if self.v0 is None else (
                 jax.tree_util.tree_map(jnp.asarray, self.b0), jnp.asarray(self.v0, jnp.float64))
 
@@ -225,7 +206,7 @@ def _state_reading(system, method):
     program shared by methods and systems of one structure). Kept per structure: runs continued
     from a state (streamed runs, the figures' starts) then trace nothing again."""
     core = system.without_metadata()
-    leaves, key, rebuild = _split((method, core))
+    leaves, key, rebuild = split_arrays((method, core))
     hit = _READINGS.get(key) if key is not None else None
     if hit is None:
         b_ref = system.initial_point(np.zeros(system.n)) if system.defaults is None else system.initial_point(

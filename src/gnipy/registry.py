@@ -3,7 +3,8 @@ solution or invariants where known.
 
 The zoo (:mod:`gnipy.models`) registers its models here; the driver (:func:`gnipy.simulate`, the
 streamed runs, the sweeps) looks up a system's default method and registered invariants by its
-name, so it depends on this table and not on the models above it."""
+`model` (:attr:`gnipy.System.model`: set on the systems the zoo builds, None on a System written
+by hand whatever its `name`), so it depends on this table and not on the models above it."""
 
 from __future__ import annotations
 
@@ -16,8 +17,8 @@ import jax
 from .errors import InputError
 from .system import System
 
-__all__ = ["ModelSpec", "FALLBACK_METHOD", "FALLBACK_METHODS", "set_default_methods", "set_method_lookup", "register",
-           "get_model", "model_names", "make_system", "registered_invariants", "default_method_for"]
+__all__ = ["ModelSpec", "FALLBACK_METHOD", "FALLBACK_METHODS", "set_default_methods", "set_method_lookup", "method_table",
+           "register", "get_model", "model_names", "make_system", "registered_invariants", "default_method_for"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -147,17 +148,41 @@ def set_default_methods(table: Mapping[str, tuple[str, str]]) -> None:
 #: table, which sets it): how :func:`default_method_for` asks a method whether it can run a system.
 _METHOD_LOOKUP: Callable[[str], Any] | None = None
 
+#: The names of the registered methods (:func:`gnipy.methods.method_names`, set with the lookup).
+_METHOD_NAMES: Callable[[], list[str]] | None = None
 
-def set_method_lookup(lookup: Callable[[str], Any]) -> None:
-    """Record how a method name becomes an integrator object (set by :mod:`gnipy.methods`)."""
-    global _METHOD_LOOKUP
+
+def set_method_lookup(lookup: Callable[[str], Any], names: Callable[[], list[str]] | None = None) -> None:
+    """Record how a method name becomes an integrator object and, with `names`, which names the
+    registered methods have (set by :mod:`gnipy.methods`)."""
+    global _METHOD_LOOKUP, _METHOD_NAMES
     _METHOD_LOOKUP = lookup
+    _METHOD_NAMES = names
+
+
+def method_table() -> tuple[Callable[[str], Any], Callable[[], list[str]]]:
+    """`(get_method, method_names)` of :mod:`gnipy.methods` (a layer above the integrators, which
+    ask it which registered methods there are), as :func:`set_method_lookup` recorded them."""
+    if _METHOD_LOOKUP is None or _METHOD_NAMES is None:
+        from .errors import MethodError
+
+        raise MethodError("the method table (gnipy.methods) is not loaded; import gnipy")
+    return _METHOD_LOOKUP, _METHOD_NAMES
 
 
 def register(spec: ModelSpec) -> ModelSpec:
-    """Add a model to the registry (names are unique)."""
+    """Add a model to the registry (names are unique); returns the registered spec, whose `build`
+    returns its systems recorded as the model (:meth:`gnipy.System.as_model`): the model's
+    invariants and measured default method apply to them, and to no System that only shares its
+    name."""
     if spec.name in _REGISTRY:
         raise ValueError(f"model {spec.name!r} registered twice")
+    build, model = spec.build, spec.name
+
+    def build_as_model(params):
+        return build(params).as_model(model)
+
+    spec = dataclasses.replace(spec, build=build_as_model)
     _REGISTRY[spec.name] = spec
     return spec
 
@@ -179,20 +204,22 @@ def make_system(name: str, **params) -> System:
     return get_model(name).system(**params)
 
 
-def registered_invariants(name: str) -> tuple[str, ...]:
-    """The names of the invariants registered for the model called `name` (none for other systems)."""
+def registered_invariants(name: str | None) -> tuple[str, ...]:
+    """The names of the invariants registered for the model called `name`: a system's are those
+    of its `model` (none for a System written by hand, whatever its name)."""
     spec = _REGISTRY.get(name)
     return tuple(spec.invariants) if spec is not None else ()
 
 
-def default_method_for(system_name: str, system: System | None = None, b0=None) -> str:
+def default_method_for(system_name: str | None, system: System | None = None, b0=None) -> str:
     """The method that runs `system` when none is named: the zoo model `system_name`'s measured
-    default (:attr:`ModelSpec.default_method`), or for other systems :data:`FALLBACK_METHOD`.
+    default (:attr:`ModelSpec.default_method`), or for other systems :data:`FALLBACK_METHOD`. For a
+    System, `system_name` is its `model` (None for a System written by hand, whatever its name).
 
     With `system` (the System to run; `b0` its base point, default the system's documented initial
     condition or the origin), the first of these candidates that can run it, then of
-    :data:`FALLBACK_METHODS`: a method whose `check` refuses the system (e.g. a System named like a
-    zoo model whose default needs a constant metric) is passed over. When none can, the first
+    :data:`FALLBACK_METHODS`: a method whose `check` refuses the system (e.g. a zoo model given a
+    metric that is not constant, where its default needs one) is passed over. When none can, the first
     candidate (running it raises the method's own error).
     """
     spec = _REGISTRY.get(system_name)

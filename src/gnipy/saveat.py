@@ -14,7 +14,7 @@ import math
 import numpy as np
 
 from .errors import InputError
-from .inputs import real_array
+from .inputs import positive_integer, real_array
 
 __all__ = ["SaveAt", "Schedule", "schedule"]
 
@@ -58,10 +58,7 @@ class SaveAt:
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise InputError(f"saveat.{name}: expected True or False, got {getattr(self, name)!r}")
         if self.every is not None:
-            e = self.every
-            if isinstance(e, bool) or not isinstance(e, (int, np.integer)) or e < 1:
-                raise InputError(f"saveat.every: must be a positive integer, got {e!r}")
-            object.__setattr__(self, "every", int(e))
+            object.__setattr__(self, "every", positive_integer("saveat.every", self.every))
         if self.ts is not None:
             ts = real_array("saveat.ts", self.ts, "a sequence of times").reshape(-1)
             try:

@@ -12,19 +12,17 @@ theorem. Batches of initial conditions or systems run vmapped (:mod:`gnipy.ensem
 
 from __future__ import annotations
 
-import math
 import warnings
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .compilation import jit
 from .errors import InputError, MethodError, SolverFailure
-from .inputs import flag, refuse_text_or_bool
+from .inputs import concrete_value, flag, is_traced, positive_integer
 from .integrators.base import Integrator
 from .integrators.reversal import backward
-from .saveat import GRID_RTOL, SaveAt, schedule
+from .saveat import SaveAt, schedule
 from .solution import RESULTS, Solution
 from .ensembles import is_batch, simulate_batch
 from .preparation import prepare
@@ -33,34 +31,12 @@ from . import monitor
 from .diagnostics import DIAGNOSTIC_ARRAYS, diagnostic_fields, energy_is_invariant
 from .forcing import check_forced_run, drive
 from .system import System, describe_orientations
+from .run_arguments import (MAX_STEPS, MAX_TOTAL_STEPS, MIN_STEP_SIZE, default_initial_condition, real_argument,
+                            resolve_run, resolve_steps)
+from .transformed import simulate_traced
 
-__all__ = ["simulate", "resolve_steps", "resolve_run", "SaveAt", "MAX_STEPS", "MAX_TOTAL_STEPS", "MIN_STEP_SIZE"]
-
-#: Most steps in one `simulate` call (the compiled loop counts steps in int32).
-MAX_STEPS = 2**31 - 2
-
-#: The most steps of any run, streamed ones included (t = t0 + k h needs k exact in float64).
-MAX_TOTAL_STEPS = 2**53
-
-#: The smallest step size accepted: the smallest normal float64 (below it, precision is lost).
-MIN_STEP_SIZE = float(np.finfo(np.float64).tiny)
-
-
-def _traced(*trees) -> bool:
-    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(trees))
-
-
-def _number(name: str, x, *, positive: bool) -> float:
-    refuse_text_or_bool(name, x, f"a {'positive ' if positive else ''}number")
-    if isinstance(x, (complex, np.complexfloating)) or (hasattr(x, "dtype") and np.iscomplexobj(x)):
-        raise InputError(f"{name}: expected a {'positive ' if positive else ''}real number, got {x!r}")
-    try:
-        value = float(x)
-    except (TypeError, ValueError, OverflowError) as e:
-        raise InputError(f"{name}: expected a {'positive ' if positive else ''}number, got {x!r}") from e
-    if not math.isfinite(value) or (positive and value <= 0):
-        raise InputError(f"{name}: must be a {'positive ' if positive else ''}finite number, got {x!r}")
-    return value
+__all__ = ["simulate", "resolve_steps", "resolve_run", "SaveAt", "MAX_STEPS", "MAX_TOTAL_STEPS", "MIN_STEP_SIZE",
+           "default_initial_condition"]
 
 
 def _check_same_system(systems) -> None:
@@ -80,100 +56,6 @@ def _check_same_system(systems) -> None:
             raise InputError(f"system[{i}]: is {say(s)}, system[0] is {say(systems[0])}; a sequence of systems is "
                              "a parameter batch (the same system with other parameter values): run different systems "
                              "in separate calls")
-
-
-def _whole_steps(steps) -> int:
-    if isinstance(steps, bool) or isinstance(steps, (complex, np.complexfloating)):
-        raise InputError(f"steps: must be a positive integer, got {steps!r}")
-    try:
-        whole = int(steps) == steps
-    except (TypeError, ValueError, OverflowError):
-        raise InputError(f"steps: must be a positive integer, got {steps!r}") from None
-    if not whole or steps < 1:
-        raise InputError(f"steps: must be a positive integer, got {steps!r}")
-    if steps > MAX_TOTAL_STEPS:
-        raise InputError(
-            f"steps: {int(steps)} steps is more than any run can take (at most {MAX_TOTAL_STEPS:.3g}: the "
-            "step index must stay exact in float64)"
-        )
-    return int(steps)
-
-
-def resolve_run(h, steps=None, t_final=None, t0: float = 0.0, *, shorten: bool = True,
-                backward: bool = False) -> tuple[float, int, float]:
-    """Validate `h` and exactly one of `steps`, `t_final` (the final time); return `(h, steps,
-    partial)`: the number of full steps of h and the shortened last step as a fraction of h (0
-    when `t_final - t0` is a whole number of steps to within 1e-9 relative). With `shorten=False`
-    a fraction is refused with an error that says how to choose h or t_final. With `backward=True`
-    a negative h is allowed (a run backward in time, `t_final` before `t0`)."""
-    h = _number("h", h, positive=not backward)
-    if h == 0:
-        raise InputError("h: must be nonzero (h > 0 runs forward in time, h < 0 backward), got 0")
-    if abs(h) < MIN_STEP_SIZE:
-        raise InputError(
-            f"h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision (subnormal numbers; "
-            "the time t0 + k h and the momenta divided by h would be meaningless)"
-        )
-    if (steps is None) == (t_final is None):
-        raise InputError("steps/t_final: give exactly one of steps and t_final")
-    if steps is not None:
-        return h, _whole_steps(steps), 0.0
-    t_final = _number("t_final", t_final, positive=False)
-    span = t_final - t0
-    if span * h <= 0:
-        raise InputError(f"t_final: must be {'after' if h > 0 else 'before'} t0 = {t0!r} for h = {h!r}, "
-                         f"got {t_final!r}")
-    ratio = span / h
-    if not math.isfinite(ratio) or ratio > MAX_TOTAL_STEPS:
-        raise InputError(
-            f"t_final: {span!r} / h = {ratio:.3g} steps, more than any run can take "
-            f"(at most {MAX_TOTAL_STEPS:.3g}); choose a larger h or an earlier t_final"
-        )
-    n = round(ratio)
-    if n >= 1 and abs(n - ratio) <= GRID_RTOL * ratio:
-        return h, n, 0.0
-    full = math.floor(ratio)
-    if not shorten:
-        up = full + 1
-        raise InputError(
-            f"t_final: t_final - t0 = {span!r} is not a whole number of steps of h = {h!r} ({ratio:.6g} steps); "
-            f"choose h = {span / up!r} ({up} steps) or t_final = {t0 + up * h!r}"
-        )
-    if full < 1:
-        raise InputError(f"t_final: the run {span!r} is shorter than one step of h = {h!r}; choose a smaller h")
-    return h, full, ratio - full
-
-
-def resolve_steps(h, steps=None, t_final=None) -> tuple[float, int]:
-    """Validate `h` and exactly one of `steps`, `t_final`; return `(h, steps)`, where `t_final`
-    (measured from 0) must be a whole number of steps of `h` to within 1e-9 relative (the error
-    says how to choose otherwise). For runs saved in chunks (streamed runs, sweeps)."""
-    h, steps, _ = resolve_run(h, steps, t_final, 0.0, shorten=False)
-    return h, steps
-
-
-def default_initial_condition(system: System, q0, v0, R0):
-    """`(q0, v0, R0)` with the system's documented defaults filling what is None; for a sequence of
-    systems (a parameter batch), each member's own defaults (see :func:`gnipy.ensembles.member_initial_conditions`)."""
-    if isinstance(system, (list, tuple)):
-        from .ensembles import member_initial_conditions
-
-        return member_initial_conditions(system, q0, v0, R0)
-    if q0 is None and system.n == 0:
-        q0 = ()
-    if q0 is None or v0 is None:
-        if system.defaults is None:
-            raise InputError(f"q0/v0: the system {system.name!r} has no default initial condition; give q0 and v0")
-        q0 = system.defaults[0] if q0 is None else q0
-        v0 = system.defaults[1] if v0 is None else v0
-        if R0 is None and len(system.defaults) > 2:
-            R0 = system.defaults[2]
-    return q0, v0, R0
-
-
-@jit
-def _init_one(method, system, b0, v0, h):
-    return method.init(system, b0, v0, h)
 
 
 def simulate(
@@ -205,8 +87,9 @@ def simulate(
             values (a parameter batch, e.g. :func:`gnipy.model_systems`).
         method: an integrator object (e.g. `GNI(Midpoint())`) or a method name (see
             :func:`~gnipy.method_names`), including `"reference"` for the continuous reference.
-            Default: for a zoo model, its measured default (`gnipy.get_model(name).default_method`,
-            shown by `gni models`); for other systems `"sgni-trapezoid"` (`gnipy.registry.FALLBACK_METHOD`),
+            Default: for a system the zoo built, its model's measured default
+            (`gnipy.get_model(system.model).default_method`, shown by `gni models`); for other
+            systems (a System written by hand, whatever its `name`) `"sgni-trapezoid"` (`gnipy.registry.FALLBACK_METHOD`),
             the method that qualifies on every zoo model by the atlas's rule (`gni-trapezoid` fails it
             on the Chaplygin sleighs and Suslov), or the next of `gnipy.registry.FALLBACK_METHODS`
             that can run the system.
@@ -324,10 +207,7 @@ def simulate(
     if saveat is not None and save_every is not None:
         raise InputError("saveat/save_every: give one of them (save_every=K is saveat=SaveAt(every=K))")
     if saveat is None:
-        if save_every is not None and (isinstance(save_every, bool) or not isinstance(save_every, (int, np.integer))
-                                       or save_every < 1):
-            raise InputError(f"save_every: must be a positive integer, got {save_every!r}")
-        saveat = SaveAt(every=1 if save_every is None else int(save_every))
+        saveat = SaveAt(every=1 if save_every is None else positive_integer("save_every", save_every))
     elif not isinstance(saveat, SaveAt):
         raise InputError(f"saveat: expected a gnipy.SaveAt, got {type(saveat).__name__}")
     if progress is not False and progress is not None and progress is not True and not callable(progress):
@@ -342,12 +222,9 @@ def simulate(
     elif systems is not None and any(s.is_forced for s in systems):
         raise InputError("system: batches of forced systems are not supported; run the members one at a time")
 
-    traced = _traced(system if systems is None else systems, q0, v0, R0, h, t0, state0,
+    traced = is_traced(system if systems is None else systems, q0, v0, R0, h, t0, state0,
                      None if callable(controls) else controls)
     if traced:
-        from .inputs import concrete_value
-        from .transformed import simulate_traced
-
         if system.is_forced:
             system = drive(system, controls, h, t0, steps)
             # the checks of an untransformed call, where the values are known at trace time
@@ -364,7 +241,7 @@ def simulate(
         return simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, saveat, t0, state0,
                                 project_v0, throw)
 
-    t0 = _number("t0", t0, positive=False)
+    t0 = real_argument("t0", t0, positive=False)
     h, n, partial = resolve_run(h, steps, t_final, t0, backward=True)
     if system.is_forced:
         system = drive(system, controls, h, t0, None)
@@ -492,7 +369,7 @@ def _method(system, method):
     if method is None:
         from .registry import default_method_for
 
-        method = default_method_for(system.name, system)
+        method = default_method_for(system.model, system)
     if isinstance(method, str):
         method = get_method(method)
     if not isinstance(method, (Integrator, ContinuousReference)):

@@ -11,6 +11,7 @@ import equinox as eqx
 import jax
 import numpy as np
 
+from .extras import require
 from .errors import SolverFailure
 
 __all__ = ["Solution", "SolverFailure", "RESULTS", "RESULT_SUCCESS", "RESULT_SOLVER_FAILED", "set_variable_attrs"]
@@ -295,7 +296,7 @@ class Solution(eqx.Module):
         `constraint_residual(time, constraint)` (and `R(time, i, j)`, the GNI diagnostics), and
         CF and provenance attributes (:mod:`gnipy.io`). A batch has a leading `member` axis. The
         dimensions and the variables' attributes are those :mod:`gnipy.schema` states."""
-        import xarray as xr
+        xr = require("xarray", extra="files")
 
         from . import schema
 
@@ -350,7 +351,7 @@ class Solution(eqx.Module):
         """The variables' attributes, the global CF and provenance attributes of a result dataset
         (and the caller's `attrs`)."""
         from .version import __version__
-        from .io import cf_attributes
+        from .file_attributes import cf_attributes
 
         set_variable_attrs(ds)
         created = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")

@@ -30,11 +30,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .extras import require
 from . import monitor
 
 __all__ = ["run_nodes", "run_nodes_checkpointed", "finish_native", "checkpoint_blocks", "progress_reporter", "Progress",
-           "residual_bytes",
-           "GRADIENT_MEMORY_BYTES"]
+           "residual_bytes", "loop_step", "initial_carry", "report_progress", "split_arrays", "GRADIENT_MEMORY_BYTES"]
 
 _INT = jnp.int32
 
@@ -48,13 +48,37 @@ def _tree_finite(tree) -> jax.Array:
     return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
 
 
-# The progress callback: compiled code calls `_report(steps_done)` through `jax.debug.callback`;
+def split_arrays(tree):
+    """`(leaves, structure_key, rebuild)`: the array leaves of `tree` (a method, a system, or a
+    tuple of them; as jax arrays), a hashable key of everything else (None when a static part
+    cannot be hashed), and `rebuild(leaves)`. The form in which compiled loops take a method and
+    a system: their programs are keyed by the structure and called with the leaves
+    (:mod:`gnipy.preparation`; the native backend's loops, :mod:`gnipy.native.backend`)."""
+    dyn, static = eqx.partition(tree, eqx.is_array)
+    leaves, treedef = jax.tree_util.tree_flatten(dyn)
+    static_leaves, static_def = jax.tree_util.tree_flatten(static)
+    key = (treedef, static_def, tuple(static_leaves))
+    try:
+        hash(key)
+    except TypeError:
+        key = None
+
+    def rebuild(ls):
+        return eqx.combine(jax.tree_util.tree_unflatten(treedef, ls), static)
+
+    return [jnp.asarray(a) for a in leaves], key, rebuild
+
+
+# The progress callback: compiled code calls `report_progress(steps_done)` through `jax.debug.callback`;
 # it forwards to the reporter of the `simulate` call in progress (one Python function, so that the
 # compiled program does not depend on which reporter it is).
 _REPORTER: list[Callable[[int], None]] = []
 
 
-def _report(k) -> None:
+def report_progress(k) -> None:
+    """Report `k` steps done (the largest of them, for a batch) to the active
+    :class:`progress_reporter`, if any: what the compiled XLA loop calls back, and the native
+    loop after each piece of a run (:mod:`gnipy.native.backend`)."""
     if _REPORTER:
         _REPORTER[-1](int(np.max(np.asarray(k))))
 
@@ -74,8 +98,8 @@ class progress_reporter:
         return False
 
 
-def _stepper(method, system):
-    """One step of the loop on the carry of :func:`_carry0`; with a monitor in the carry (its 7th
+def loop_step(method, system):
+    """One step of the loop on the carry of :func:`initial_carry`; with a monitor in the carry (its 7th
     entry), the node the step starts from is checked first (:func:`gnipy.monitor.update`), and
     the iteration k = k_end (the monitor's) only checks: the loop's one extra iteration checks the
     last node, so that the check is compiled once."""
@@ -108,7 +132,7 @@ def _observer(method, system, save_states: bool):
     return observe
 
 
-def _carry0(state0, monitor0=None):
+def initial_carry(state0, monitor0=None):
     """The loop's carry: the state, the step index, the first failed step and its residual, the
     Newton iterations (total, max), and the monitor (:mod:`gnipy.monitor`) when given."""
     carry = (state0, jnp.asarray(0, _INT), jnp.asarray(-1, _INT), jnp.asarray(0.0), jnp.asarray(0, _INT),
@@ -119,7 +143,7 @@ def _carry0(state0, monitor0=None):
 def _final_step(method, system, carry, h, h_last):
     """The shortened last step: the state rescaled to the new step size, then one step of it."""
     state = method.change_step(system, carry[0], h, h_last)
-    return _stepper(method, system)((state,) + carry[1:], h_last)
+    return loop_step(method, system)((state,) + carry[1:], h_last)
 
 
 def watched_run(monitor0, lengths, tail, partial: bool):
@@ -172,13 +196,13 @@ def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool
         (if `save_states`), `energy`, `residual`, `fail_k` (first failed step, -1 if none),
         `fail_res`, `iterations` (total, max), `final_state`, `monitor` (None without `monitor0`).
     """
-    step = _stepper(method, system)
+    step = loop_step(method, system)
     observe = _observer(method, system, save_states)
 
     def one_step(c, h):
         c = step(c, h)
         if progress:
-            jax.lax.cond(c[1] % progress_stride == 0, lambda k: jax.debug.callback(_report, k), lambda k: None, c[1])
+            jax.lax.cond(c[1] % progress_stride == 0, lambda k: jax.debug.callback(report_progress, k), lambda k: None, c[1])
         return c
 
     def steps(carry, n):
@@ -192,7 +216,7 @@ def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool
     # once, not once for the blocks and again for the tail
     if monitor0 is not None:
         monitor0, tail = watched_run(monitor0, lengths, tail, partial)
-    carry = _carry0(state0, monitor0)
+    carry = initial_carry(state0, monitor0)
     blocks = jnp.concatenate([jnp.asarray(lengths, _INT).reshape(-1), jnp.asarray(tail, _INT).reshape(1)])
     carry, obs = jax.lax.scan(block, carry, blocks)
     obs = jax.tree_util.tree_map(lambda a: a[:-1], obs)
@@ -265,7 +289,7 @@ def run_nodes_checkpointed(method, system, state0, h, lengths: tuple, tail: int,
     backward pass (`jax.checkpoint`) when `checkpoint` (default: when the steps' residuals would
     exceed :data:`GRADIENT_MEMORY_BYTES`). Same arguments and result as :func:`run_nodes`
     (`lengths`, `tail` static)."""
-    one_step = _stepper(method, system)
+    one_step = loop_step(method, system)
     observe = _observer(method, system, save_states)
     first_saved = len(lengths) > 0 and lengths[0] == 0
     seg = lengths[1:] if first_saved else lengths
@@ -290,7 +314,7 @@ def run_nodes_checkpointed(method, system, state0, h, lengths: tuple, tail: int,
         carry = run_block(carry, n)
         return carry, observe(carry[0], h)
 
-    carry = _carry0(state0)
+    carry = initial_carry(state0)
     obs0 = observe(state0, h)
     if any(blocks):
         carry, obs = jax.lax.scan(body, carry, jnp.asarray(blocks, dtype=_INT))
@@ -322,6 +346,7 @@ class Progress:
         if not self.active:
             return self
         if self.fn is None:
+            require("rich", extra="cli", what="progress bar")
             from rich.progress import BarColumn, MofNCompleteColumn, Progress, TimeElapsedColumn, TimeRemainingColumn
 
             self.bar = Progress("simulate", BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),

@@ -30,8 +30,8 @@ from .compilation import jit
 from .spaces import EuclideanSpace, GroupSpace, Point
 
 from .errors import InputError
-from .inputs import _as_vector, _fmt, _number, flag, real_array, require_float64
-from .system_checks import _lagrangian_derivatives, _metric_derivatives, _validation_values
+from .inputs import finite_vector, flag, format_scientific, provenance_number, real_array, require_float64
+from .system_checks import lagrangian_derivatives, metric_derivatives, validation_values
 
 __all__ = ["System"]
 
@@ -85,6 +85,10 @@ class System(eqx.Module):
     coordinates: tuple[str, ...] = eqx.field(static=True)
     velocities: tuple[str, ...] = eqx.field(static=True)
     name: str = eqx.field(static=True)
+    #: the zoo model this system was built as (:meth:`as_model`), None for a System written by hand
+    #: whatever its `name`: the model's registered invariants and measured default method apply
+    #: to the systems the zoo builds only
+    model: str | None = eqx.field(static=True)
     params: tuple[tuple[str, float], ...] = eqx.field(static=True)
     defaults: tuple | None = eqx.field(static=True)
     orientation_note: str = eqx.field(static=True)
@@ -175,9 +179,10 @@ class System(eqx.Module):
         self.coordinates = coordinates
         self.velocities = velocities
         self.name = str(name)
-        self.params = tuple((str(k), _number(v)) for k, v in (params or {}).items())
+        self.model = None
+        self.params = tuple((str(k), provenance_number(v)) for k, v in (params or {}).items())
         if defaults is not None:
-            defaults = tuple(None if d is None else tuple(_number(x) for x in jnp.ravel(jnp.asarray(d)))
+            defaults = tuple(None if d is None else tuple(provenance_number(x) for x in jnp.ravel(jnp.asarray(d)))
                              if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(d))
                              else tuple(float(x) for x in np.ravel(d)) for d in defaults)
         self.defaults = defaults
@@ -346,6 +351,19 @@ class System(eqx.Module):
         object.__setattr__(new, "drive", Drive.make(inputs=int(inputs)))
         return new
 
+    def as_model(self, model: str) -> "System":
+        """This system recorded as the zoo model `model` (what the zoo's builds return,
+        :func:`gnipy.registry.register`): the model's registered invariants and measured default
+        method (:func:`gnipy.get_model`) then apply to it. A System written by hand is no model's,
+        whatever its `name`."""
+        import dataclasses
+
+        new = object.__new__(type(self))
+        for f in dataclasses.fields(self):
+            object.__setattr__(new, f.name, getattr(self, f.name))
+        object.__setattr__(new, "model", str(model))
+        return new
+
     def driven(self, drive) -> "System":
         """A copy of this system with the :class:`gnipy.forcing.Drive` `drive` (its inputs)."""
         if self.force is None:
@@ -391,7 +409,7 @@ class System(eqx.Module):
     def initial_point(self, q0, R0=None):
         """The validated base point from coordinates `q0` and (on $\\mathbb{R}^n\\times G$) an
         orientation `R0` (default: the identity)."""
-        x0 = _as_vector("q0", q0, self.n)
+        x0 = finite_vector("q0", q0, self.n)
         if self.group is None:
             if R0 is not None:
                 raise InputError("R0: this system has no group part")
@@ -407,12 +425,8 @@ class System(eqx.Module):
                 raise InputError(f"R0: expected a {k}x{k} group matrix, got shape {R.shape}")
             if not np.all(np.isfinite(R)):
                 raise InputError("R0: contains NaN or infinite values")
-            from .lie_groups import SO3
-
-            if isinstance(self.group, SO3):
-                err = np.max(np.abs(R.T @ R - np.eye(3)))
-                if err > 1e-10 or np.linalg.det(R) <= 0:
-                    raise InputError(f"R0: not a rotation matrix (|RᵀR − I| = {_fmt(err)}, det = {np.linalg.det(R):.3g})")
+            if not self.group.is_element(R):  # e.g. a rotation matrix on SO(3)
+                raise InputError(f"R0: {self.group.why_not_element(R)}")
         return Point(jnp.asarray(x0), jnp.asarray(R))
 
     def check(self, q0, v0=None, *, R0=None, project_v0: bool = False, tol: float = 1e-10):
@@ -438,7 +452,7 @@ class System(eqx.Module):
         project_v0 = flag("project_v0", project_v0)
         b0 = self.initial_point(q0, R0)
         if v0 is not None:
-            v0 = _as_vector("v0", v0, self.dim)
+            v0 = finite_vector("v0", v0, self.dim)
         vals = self._validation_values(b0)
         self._check_mechanical_values(vals, tol=1e-9)
         G = vals["G"]
@@ -450,7 +464,7 @@ class System(eqx.Module):
         if eig[0] <= tol * max(1.0, eig[-1]):
             raise InputError(
                 "lagrangian: the metric d²l/dv² is not positive definite at q0 "
-                f"(smallest eigenvalue {_fmt(eig[0])})"
+                f"(smallest eigenvalue {format_scientific(eig[0])})"
             )
         mu = vals["mu"]
         N = self.dim
@@ -470,7 +484,7 @@ class System(eqx.Module):
         if sv[-1] <= 1e-10 * max(1.0, sv[0]):
             raise InputError(
                 f"constraints: mu(q0) is rank deficient (rank {int(np.sum(sv > 1e-10 * max(1.0, sv[0])))} "
-                f"< {m} constraints; smallest singular value {_fmt(sv[-1])})"
+                f"< {m} constraints; smallest singular value {format_scientific(sv[-1])})"
             )
         Y = vals["Y"]
         if Y.shape != (N,):
@@ -487,7 +501,7 @@ class System(eqx.Module):
             if not project_v0:
                 raise InputError(
                     "v0: the initial velocity violates the constraints mu(q0)(v0 - Y(q0)) = 0 "
-                    f"(residual {_fmt(np.max(np.abs(res)))}); pass project_v0=True to project it"
+                    f"(residual {format_scientific(np.max(np.abs(res)))}); pass project_v0=True to project it"
                 )
             v0 = np.asarray(_project_velocity(self.without_metadata(), b0, jnp.asarray(v0)))
         return b0, v0
@@ -516,7 +530,7 @@ class System(eqx.Module):
         ws[0] = 0.0
         vs = rng.standard_normal((self._SAMPLES, N))
         try:
-            out = _validation_values(self.without_metadata(), b0, jnp.asarray(ws), jnp.asarray(vs))
+            out = validation_values(self.without_metadata(), b0, jnp.asarray(ws), jnp.asarray(vs))
         except InputError:
             raise
         except Exception as e:  # the user's function failed while being traced: say where
@@ -535,8 +549,8 @@ class System(eqx.Module):
             if np.max(np.abs(lin)) > tol * scale or abs(lv - quad) > tol * scale:
                 raise InputError(
                     "lagrangian: not of mechanical type ½ vᵀG(q)v − V(q) "
-                    f"(linear term {_fmt(np.max(np.abs(lin)))}, "
-                    f"mismatch with the quadratic part {_fmt(abs(lv - quad))})"
+                    f"(linear term {format_scientific(np.max(np.abs(lin)))}, "
+                    f"mismatch with the quadratic part {format_scientific(abs(lv - quad))})"
                 )
 
     def check_mechanical(self, b0, *, tol: float = 1e-9, samples: int = 3):
@@ -553,7 +567,7 @@ class System(eqx.Module):
         """
         rng = np.random.default_rng(1)
         ws = jnp.asarray(0.3 * rng.standard_normal((2, self.dim)))
-        dG = np.asarray(_metric_derivatives(self.without_metadata(), b0, ws))
+        dG = np.asarray(metric_derivatives(self.without_metadata(), b0, ws))
         return not np.any(dG != 0.0)
 
     def _default_point(self):
@@ -591,7 +605,7 @@ class System(eqx.Module):
         ws = 0.3 * rng.standard_normal((3, self.dim))
         vs = rng.standard_normal((3, self.dim))
         with jax.ensure_compile_time_eval():  # also when called while tracing (a traced h): values known
-            d = np.asarray(_lagrangian_derivatives(core, self._default_point(), ws, vs))
+            d = np.asarray(lagrangian_derivatives(core, self._default_point(), ws, vs))
         return bool(np.any(d[:, self.n:] != 0.0 if part == "orientation" else d != 0.0))
 
 

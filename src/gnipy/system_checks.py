@@ -13,7 +13,10 @@ from .compilation import jit
 
 
 @jit
-def _validation_values(system, b0, ws, vs):
+def validation_values(system, b0, ws, vs):
+    """What :meth:`gnipy.System.check` and :meth:`~gnipy.System.check_mechanical` test: l, the metric
+    G and the potential at the sample points $(b_0 \\cdot w_i, v_i)$ and the linear term of l in v
+    there (`lv`, `Gs`, `Vs`, `lin`), and G, μ and Y at $b_0$ (`G`, `mu`, `Y`)."""
     def at(w, v):
         b = system.space.move(b0, w)
         return dict(
@@ -29,7 +32,9 @@ def _validation_values(system, b0, ws, vs):
 
 
 @jit
-def _metric_derivatives(system, b0, ws):
+def metric_derivatives(system, b0, ws):
+    """The derivative of the metric G in the base point's local coordinates at each $b_0 \\cdot w_i$
+    (exact zeros where G is constant)."""
     def one(w):
         b = system.space.move(b0, w)
         return jax.jacfwd(lambda u: system.metric(system.space.move(b, u)))(jnp.zeros(system.dim))
@@ -38,7 +43,7 @@ def _metric_derivatives(system, b0, ws):
 
 
 @jit
-def _lagrangian_derivatives(system, b0, ws, vs):
+def lagrangian_derivatives(system, b0, ws, vs):
     """$\\partial l/\\partial w$ at $(b_0 \\cdot w_i, v_i)$, w the base point's local coordinates
     ($(x, \\xi)$ on $\\mathbb{R}^n \\times G$): exact zeros where l does not depend on them."""
     def one(w, v):

@@ -12,12 +12,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from .errors import InputError, MethodError
+from .inputs import concrete_value as _concrete, is_traced
 from .preparation import prepare
+from .run_arguments import default_initial_condition, real_argument, resolve_run, whole_steps
 from .saveat import schedule
-from .simulate import _number, _traced, _whole_steps, default_initial_condition, resolve_run
 from .solution import Solution
 from .stepping import run_nodes_checkpointed
-from .inputs import concrete_value as _concrete
 
 __all__ = ["simulate_traced"]
 
@@ -52,16 +52,16 @@ def simulate_traced(system, systems, method, q0, v0, R0, h, steps, t_final, save
     h_c, t0_c = _concrete(h), _concrete(t0)
     if h_c is None and steps is None:
         raise InputError("steps: h is traced (jax.jit), so the number of steps cannot follow from t_final; give steps")
-    t0_num = 0.0 if t0_c is None else _number("t0", t0_c, positive=False)
+    t0_num = 0.0 if t0_c is None else real_argument("t0", t0_c, positive=False)
     if h_c is not None:
         hv, n, partial = resolve_run(h_c, steps, t_final, t0_num, backward=True)
     else:
-        hv, n, partial = None, _whole_steps(steps), 0.0
+        hv, n, partial = None, whole_steps(steps), 0.0
     if partial and not method.can_change_step:
         raise InputError(f"t_final: not a whole number of steps of h, and {method.name} cannot shorten its last step")
     plan = schedule(saveat, n, partial, h=hv, t0=t0_num)
     if state0 is None:
-        if (q0 is None or v0 is None) and _traced(system.lagrangian, system.constraints, system.affine, system.force):
+        if (q0 is None or v0 is None) and is_traced(system.lagrangian, system.constraints, system.affine, system.force):
             # the defaults were computed from the parameters' values: their derivative is not in them
             raise InputError(
                 "q0/v0: the system's parameters are traced (differentiated or inside jax.jit), and its default "

@@ -21,6 +21,7 @@ import pytest
 
 import gnipy
 from gnipy.experiments import figures as F
+from gnipy.experiments.figure_tools import asymptotic_order, observed_order
 from gnipy.models import rolling_ball as rb
 from gnipy.spaces import Point
 
@@ -162,13 +163,13 @@ def test_fitted_order_leaves_out_round_off():
     three smallest fitted h for the 'finest 3' slopes."""
     hs = np.array([0.1, 0.05, 0.025, 0.0125, 0.00625])
     errors = 3.0 * hs**2
-    assert F._order(hs, errors) == pytest.approx(2.0, abs=1e-12)
+    assert observed_order(hs, errors) == pytest.approx(2.0, abs=1e-12)
     # a floor, and a point past the smallest error (round-off growing again), are left out
     errors_ro = np.concatenate([errors[:4], [1e-2]])
-    assert F._order(hs, errors_ro) == pytest.approx(2.0, abs=1e-12)
-    assert F._order(hs, errors, floor=3.0 * 0.025**2 * 0.99) == pytest.approx(2.0, abs=1e-12)
-    assert math.isnan(F._order(hs, errors, floor=1.0))
+    assert observed_order(hs, errors_ro) == pytest.approx(2.0, abs=1e-12)
+    assert observed_order(hs, errors, floor=3.0 * 0.025**2 * 0.99) == pytest.approx(2.0, abs=1e-12)
+    assert math.isnan(observed_order(hs, errors, floor=1.0))
     # the finest three: slope 1 there although the coarse points have slope 2
     mixed = np.where(hs > 0.03, 3.0 * hs**2, 3.0 * 0.025 * hs)
-    assert F._fine_order(hs, mixed) == pytest.approx(1.0, abs=1e-12)
-    assert F._order(hs, mixed) > 1.2
+    assert asymptotic_order(hs, mixed) == pytest.approx(1.0, abs=1e-12)
+    assert observed_order(hs, mixed) > 1.2

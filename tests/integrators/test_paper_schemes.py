@@ -9,13 +9,14 @@ formulation: the GNI core (reflection + discrete Legendre transforms) and the ex
 
 from __future__ import annotations
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
 
 import gnipy
+# equinox's filter_jit with gnipy's compiler options (simulate's own): about half the compile time
+from gnipy.compilation import jit
 from gnipy.integrators import paper_schemes as ps
 from gnipy.integrators.base import MethodError
 
@@ -72,7 +73,7 @@ def test_variants_are_distinguishable(run, case):
     assert _rel(b.q, r.q) > 1e-4
 
 
-@eqx.filter_jit
+@jit
 def _node_data(system, q):
     """V_q, μ and Y at a batch of configurations."""
     return jax.vmap(lambda x: (system.potential_gradient(x), system.mu(x), system.Y(x)))(q)
@@ -113,7 +114,7 @@ def test_trajectory_solves_two_step_lagrangian_form(run, case, name, s):
     assert np.max(np.abs(constraint(wrong))) > 1e-4
 
 
-@eqx.filter_jit
+@jit
 def _gni_composition(system, q0, v0, h, n):
     """q_0..q_n of the GNI core composed: G_A^{h/2} ∘ G_B^{h/2} on (q, p⁺) (GNI with L_B, then L_A)."""
     ga, gb = (gnipy.GNI(gnipy.EulerA(), explicit=True, start="rest"),
@@ -147,6 +148,20 @@ def test_composition_is_the_composed_gni_and_not_rattle(run, case):
 # --------------------------------------------------------------------------------------------
 # Theorem 5.2: the nonholonomic Euler A and B methods are each other's adjoint
 # --------------------------------------------------------------------------------------------
+@jit
+def _project(system, q, p, h, sign):
+    """p̃ projected M⁻¹-orthogonally onto μM⁻¹(p̃ + sign (h/2) V_q − Π) = 0, for a batch (compiled once
+    per system: eagerly, the vmapped solves cost seconds of small compilations)."""
+
+    def project(q, p):
+        M, mu = system.metric(q), system.mu(q)
+        r = mu @ jnp.linalg.solve(M, p + sign * 0.5 * h * system.potential_gradient(q) - system.Pi(q))
+        C = mu @ jnp.linalg.solve(M, mu.T)
+        return p - mu.T @ jnp.linalg.solve(C, r)
+
+    return jax.vmap(project)(q, p)
+
+
 def _random_states(system, n_states, h, sign, seed):
     """Random (q, p̃, λ̃) with μM⁻¹(p̃ + sign (h/2) V_q − Π) = 0 (p̃ projected M⁻¹-orthogonally)."""
     rng = np.random.default_rng(seed)
@@ -155,21 +170,19 @@ def _random_states(system, n_states, h, sign, seed):
     q = jnp.asarray(rng.normal(size=(n_states, n)))
     p = jnp.asarray(rng.normal(size=(n_states, n)))
     lam = jnp.asarray(rng.normal(size=(n_states, m)))
-
-    def project(q, p):
-        M, mu = system.metric(q), system.mu(q)
-        r = mu @ jnp.linalg.solve(M, p + sign * 0.5 * h * system.potential_gradient(q) - system.Pi(q))
-        C = mu @ jnp.linalg.solve(M, mu.T)
-        return p - mu.T @ jnp.linalg.solve(C, r)
-
-    p = jax.vmap(project)(q, p)
+    p = _project(system, q, p, jnp.asarray(h, dtype=jnp.float64), jnp.asarray(sign, dtype=jnp.float64))
     return ps.TildeState(q, p, lam)
 
 
-@eqx.filter_jit
+@jit
 def _round_trip(system, first, second, states, h):
-    """second^{h}(first^{-h}(state)) for a batch of states."""
-    return jax.vmap(lambda s: second(system, first(system, s, -h), h))(states)
+    """second^{h}(first^{-h}(state)) for a batch of states, and the intermediate first^{-h}(state)."""
+
+    def both(s):
+        mid = first(system, s, -h)
+        return second(system, mid, h), mid
+
+    return jax.vmap(both)(states)
 
 
 def _max_rel(out, states):
@@ -185,10 +198,9 @@ def test_theorem_5_2_euler_a_after_euler_b_reversed_is_identity(case, h):
     system = CASES[case][0]
     for seed in range(3):
         states = _random_states(system, 64, h, +1.0, seed)
-        out = _round_trip(system, ps.euler_b_map, ps.euler_a_map, states, jnp.asarray(h))
+        out, mid = _round_trip(system, ps.euler_b_map, ps.euler_a_map, states, jnp.asarray(h))
         assert _max_rel(out, states) <= 1e-12
         # the intermediate state really moved (the test is not a trivial identity)
-        mid = jax.vmap(lambda s: ps.euler_b_map(system, s, -h))(states)
         assert float(jnp.max(jnp.abs(mid.q - states.q))) > 1e-3
 
 
@@ -199,17 +211,17 @@ def test_theorem_5_2_symmetric_statement_and_control(case):
     system = CASES[case][0]
     h = jnp.asarray(0.05)
     states = _random_states(system, 64, 0.05, -1.0, 7)
-    out = _round_trip(system, ps.euler_a_map, ps.euler_b_map, states, h)
+    out, _ = _round_trip(system, ps.euler_a_map, ps.euler_b_map, states, h)
     assert _max_rel(out, states) <= 1e-12
     # F_A^{-h} acts on the same states (its output constraint is B's at +h); F_A^h does not undo it
-    out_aa = _round_trip(system, ps.euler_a_map, ps.euler_a_map, states, h)
+    out_aa, _ = _round_trip(system, ps.euler_a_map, ps.euler_a_map, states, h)
     assert _max_rel(out_aa, states) > 1e-6
 
 
 # --------------------------------------------------------------------------------------------
 # Order of the composition (Remark after Thm 5.2) and of Euler A (Thm 5.1)
 # --------------------------------------------------------------------------------------------
-@eqx.filter_jit
+@jit
 def _final_q(method, system, q0, v0, h, n):
     """q after n steps (n traced: one compile for every step count)."""
     state = method.init(system, q0, v0, h)
@@ -217,12 +229,26 @@ def _final_q(method, system, q0, v0, h, n):
     return method.observe(system, state, h)[0]
 
 
-def _observed_order(method, system, q0, v0, T=1.0, ns=(40, 80, 160)):
-    qs = [np.asarray(_final_q(method, system, jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(T / n), jnp.asarray(n)))
-          for n in ns]
+ORDER_NS = (40, 80, 160)  # steps to t = 1
+
+
+def _order_from(qs):
+    """Observed order from q at t = 1 after n = 40, 80, 160 steps (self-convergence)."""
     e1 = np.max(np.abs(qs[0] - qs[1]))
     e2 = np.max(np.abs(qs[1] - qs[2]))
     return np.log2(e1 / e2)
+
+
+def _observed_order(method, system, q0, v0, T=1.0, ns=ORDER_NS):
+    return _order_from([np.asarray(_final_q(method, system, jnp.asarray(q0), jnp.asarray(v0), jnp.asarray(T / n),
+                                            jnp.asarray(n))) for n in ns])
+
+
+def _observed_order_of_named(name, system, q0, v0, T=1.0, ns=ORDER_NS):
+    """As _observed_order, for a registered method through `gnipy.simulate`: runs of STEPS steps with
+    h = T/n, every node saved, node n is t = T. These are the compiled programs of the `run` fixture
+    (same system, method and saved-node count; h is traced), so the orders compile nothing new."""
+    return _order_from([np.asarray(gnipy.simulate(system, name, q0, v0, h=T / n, steps=STEPS).q[n]) for n in ns])
 
 
 class _LiteralComposition(ps.EulerABComposition):
@@ -234,15 +260,17 @@ class _LiteralComposition(ps.EulerABComposition):
 
 
 @pytest.mark.parametrize("case", ["linear", "affine"])
-def test_orders(case):
+def test_orders(run, case):
     """Self-convergence |q_h − q_{h/2}| at t = 1: order 2 for euler-ab, rattle and shake, order 1
     for euler-a and euler-b (Thm 5.1). The literal composition of the two maps on (q, p̃, λ̃),
     without the change of p̃ reading at the junctions, is only of order 1 (see EulerABComposition)."""
     system, q0, v0 = CASES[case]
     for name in ("euler-ab", "rattle", "shake"):
-        assert 1.8 < _observed_order(gnipy.get_method(name), system, q0, v0) < 2.3, name
+        run(case, name)  # compiled here if this test runs alone
+        assert 1.8 < _observed_order_of_named(name, system, q0, v0) < 2.3, name
     for name in ("euler-a", "euler-b"):
-        assert 0.8 < _observed_order(gnipy.get_method(name), system, q0, v0) < 1.3, name
+        run(case, name)
+        assert 0.8 < _observed_order_of_named(name, system, q0, v0) < 1.3, name
     assert 0.8 < _observed_order(_LiteralComposition(), system, q0, v0) < 1.3
 
 

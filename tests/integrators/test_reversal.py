@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 import gnipy
+from gnipy.compilation import jit as gnipy_jit
 from gnipy.integrators.gni import GNIState
 from gnipy.integrators.reversal import Reversed
 
@@ -42,37 +43,81 @@ def _applicable(method):
     return out
 
 
-# the GNI on every kind of space; the other methods (and the compositions, whose substeps are the
-# same steps) on the first model they apply to
+# the GNI on every kind of space; the other methods on the first model they apply to. Of the
+# compositions, which all run the same Composition.step (substeps, and for a GNI base the impulse
+# rescaling of GNI.change_step, which does not depend on the discrete Lagrangian) with palindromic
+# coefficients, one per kind of base: yoshida4-gni-trapezoid (a GNI) and kahanli6-mp (not a GNI).
+# suzuki4-gni-trapezoid differs from the first only by its coefficients, yoshida4-gni-midpoint by a
+# base whose own round trips are run here; their coefficients are checked to be palindromic in
+# test_compositions_are_palindromic.
+ROUND_TRIP_COMPOSITIONS = ("yoshida4-gni-trapezoid", "kahanli6-mp")
 CASES = [(method, model) for method in _symmetric_methods()
+         if method in ROUND_TRIP_COMPOSITIONS or not isinstance(gnipy.get_method(method), gnipy.Composition)
          for model in (_applicable(method) if method.startswith("gni-") else _applicable(method)[:1])]
 
 
 def test_the_symmetric_methods_are_the_expected_ones():
     names = set(_symmetric_methods())
     assert {"gni-trapezoid", "gni-midpoint", "mp", "rattle", "yoshida4-gni-trapezoid", "kahanli6-mp"} <= names
+    assert {"suzuki4-gni-trapezoid", "yoshida4-gni-midpoint"} <= names
     for not_symmetric in ("gni-euler-a", "gni-euler-b", "euler-a", "euler-b", "dla", "shake"):
         assert not gnipy.get_method(not_symmetric).symmetric
 
 
+def test_compositions_are_palindromic():
+    """Every composition scheme's substep fractions are palindromic and sum to 1: a composition of a
+    symmetric method with them is symmetric (Hairer–Lubich–Wanner §II.4), whence the round trips of
+    one composition per kind of base suffice."""
+    from gnipy.integrators import COMPOSITIONS
+
+    assert set(COMPOSITIONS) >= {"yoshida4", "suzuki4", "yoshida6", "kahanli6"}
+    for scheme, (_, gammas, _) in COMPOSITIONS.items():
+        assert tuple(gammas) == tuple(reversed(gammas)), scheme
+        assert abs(sum(gammas) - 1.0) <= 1e-15, scheme
+    for name in _symmetric_methods():
+        method = gnipy.get_method(name)
+        if isinstance(method, gnipy.Composition):
+            assert method.symmetric and method.base.symmetric, name
+
+
+def _round_trip(model, method, h=0.05, n=100):
+    """N steps forward and N back through one compiled program, from the method's own start at the
+    model's default initial condition: h is traced (jax.jit), so simulate runs a symmetric method as
+    Reversed(dynamic=True), its steps with h < 0 being σ∘Φ_{−h}∘σ — the same method.reverse and
+    method.step as a run with a negative h known in advance (Reversed, the static wrapper, is run
+    in test_plain_negative_step_of_the_gni_is_not_its_inverse and test_backward_run_follows_the_backward_flow)."""
+    system = gnipy.make_system(model)
+    q0, v0, *R0 = system.defaults
+    b0, v0 = system.check(q0, v0, R0=R0[0] if R0 else None)
+    m = gnipy.get_method(method).prepare(system, b0)
+    core = system.without_metadata()
+    h = np.float64(h)  # the same argument types both ways: one compiled program
+    # gnipy's jit: its compiler options, as simulate's own programs (half the compile time of jax.jit)
+    state0 = gnipy_jit(lambda b, v, h: m.init(core, b, v, h))(b0, np.asarray(v0, np.float64), h)
+    run = gnipy_jit(lambda h, state, t0: gnipy.simulate(system, method, h=h, steps=n, state0=state, t0=t0,
+                                                       saveat=gnipy.SaveAt(t0=True, t1=True, states=True)))
+    fwd = run(h, state0, np.float64(0.0))
+    back = run(-h, fwd.final_state, np.float64(fwd.t[-1]))
+    return state0, fwd, back
+
+
 @pytest.mark.parametrize("method,model", CASES)
 def test_forward_then_back_returns_to_the_start(method, model):
-    system = gnipy.make_system(model)
-    h, n = 0.05, 100
-    fwd = gnipy.simulate(system, method, h=h, steps=n, saveat=gnipy.SaveAt(t0=True, t1=True, states=True))
-    start = fwd
-    back = gnipy.simulate(system, method, h=-h, steps=n, state0=fwd.final_state, t0=float(fwd.t[-1]),
-                          saveat=gnipy.SaveAt(t1=True))
-    assert float(back.t[-1]) == pytest.approx(0.0, abs=1e-12)
-    scale = max(1.0, float(np.max(np.abs(fwd.q[-1]))))
-    assert float(np.max(np.abs(back.q[-1] - start.q[0]))) <= 1e-12 * scale
-    assert float(np.max(np.abs(back.v[-1] - start.v[0]))) <= 1e-12 * scale
-    if start.R is not None:
-        assert float(np.max(np.abs(back.R[-1] - start.R[0]))) <= 1e-12
+    start, fwd, back = _round_trip(model, method)
+    assert float(fwd.t[-1]) == pytest.approx(5.0, abs=1e-12) and float(back.t[-1]) == pytest.approx(0.0, abs=1e-12)
+    scale = max(1.0, float(np.max(np.abs(fwd.q[-1]), initial=0.0)))
+    moved = [np.max(np.abs(fwd.q[-1] - fwd.q[0]), initial=0.0)] + ([] if fwd.R is None else [np.max(np.abs(fwd.R[-1] - fwd.R[0]))])
+    assert max(moved) > 1e-3  # the test is not vacuous
+    assert float(np.max(np.abs(back.q[-1] - fwd.q[0]))) <= 1e-12 * scale
+    assert float(np.max(np.abs(back.v[-1] - fwd.v[0]))) <= 1e-12 * scale
+    if fwd.R is not None:
+        assert float(np.max(np.abs(back.R[-1] - fwd.R[0]))) <= 1e-12
     # the whole integrator state comes back, hidden impulse included
-    for a, b in zip(jax.tree_util.tree_leaves(back.final_state), jax.tree_util.tree_leaves(start.states)):
+    for a, b, c in zip(jax.tree_util.tree_leaves(back.final_state), jax.tree_util.tree_leaves(fwd.states),
+                       jax.tree_util.tree_leaves(start)):
         if a is not None and jnp.issubdtype(jnp.asarray(a).dtype, jnp.floating):
-            assert float(np.max(np.abs(np.asarray(a) - np.asarray(b)[0]))) <= 1e-12 * scale
+            np.testing.assert_array_equal(np.asarray(b)[0], np.asarray(c))  # the saved start is state0
+            assert float(np.max(np.abs(np.asarray(a) - np.asarray(b)[0]), initial=0.0)) <= 1e-12 * scale
 
 
 def test_midpoint_with_cayley_on_an_orientation_dependent_system_is_not_symmetric():
@@ -115,9 +160,9 @@ def _round_trip_miss(model, method, n=20, h=0.05):
     system, spec, m = gnipy.make_system(model), gnipy.get_model(model), gnipy.get_method(method)
     b0 = system.initial_point(spec.q0, getattr(spec, "R0", None))
     state = GNIState(b0, system.momentum(b0, jnp.asarray(spec.v0)), jnp.zeros(system.n))
-    run = jax.jit(lambda h, s: gnipy.simulate(system, m, h=h, steps=n, state0=s, saveat=gnipy.SaveAt(t0=True, t1=True)))
-    fwd = run(h, state)
-    back = run(-h, fwd.final_state)
+    run = gnipy_jit(lambda h, s: gnipy.simulate(system, m, h=h, steps=n, state0=s, saveat=gnipy.SaveAt(t0=True, t1=True)))
+    fwd = run(np.float64(h), state)  # arrays, not Python floats: traced by gnipy's (equinox's) jit
+    back = run(np.float64(-h), fwd.final_state)
     miss = [np.max(np.abs(back.q[-1] - fwd.q[0]), initial=0.0), np.max(np.abs(back.v[-1] - fwd.v[0])),
             np.max(np.abs(back.R[-1] - fwd.R[0]))]
     return float(max(miss)), float(np.max(np.abs(fwd.R[-1] - fwd.R[0])))

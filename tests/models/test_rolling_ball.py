@@ -6,6 +6,8 @@ time dominates: runs share one compilation wherever the number of steps (the onl
 the system agree; h is traced, so e.g. (h = 0.1, 200 steps) and (h = 0.0125, 200 steps) share one.
 """
 
+from types import SimpleNamespace
+
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
@@ -26,7 +28,8 @@ from gnipy.spaces import Point
 CHECK_EVERY_NODE = False
 
 T_CONV = 2.5
-HS = [0.1, 0.05, 0.025, 0.0125]  # 25, 50, 100, 200 steps
+HS = [0.1, 0.05, 0.025, 0.0125]  # compared on t ≤ T_CONV: 25, 50, 100, 200 steps
+N_CONV = round(T_CONV / HS[-1])  # every convergence run takes 200 steps: one compiled program
 #: The paper's GNI of §7.4: Euler A l_d, started from rest (p⁺₀ = p̄₀), as its five equations assume.
 PAPER_GNI = gnipy.GNI(gnipy.EulerA(), start="rest")
 H_EQ, N_EQ = 0.1, 200  # the five equations: 200 steps of h = 0.1 (shares the 200-step compile)
@@ -105,11 +108,25 @@ def relative_residuals(p, sol, h, **kw):
 # --------------------------------------------------------------------------------------------
 # Shared runs
 # --------------------------------------------------------------------------------------------
+def _convergence_runs(s, q0, v0):
+    """gni-euler-a at every h of HS, on t ≤ T_CONV (host arrays). Every run takes N_CONV steps (h and
+    the steps are traced, the saved-node count is static), so the four share one compiled program;
+    the first round(T_CONV/h) steps of a longer run are the shorter run's, and the rest is dropped."""
+    runs = {}
+    for h in HS:
+        sol = gnipy.simulate(s, "gni-euler-a", q0, v0, h=h, steps=N_CONV)
+        n = round(T_CONV / h) + 1
+        runs[h] = SimpleNamespace(**{k: _np(getattr(sol, k))[:n] for k in
+                                     ("t", "q", "v", "R", "p", "energy", "constraint_residual")})
+        assert runs[h].t[-1] == pytest.approx(T_CONV, abs=1e-12)
+    return runs
+
+
 @pytest.fixture(scope="module")
 def ex1_runs():
     """GNI (Euler A, the paper's l_d) on example 1 for the h of HS up to T_CONV, plus the 200-step run."""
     s, q0, v0 = ex1()
-    runs = {h: gnipy.simulate(s, "gni-euler-a", q0, v0, h=h, t_final=T_CONV) for h in HS}
+    runs = _convergence_runs(s, q0, v0)
     runs["eq"] = gnipy.simulate(s, PAPER_GNI, q0, v0, h=H_EQ, steps=N_EQ)
     return runs
 
@@ -117,7 +134,7 @@ def ex1_runs():
 @pytest.fixture(scope="module")
 def ex2_runs():
     s, q0, v0 = rb.example_2()
-    runs = {h: gnipy.simulate(s, "gni-euler-a", q0, v0, h=h, t_final=T_CONV) for h in HS}
+    runs = _convergence_runs(s, q0, v0)
     runs["eq"] = gnipy.simulate(s, PAPER_GNI, q0, v0, h=H_EQ, steps=N_EQ)
     runs["ref"] = gnipy.simulate(s, "reference", q0, v0, h=HS[-1], t_final=T_CONV)
     return runs
@@ -361,14 +378,16 @@ def test_attitude_is_the_physical_ball_for_equal_moments(ball_and_sphere, Omega)
     assert fitted_order(H_SPHERE, errors) == pytest.approx(2.0, abs=0.1), errors
 
 
-def test_left_reconstruction_is_not_the_attitude_and_changes_only_R():
+def test_left_reconstruction_is_not_the_attitude_and_changes_only_R(ball_and_sphere):
     """Read as the body angular velocity (Ṙ = Rω̂), ω gives another R (off by O(1) at T = 20 on the
-    turning table); the motion of (x, y, ω) is the same to the last bit."""
+    turning table); the motion of (x, y, ω) is the same to the last bit. (The run with the model's
+    right reconstruction is that of `ball_and_sphere` at h = 0.02.)"""
     p = dict(m=1.0, r=1.0, I1=2.0 / 3.0, I2=2.0 / 3.0, I3=2.0 / 3.0, Omega=1.0)
     q0 = (1.0, 1.0)
     v0 = rb.velocity_from_constraints(p, q0, (0.3, 2.0, -0.5))
     kw = dict(h=0.02, t_final=T_SPHERE, save_every=10)
-    right = gnipy.simulate(rb.build_system(p), "gni-midpoint", q0, v0, **kw)
+    right = ball_and_sphere[1.0]["rolling-ball", 0.02]
+    assert dict(right.params) == p and (right.h, len(right.t)) == (0.02, 101)
     left = gnipy.simulate(rb.build_system(p, reconstruction="left"), "gni-midpoint", q0, v0, **kw)
     for name in ("q", "v", "p", "energy", "constraint_residual"):
         np.testing.assert_array_equal(_np(getattr(left, name)), _np(getattr(right, name)), err_msg=name)
@@ -379,7 +398,8 @@ def test_left_reconstruction_is_not_the_attitude_and_changes_only_R():
 def test_orientation_attribute_says_whether_R_is_physical():
     s, q0, v0 = rb.example_2()  # unequal moments: the paper's simplified model
     assert s.reconstruction == "right"
-    ds = gnipy.simulate(s, "gni-midpoint", q0, v0, h=0.1, steps=2).to_xarray()
+    # 100 steps (101 saved nodes): the compiled program of the gni-midpoint runs of `ball_and_sphere`
+    ds = gnipy.simulate(s, "gni-midpoint", q0, v0, h=0.1, steps=100).to_xarray()
     assert "dR/dt = hat(xi) R" in ds.attrs["orientation"]
     assert "R is not a physical attitude" in ds.attrs["orientation"]
     # a batch over the moments: the attribute names both cases
@@ -499,16 +519,17 @@ def _invoke(*args):
 
 def test_cli_run_writes_orientations(tmp_path):
     out = tmp_path / "f.nc"
-    # 50 steps: shares the compilation of the h = 0.05 convergence run
-    res = _invoke("run", "rolling-ball", "--method", "gni-euler-a", "--h", "0.1", "--steps", "50", "--out", out)
+    # 200 steps: shares the compilation of the convergence runs (N_CONV steps)
+    res = _invoke("run", "rolling-ball", "--method", "gni-euler-a", "--h", "0.0125", "--steps", str(N_CONV),
+                  "--out", out)
     assert res.exit_code == 0, res.output
     assert "error vs exact" in res.output and "omega3" in res.output
     ds = xr.load_dataset(out)
     R = ds["R"]
-    assert R.dims == ("time", "i", "j") and R.shape == (51, 3, 3)
+    assert R.dims == ("time", "i", "j") and R.shape == (N_CONV + 1, 3, 3)
     R = R.values
     assert np.max(np.abs(np.einsum("kji,kjl->kil", R, R) - np.eye(3))) < 1e-13
-    assert np.linalg.det(R) == pytest.approx(np.ones(51), abs=1e-13)
+    assert np.linalg.det(R) == pytest.approx(np.ones(N_CONV + 1), abs=1e-13)
     assert list(ds["coordinate"].values) == ["x", "y"] and ds.sizes["velocity"] == 5
     np.testing.assert_array_equal(ds.attrs["R0"], np.eye(3).ravel())
     assert ds.attrs["max_error_q_vs_exact"] < 1e-2 and ds.attrs["invariant_drift_spin"] < 1e-13
@@ -519,7 +540,7 @@ def test_cli_run_writes_orientations(tmp_path):
     # --x0 (2 values), --v0 (5 values) and --R0 (9 values): on the constraints at x0
     out2 = tmp_path / "g.nc"
     Rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
-    res = _invoke("run", "rolling-ball", "--method", "gni-euler-a", "--h", "0.05", "--steps", "50",
+    res = _invoke("run", "rolling-ball", "--method", "gni-euler-a", "--h", "0.05", "--steps", str(N_CONV),
                   "--x0", "0.5,-1", "--v0", "0.5,1.5,-1,-0.5,0.3", "--R0", ",".join(map(str, Rz.ravel())),
                   "--out", out2)
     assert res.exit_code == 0, res.output

@@ -1,7 +1,16 @@
 """`simulate(..., backend=)`: the native loop gives the XLA loop's results to round-off (the
-independent formulation: the same method compiled by XLA), on every zoo model's default method and
-on every method of an affine model and a group model; which backend runs, and why, is recorded;
-what the native loop does not do falls back to XLA with a reason."""
+independent formulation: the same method compiled by XLA), on every method but the continuous
+reference, on an affine model and a group model, and on one zoo model per other structure; which
+backend runs, and why, is recorded; what the native loop does not do falls back to XLA with a
+reason.
+
+Why representatives suffice: the native loop lowers the step's jaxpr primitive by primitive. That
+every primitive of every zoo model × method step has a lowering rule is checked without compiling
+(tests/native/test_primitives.py), and each rule against NumPy or XLA (tests/native/test_lowering.py);
+what a whole run adds is the loop, the method's state and control flow, and the configuration space,
+so each method runs once (on the turning table: affine, R^n; the group methods on Suslov: SO(3)),
+and each other structure once (ZOO_CASES), not every model × method (a compiled composition costs
+about 10 s of CPU on XLA)"""
 
 import warnings
 
@@ -70,23 +79,51 @@ def _assert_agree(a, b, tol=1e-12):
     assert a.success and b.success
 
 
-@pytest.mark.parametrize("model", gnipy.model_names())
-def test_every_zoo_model_default_method_equals_xla(model):
+#: The structures the method tests below (the turning table: affine, R^n; Suslov: SO(3)) do not
+#: cover, one zoo model each: SE(2) (the sleigh, with its default, the discrete gradient),
+#: constraints that depend on the orientation R on SO(3) (Veselova, with its default, Suzuki's
+#: composition) and on R² × SO(3) with an affine part (the Chaplygin sphere, with gni-trapezoid:
+#: its default, Suzuki's composition of gni-trapezoid, has the same primitives, tests/native/
+#: test_primitives.py, and takes about 10 s of CPU to compile on XLA). Linear constraints on R^n:
+#: the wall of the failure tests below.
+ZOO_CASES = [("chaplygin-sleigh-se2", gnipy.get_model("chaplygin-sleigh-se2").default_method),
+             ("veselova", gnipy.get_model("veselova").default_method), ("chaplygin-sphere", "gni-trapezoid")]
+#: The methods on the turning table: all but the continuous reference, rat (on Suslov below), and
+#: Suzuki's composition of gni-trapezoid (on Veselova; here Yoshida's of the same base stands in
+#: for it, the two differing in their coefficients only).
+AFFINE_METHODS = [m for m in gnipy.method_names() if m not in ("reference", "rat", "suzuki4-gni-trapezoid")]
+GROUP_METHODS = ["gni-trapezoid", "gni-midpoint", "sgni-midpoint", "dla", "discrete-gradient", "yoshida4-gni-trapezoid",
+                 "rat"]
+
+
+def test_the_cases_cover_every_method_every_default_and_every_structure():
+    zoo_methods = {method for _, method in ZOO_CASES}
+    assert set(gnipy.method_names()) - {"reference"} == set(AFFINE_METHODS) | set(GROUP_METHODS) | zoo_methods
+    assert {gnipy.get_model(m).default_method for m in gnipy.model_names()} <= set(AFFINE_METHODS) | zoo_methods
+    systems = [gnipy.make_system(m) for m in [m for m, _ in ZOO_CASES] + ["rotating-table-ball", "suslov"]]
+    kinds = {(type(s.group).__name__ if s.group is not None else "R^n", s.is_affine, s.depends_on_orientation)
+             for s in systems}
+    assert {("R^n", True, False), ("SE2", False, False), ("SO3", False, False), ("SO3", True, True),
+            ("SO3", False, True)} <= kinds
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("model", "method"), ZOO_CASES)
+def test_zoo_structures_equal_xla(model, method):
     s = gnipy.make_system(model)
     kw = dict(h=0.01, steps=STEPS, save_every=1000)
-    a, b = _pair(s, None, **kw)
-    _assert_agree_or_floor(s, None, a, b, **kw)
+    a, b = _pair(s, method, **kw)
+    _assert_agree_or_floor(s, method, a, b, **kw)
 
 
-@pytest.mark.parametrize("method", [m for m in gnipy.method_names() if m not in ("reference", "rat")])
-def test_every_method_on_an_affine_model_equals_xla(method):
+@pytest.mark.parametrize("method", AFFINE_METHODS)
+def test_methods_on_an_affine_model_equal_xla(method):
     s = gnipy.make_system("rotating-table-ball")
     a, b = _pair(s, method, h=0.01, steps=STEPS, save_every=2500)
     _assert_agree(a, b)
 
 
-@pytest.mark.parametrize("method", ["gni-trapezoid", "gni-midpoint", "sgni-midpoint", "dla", "discrete-gradient",
-                                    "yoshida4-gni-trapezoid", "rat"])
+@pytest.mark.parametrize("method", GROUP_METHODS)
 def test_methods_on_a_group_model_equal_xla(method):
     s = gnipy.make_system("suslov")
     kw = dict(h=0.01, steps=STEPS, save_every=2500)

@@ -143,6 +143,8 @@ def guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--m
         usage(str(e))
     except gnipy.SolverFailure as e:
         fail(f"solver failure: {e}", EXIT_FAILURE)
+    except gnipy.MissingExtra as e:  # e.g. gni sweep without dask: the message names the pip line
+        fail(str(e), EXIT_FAILURE)
     except WriteFailure as e:
         fail(str(e), EXIT_FAILURE)
     except OutputError as e:

@@ -33,22 +33,23 @@ from typing import Any
 
 import numpy as np
 
+from ..extras import require
 from ..errors import InputError
 from .problem_files import (
-    _build,
-    _got,
-    _is_number,
-    _known_keys,
-    _method,
-    _model,
-    _names,
-    _number,
-    _numbers,
-    _params,
-    _rotation,
-    _table,
-    _text,
+    build_model_system,
+    describe_entry,
+    entry_method,
+    entry_model,
+    entry_number,
+    entry_numbers,
+    entry_params,
+    entry_rotation,
+    entry_table,
+    entry_text,
+    is_entry_number,
+    quoted_names,
     read_problem,
+    refuse_unknown_keys,
 )
 
 __all__ = ["FitProblem", "load_fit_problem", "write_fit_result"]
@@ -123,34 +124,34 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
     data, text, base, name = read_problem(source, name)
     unknown = set(data) - _FIT_SECTIONS
     if unknown:
-        raise InputError(f"problem: unknown section(s) {_names(unknown)}; expected {', '.join(sorted(_FIT_SECTIONS))}")
-    title = _text("name", data.get("name", name))
-    description = _text("description", data.get("description", "")).strip()
-    spec, fixed_all = _model(data)
-    fixed = _params(spec, data["system"].get("params"), "system.params")
-    estimate = _table(data, "estimate")
-    _known_keys(estimate, "estimate", {"params", "initial"})
-    params = _params(spec, estimate.get("params"), "estimate.params")
+        raise InputError(f"problem: unknown section(s) {quoted_names(unknown)}; expected {', '.join(sorted(_FIT_SECTIONS))}")
+    title = entry_text("name", data.get("name", name))
+    description = entry_text("description", data.get("description", "")).strip()
+    spec, fixed_all = entry_model(data)
+    fixed = entry_params(spec, data["system"].get("params"), "system.params")
+    estimate = entry_table(data, "estimate")
+    refuse_unknown_keys(estimate, "estimate", {"params", "initial"})
+    params = entry_params(spec, estimate.get("params"), "estimate.params")
     both = set(params) & set(fixed)
     if both:
-        raise InputError(f"estimate.params: {_names(both)} also in system.params (a parameter is either estimated or "
+        raise InputError(f"estimate.params: {quoted_names(both)} also in system.params (a parameter is either estimated or "
                          "fixed)")
     initial = estimate.get("initial", [])
     if isinstance(initial, str):
         initial = [initial]
     if (not isinstance(initial, list) or not all(isinstance(k, str) for k in initial)
             or not set(initial) <= {"q0", "v0"} or len(set(initial)) != len(initial)):
-        raise InputError(f"estimate.initial: expected a list of 'q0' and/or 'v0' (each once), got {_got(initial)}")
+        raise InputError(f"estimate.initial: expected a list of 'q0' and/or 'v0' (each once), got {describe_entry(initial)}")
     if not params and not initial:
         raise InputError("estimate: nothing to estimate: give params = {...} and/or initial = [...]")
     # the system at the initial guess: the names and sizes below are checked against it
-    system = _build(spec, {**fixed_all, **params}, "system.params/estimate.params")
+    system = build_model_system(spec, {**fixed_all, **params}, "system.params/estimate.params")
 
-    obs_sec = _table(data, "observations")
-    _known_keys(obs_sec, "observations", {"file", "variables", "sigma"})
+    obs_sec = entry_table(data, "observations")
+    refuse_unknown_keys(obs_sec, "observations", {"file", "variables", "sigma"})
     file = obs_sec.get("file")
     if not isinstance(file, str) or not file:
-        raise InputError(f"observations.file: expected the path of a gnipy result file (netCDF), got {_got(file)}")
+        raise InputError(f"observations.file: expected the path of a gnipy result file (netCDF), got {describe_entry(file)}")
     if "\x00" in file:
         raise InputError(f"observations.file: {file!r}: a path cannot contain a NUL character")
     obs_path = Path(file) if Path(file).is_absolute() else base / file
@@ -158,7 +159,7 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
     if variables is not None:
         known = (*system.coordinates, *system.velocities)
         if not isinstance(variables, list) or not variables or not all(isinstance(v, str) for v in variables):
-            raise InputError(f"observations.variables: expected a list of names, got {_got(variables)}")
+            raise InputError(f"observations.variables: expected a list of names, got {describe_entry(variables)}")
         if len(set(variables)) != len(variables):
             raise InputError(f"observations.variables: a name is repeated in {variables!r}")
         unknown = [v for v in variables if v not in known]
@@ -168,32 +169,32 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
                              f"{', '.join(system.velocities)})")
     sigma = obs_sec.get("sigma")
     if sigma is not None:
-        sigma = _number("observations.sigma", sigma, positive=True)
+        sigma = entry_number("observations.sigma", sigma, positive=True)
         if not SIGMA_RANGE[0] <= sigma <= SIGMA_RANGE[1]:
             raise InputError(f"observations.sigma: {sigma!r} is outside {SIGMA_RANGE[0]:g} .. {SIGMA_RANGE[1]:g}: the "
                              "weights 1/sigma or the squared weighted residuals would not be finite in float64")
 
-    start = _table(data, "start", required=False)
-    _known_keys(start, "start", {"q0", "v0", "R0"})
-    q0 = tuple(_numbers("start.q0", start["q0"], system.coordinates)) if "q0" in start else None
-    v0 = tuple(_numbers("start.v0", start["v0"], system.velocities)) if "v0" in start else None
-    R0 = _rotation("start.R0", start["R0"], system) if "R0" in start else None
-    integ = _table(data, "integration", required=False)
-    _known_keys(integ, "integration", {"method", "h", "t0"})
+    start = entry_table(data, "start", required=False)
+    refuse_unknown_keys(start, "start", {"q0", "v0", "R0"})
+    q0 = tuple(entry_numbers("start.q0", start["q0"], system.coordinates)) if "q0" in start else None
+    v0 = tuple(entry_numbers("start.v0", start["v0"], system.velocities)) if "v0" in start else None
+    R0 = entry_rotation("start.R0", start["R0"], system) if "R0" in start else None
+    integ = entry_table(data, "integration", required=False)
+    refuse_unknown_keys(integ, "integration", {"method", "h", "t0"})
     method = integ.get("method")
     if method is not None:
-        method = _method("integration.method", method)
+        method = entry_method("integration.method", method)
     h = integ.get("h")
     if h is not None:
-        h = _number("integration.h", h, positive=True)
-    t0 = _number("integration.t0", integ.get("t0", 0.0))
+        h = entry_number("integration.h", h, positive=True)
+    t0 = entry_number("integration.t0", integ.get("t0", 0.0))
 
     observations, file_h = _read_observations(obs_path, variables, sigma, memory_limit(max_bytes))
     if h is None:
         if file_h is None:
             raise InputError("integration.h: missing, and the observation file does not record its h; give "
                              "[integration] h")
-        if not (_is_number(file_h) and math.isfinite(file_h) and file_h > 0):
+        if not (is_entry_number(file_h) and math.isfinite(file_h) and file_h > 0):
             raise InputError(f"integration.h: missing, and the observation file's attribute h ({file_h!r}) is not a "
                              "positive number; give [integration] h")
         h = float(file_h)
@@ -215,7 +216,7 @@ def _read_observations(path: Path, variables, sigma, bound: int | None):
     """`(Observations, the file's h attribute or None)` from a gnipy result file: opened lazily, its
     observed variables checked (dimensions, numbers) and their size bounded before they are read.
     Every failure is an InputError naming `observations.file`."""
-    import xarray as xr
+    xr = require("xarray", extra="files")
 
     from ..files import format_bytes
     from ..io import upgrade_layout
@@ -274,7 +275,7 @@ def write_fit_result(result, problem: FitProblem | None, path, *, overwrite: boo
     nodes (as `gni run` writes them), the estimates `estimate(quantity)`, their standard errors
     `standard_error(quantity)` and covariance `covariance(quantity, quantity_)`, and the fit's
     figures (chi², degrees of freedom, iterations) as attributes."""
-    import xarray as xr
+    xr = require("xarray", extra="files")
 
     from .. import schema
     from ..io import write_netcdf

@@ -45,15 +45,16 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..extras import require
 from ..errors import InputError, SolverFailure
-from ..inputs import real_array, real_number, require_float64, whole_number
+from ..inputs import finite_number, real_array, real_number, require_float64, whole_number
 from ..registry import get_model
 from ..saveat import GRID_RTOL, SaveAt
 from ..simulate import MIN_STEP_SIZE, simulate
 from ..solution import Solution
 from ..system import System, project_velocity
 from .memory import check_fit_memory, memory_limit
-from .observations import Observations, _as_observations, _sigma_array, _Unnamed
+from .observations import Observations, UnnamedObservations, as_observations, sigma_array
 from .optimal_control import MAX_ITERATIONS
 
 __all__ = ["fit", "FitResult", "Observations", "RCOND", "MAX_STEPS"]
@@ -226,6 +227,7 @@ def _progress_reporter(progress):
     if progress is None or progress is False:
         return None
     if progress is True:
+        require("rich", extra="cli", what="progress display")
         from rich.console import Console
 
         console = Console(stderr=True)
@@ -469,11 +471,6 @@ def _check_method(method) -> None:
         raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
 
 
-def _number(name: str, x) -> float:
-    """`x` as a finite float (`InputError` naming `name`: a string or a boolean is not a number)."""
-    return real_number(name, x)
-
-
 _TRACE_ERRORS = (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError,
                  jax.errors.TracerBoolConversionError, jax.errors.TracerIntegerConversionError)
 
@@ -573,12 +570,12 @@ def fit(
 
     start = time.perf_counter()
     require_float64()
-    h = _number("h", h)
+    h = finite_number("h", h)
     if h == 0:
         raise InputError("h: must be nonzero")
     if abs(h) < MIN_STEP_SIZE:
         raise InputError(f"h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision")
-    t0 = _number("t0", t0)
+    t0 = finite_number("t0", t0)
     if params is None:
         params = {}
     if not isinstance(params, Mapping):
@@ -591,10 +588,10 @@ def fit(
         if bad:
             raise InputError(f"{arg}: parameter names must be strings, got {bad[0]!r}")
     param_names = tuple(params)
-    guesses = [_number(f"params: {k!r}", v) for k, v in params.items()]
+    guesses = [finite_number(f"params: {k!r}", v) for k, v in params.items()]
     for k, v in fixed.items():  # before a model reads them (its own check would take "1" or True)
         if not isinstance(v, jax.core.Tracer):
-            _number(f"fixed: {k!r}", v)
+            finite_number(f"fixed: {k!r}", v)
     both = sorted(set(param_names) & set(fixed))
     if both:
         raise InputError(f"fixed: {both} also in params (a parameter is either estimated or fixed)")
@@ -659,8 +656,8 @@ def fit(
     y0 = np.concatenate([np.asarray(guesses, dtype=np.float64), q0v[list(q_idx)], v0v[list(v_idx)]])
 
     # the observations, on the grid
-    obs = _as_observations(observations)
-    if isinstance(obs, _Unnamed):
+    obs = as_observations(observations)
+    if isinstance(obs, UnnamedObservations):
         obs = obs.named(coords)
     columns = _columns(obs.variables, coords, vels)
     ks = _grid(obs.times, t0, h)
@@ -669,7 +666,7 @@ def fit(
                      max_bytes=bound)
     if sigma is not None and obs.sigma is not None:
         raise InputError("sigma: given both here and in the observations; give one")
-    sig = obs.sigma if sigma is None else _sigma_array(sigma, obs.values.shape, "sigma")
+    sig = obs.sigma if sigma is None else sigma_array(sigma, obs.values.shape, "sigma")
     sigma_known = sig is not None
     mask = np.isfinite(obs.values)
     n_obs = int(mask.sum())
@@ -681,7 +678,7 @@ def fit(
     scale = np.where(y0 != 0, np.abs(y0), 1.0)
     problem = _Problem(
         system=None if given_system is None else given_system.without_metadata(),
-        fixed={k: jnp.asarray(_number(f"fixed: {k!r}", v), jnp.float64) for k, v in fixed.items()},
+        fixed={k: jnp.asarray(finite_number(f"fixed: {k!r}", v), jnp.float64) for k, v in fixed.items()},
         q0=jnp.asarray(q0v), v0=jnp.asarray(v0v), R0=None if R0a is None else jnp.asarray(R0a),
         scale=jnp.asarray(scale), controls=controls, build=build, method=method, param_names=param_names,
         q_idx=q_idx, v_idx=v_idx, follow_ic=follow_ic, h=h, steps=ks[-1], t0=t0,

@@ -10,6 +10,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..extras import require
 from ..errors import InputError
 from ..inputs import real_array
 from ..solution import Solution
@@ -82,7 +83,7 @@ class Observations:
         object.__setattr__(self, "values", values)
         object.__setattr__(self, "variables", variables)
         if self.sigma is not None:
-            object.__setattr__(self, "sigma", _sigma_array(self.sigma, values.shape, "observations"))
+            object.__setattr__(self, "sigma", sigma_array(self.sigma, values.shape, "observations"))
 
     @property
     def count(self) -> int:
@@ -120,7 +121,7 @@ class Observations:
             variables: the coordinate and/or velocity names to take (default: every coordinate).
             sigma: as in :class:`Observations`.
         """
-        import xarray as xr
+        xr = require("xarray", extra="files")
 
         from ..io import read_netcdf, result_times
 
@@ -185,7 +186,7 @@ class Observations:
         return cls(np.asarray(t, dtype=np.float64), values, tuple(variables), sigma)
 
 
-def _sigma_array(sigma, shape, name: str) -> np.ndarray:
+def sigma_array(sigma, shape, name: str) -> np.ndarray:
     """`sigma` broadcast to `shape` (T, k): a number, (k,) or (T, k); positive and finite."""
     s = real_array(name, sigma, "positive standard deviations (numbers)")
     if s.ndim == 1 and s.shape[0] == shape[1]:
@@ -205,9 +206,9 @@ def _sigma_array(sigma, shape, name: str) -> np.ndarray:
     return np.array(s, dtype=np.float64)
 
 
-def _as_observations(observations) -> Observations:
+def as_observations(observations) -> Observations:
     """What :func:`fit` accepts as `observations`, as an :class:`Observations`."""
-    import xarray as xr
+    xr = require("xarray", extra="files")
 
     if isinstance(observations, Observations):
         return observations
@@ -218,20 +219,21 @@ def _as_observations(observations) -> Observations:
     if isinstance(observations, tuple) and len(observations) in (2, 3):
         if len(observations) == 3:
             return Observations(*observations)
-        return _Unnamed(*observations)
+        return UnnamedObservations(*observations)
     raise InputError(
         "observations: expected a gnipy.control.Observations, a (times, values[, variables]) tuple, a "
         f"gnipy.Solution, an xarray.Dataset or the path of a netCDF file, got {type(observations).__name__}"
     )
 
 
-class _Unnamed:
+class UnnamedObservations:
     """`(times, values)` without names: every coordinate, named once the system is known."""
 
     def __init__(self, times, values):
         self.times, self.values = times, values
 
     def named(self, coordinates) -> Observations:
+        """The observations with the system's `coordinates` as their variables."""
         values = real_array("observations", self.values, "an array of observed values (numbers)")
         if values.ndim == 1 and len(coordinates) == 1:
             values = values[:, None]

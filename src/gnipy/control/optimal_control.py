@@ -58,6 +58,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..extras import require
 from ..errors import InputError
 from ..inputs import real_array, real_number, whole_number
 from ..resources import MAX_MEMORY_BYTES
@@ -674,6 +675,7 @@ def _reporter(progress):
     if progress is False or progress is None:
         return None
     if progress is True:
+        require("rich", extra="cli", what="progress display")
         from rich.console import Console
 
         console = Console(stderr=True, markup=False, highlight=False)

@@ -4,7 +4,7 @@ A file is read as bytes, at most :data:`MAX_PROBLEM_BYTES`, and decoded as UTF-8
 checked for its type before it is used (TOML's strings and booleans are never taken as numbers,
 NaN and infinities are refused where a finite number is needed), and every error is an
 :class:`~gnipy.errors.InputError` whose message starts with the key (`horizon.steps: ...`,
-`system.params.m: ...`). The checks (`_number`, `_numbers`, `_table`, ...) are shared by
+`system.params.m: ...`). The checks (`entry_number`, `entry_numbers`, `entry_table`, ...) are shared by
 :mod:`gnipy.control.problems` and :mod:`gnipy.control.fit_problems`.
 """
 
@@ -68,7 +68,7 @@ def read_problem(source, name: str, also: str = "") -> tuple[dict, str, Path, st
 # The entries, checked: a TOML value of the wrong type is refused naming its key (no coercion:
 # "1" and true are not numbers), as are NaN, infinities and values out of range.
 # ----------------------------------------------------------------------------------------------
-def _got(value) -> str:
+def describe_entry(value) -> str:
     """What a TOML value is, for messages: `the string '1'`, `true (a boolean)`, `a table`..."""
     if value is None:
         return "nothing (the key is missing)"
@@ -87,15 +87,17 @@ def _got(value) -> str:
     return text if len(text) <= 100 else text[:97] + "..."
 
 
-def _names(names) -> str:
+def quoted_names(names) -> str:
+    """The names, sorted and quoted, for a message: `'a', 'b'`."""
     return ", ".join(repr(n) for n in sorted(names, key=str))
 
 
-def _is_number(value) -> bool:
+def is_entry_number(value) -> bool:
+    """Whether a TOML value is a number (an int or a float; a boolean is not)."""
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def _table(data, key: str, *, required: bool = True) -> Mapping:
+def entry_table(data, key: str, *, required: bool = True) -> Mapping:
     """The section `[key]`: a table; when `required`, present and not empty."""
     sec = data.get(key)
     if sec is None:
@@ -103,34 +105,37 @@ def _table(data, key: str, *, required: bool = True) -> Mapping:
             raise InputError(f"{key}: missing section [{key}]")
         return {}
     if not isinstance(sec, Mapping):
-        raise InputError(f"{key}: expected a table [{key}], got {_got(sec)}")
+        raise InputError(f"{key}: expected a table [{key}], got {describe_entry(sec)}")
     if required and not sec:
         raise InputError(f"{key}: the section [{key}] is empty")
     return sec
 
 
-def _known_keys(sec: Mapping, where: str, keys: set[str]) -> None:
+def refuse_unknown_keys(sec: Mapping, where: str, keys: set[str]) -> None:
     """Refuse keys a section does not have (a misspelt key would otherwise be a default)."""
     unknown = set(sec) - keys
     if unknown:
-        raise InputError(f"{where}: unknown key(s) {_names(unknown)}; expected {', '.join(sorted(keys))}")
+        raise InputError(f"{where}: unknown key(s) {quoted_names(unknown)}; expected {', '.join(sorted(keys))}")
 
 
-def _text(where: str, value) -> str:
+def entry_text(where: str, value) -> str:
+    """A TOML string; :class:`InputError` naming `where` otherwise."""
     if not isinstance(value, str):
-        raise InputError(f"{where}: expected a string, got {_got(value)}")
+        raise InputError(f"{where}: expected a string, got {describe_entry(value)}")
     return value
 
 
-def _flag(where: str, value) -> bool:
+def entry_flag(where: str, value) -> bool:
+    """A TOML boolean; :class:`InputError` naming `where` otherwise."""
     if not isinstance(value, bool):
-        raise InputError(f"{where}: expected true or false, got {_got(value)}")
+        raise InputError(f"{where}: expected true or false, got {describe_entry(value)}")
     return value
 
 
-def _number(where: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
-    if not _is_number(value):
-        raise InputError(f"{where}: expected a {'positive ' if positive else ''}number, got {_got(value)}")
+def entry_number(where: str, value, *, positive: bool = False, nonnegative: bool = False) -> float:
+    """A finite TOML number as a float, positive or >= 0 when asked; :class:`InputError` naming `where` otherwise."""
+    if not is_entry_number(value):
+        raise InputError(f"{where}: expected a {'positive ' if positive else ''}number, got {describe_entry(value)}")
     if not math.isfinite(value):
         raise InputError(f"{where}: must be finite, got {value!r}")
     if positive and value <= 0:
@@ -140,21 +145,22 @@ def _number(where: str, value, *, positive: bool = False, nonnegative: bool = Fa
     return float(value)
 
 
-def _integer(where: str, value, low: int, high: int, high_key: str = "") -> int:
+def entry_integer(where: str, value, low: int, high: int, high_key: str = "") -> int:
+    """A TOML integer from `low` to `high` (`high_key`: the key that sets `high`, named in the message)."""
     bound = f"{high:,}" + (f" ({high_key})" if high_key else "")
     if isinstance(value, bool) or not isinstance(value, int):
-        raise InputError(f"{where}: expected an integer from {low:,} to {bound}, got {_got(value)}")
+        raise InputError(f"{where}: expected an integer from {low:,} to {bound}, got {describe_entry(value)}")
     if not low <= value <= high:
         raise InputError(f"{where}: must be an integer from {low:,} to {bound}, got {value:,}")
     return value
 
 
-def _numbers(where: str, value, names: tuple[str, ...] | None = None) -> list[float]:
+def entry_numbers(where: str, value, names: tuple[str, ...] | None = None) -> list[float]:
     """A list of finite numbers; with `names`, one per name."""
-    if not isinstance(value, list) or not all(_is_number(x) for x in value):
-        bad = next((x for x in value if not _is_number(x)), None) if isinstance(value, list) else None
-        raise InputError(f"{where}: expected a list of numbers, got {_got(value)}"
-                         + (f" (holding {_got(bad)})" if isinstance(value, list) and value else ""))
+    if not isinstance(value, list) or not all(is_entry_number(x) for x in value):
+        bad = next((x for x in value if not is_entry_number(x)), None) if isinstance(value, list) else None
+        raise InputError(f"{where}: expected a list of numbers, got {describe_entry(value)}"
+                         + (f" (holding {describe_entry(bad)})" if isinstance(value, list) and value else ""))
     if not all(math.isfinite(x) for x in value):
         raise InputError(f"{where}: contains NaN or infinite values")
     if names is not None and len(value) != len(names):
@@ -165,8 +171,8 @@ def _numbers(where: str, value, names: tuple[str, ...] | None = None) -> list[fl
 
 def _matrix(where: str, value, k: int | None = None) -> np.ndarray:
     if not isinstance(value, list) or not value:
-        raise InputError(f"{where}: expected a matrix as a list of rows, got {_got(value)}")
-    rows = [_numbers(where, r) for r in value]
+        raise InputError(f"{where}: expected a matrix as a list of rows, got {describe_entry(value)}")
+    rows = [entry_numbers(where, r) for r in value]
     if len({len(r) for r in rows}) != 1:
         raise InputError(f"{where}: rows of different lengths")
     R = np.asarray(rows)
@@ -175,7 +181,7 @@ def _matrix(where: str, value, k: int | None = None) -> np.ndarray:
     return R
 
 
-def _rotation(where: str, value, system: System) -> np.ndarray:
+def entry_rotation(where: str, value, system: System) -> np.ndarray:
     """A k x k group element (a rotation: RᵀR = I, det R > 0) for a system with a group part."""
     if system.group is None:
         raise InputError(f"{where}: the model {system.name!r} has no orientation (no group part)")
@@ -188,12 +194,12 @@ def _rotation(where: str, value, system: System) -> np.ndarray:
     return R
 
 
-def _method(where: str, value) -> str:
+def entry_method(where: str, value) -> str:
     """A method's name, known and differentiable (the solvers differentiate through its steps)."""
     from ..methods import get_method
     from ..reference import ContinuousReference
 
-    name = _text(where, value)
+    name = entry_text(where, value)
     try:
         method = get_method(name)
     except InputError as e:
@@ -204,37 +210,37 @@ def _method(where: str, value) -> str:
     return name
 
 
-def _params(spec, table, where: str) -> dict[str, float]:
+def entry_params(spec, table, where: str) -> dict[str, float]:
     """A table of a model's parameters: known names, finite numbers."""
     if table is None:
         return {}
     if not isinstance(table, Mapping):
-        raise InputError(f"{where}: expected a table {{name = value}}, got {_got(table)}")
+        raise InputError(f"{where}: expected a table {{name = value}}, got {describe_entry(table)}")
     unknown = set(table) - set(spec.params)
     if unknown:
-        raise InputError(f"{where}: unknown parameter(s) {_names(unknown)} of model {spec.name!r} (known: "
+        raise InputError(f"{where}: unknown parameter(s) {quoted_names(unknown)} of model {spec.name!r} (known: "
                          f"{', '.join(spec.params) or 'none'})")
-    return {k: _number(f"{where}.{k}", v) for k, v in table.items()}
+    return {k: entry_number(f"{where}.{k}", v) for k, v in table.items()}
 
 
-def _model(data):
+def entry_model(data):
     """`(spec, params)` of `[system]`: the model and its parameters (the defaults updated)."""
     from ..registry import get_model
 
-    system_sec = _table(data, "system")
-    _known_keys(system_sec, "system", {"model", "params"})
+    system_sec = entry_table(data, "system")
+    refuse_unknown_keys(system_sec, "system", {"model", "params"})
     model = system_sec.get("model")
     if not isinstance(model, str):
-        raise InputError(f"system.model: expected a model name (see `gni models`), got {_got(model)}")
+        raise InputError(f"system.model: expected a model name (see `gni models`), got {describe_entry(model)}")
     try:
         spec = get_model(model)
     except (KeyError, ValueError, InputError) as e:
         raise InputError(f"system.model: {str(e).strip(chr(39))}") from None
-    params = spec.resolve_params(_params(spec, system_sec.get("params"), "system.params"))
+    params = spec.resolve_params(entry_params(spec, system_sec.get("params"), "system.params"))
     return spec, params
 
 
-def _build(spec, params, where: str) -> System:
+def build_model_system(spec, params, where: str) -> System:
     """The model's System for `params`; a failure names `where` (the parameters' key)."""
     try:
         return spec.build(params)
@@ -245,11 +251,11 @@ def _build(spec, params, where: str) -> System:
                          f"{type(e).__name__}: {e}") from None
 
 
-def _start(start: Mapping, system: System, spec, params, where: str = "start"):
+def entry_start(start: Mapping, system: System, spec, params, where: str = "start"):
     """`(q0, v0, R0)` of `[start]`, checked against the model (the model's defaults where absent)."""
-    q0 = tuple(_numbers(f"{where}.q0", start["q0"], system.coordinates)) if "q0" in start else None
-    v0 = tuple(_numbers(f"{where}.v0", start["v0"], system.velocities)) if "v0" in start else None
-    R0 = _rotation(f"{where}.R0", start["R0"], system) if "R0" in start else None
+    q0 = tuple(entry_numbers(f"{where}.q0", start["q0"], system.coordinates)) if "q0" in start else None
+    v0 = tuple(entry_numbers(f"{where}.v0", start["v0"], system.velocities)) if "v0" in start else None
+    R0 = entry_rotation(f"{where}.R0", start["R0"], system) if "R0" in start else None
     if q0 is None or v0 is None:
         try:
             dq, dv = spec.initial_condition(params)

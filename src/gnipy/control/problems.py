@@ -35,25 +35,26 @@ from typing import Any
 
 import numpy as np
 
+from ..extras import require
 from ..errors import InputError
 from ..system import System
 from .problem_files import (
-    _build,
-    _flag,
-    _got,
-    _integer,
-    _is_number,
-    _known_keys,
-    _method,
-    _model,
-    _names,
-    _number,
-    _numbers,
-    _rotation,
-    _start,
-    _table,
-    _text,
+    build_model_system,
+    describe_entry,
+    entry_flag,
+    entry_integer,
+    entry_method,
+    entry_model,
+    entry_number,
+    entry_numbers,
+    entry_rotation,
+    entry_start,
+    entry_table,
+    entry_text,
+    is_entry_number,
+    quoted_names,
     read_problem,
+    refuse_unknown_keys,
 )
 
 __all__ = ["ControlProblem", "WORKED_PROBLEMS", "load_problem", "write_control_result"]
@@ -219,41 +220,41 @@ def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlP
     data, text, _, name = read_problem(source, name, f"a worked problem's name ({', '.join(WORKED_PROBLEMS)})")
     unknown = set(data) - _SECTIONS
     if unknown:
-        raise InputError(f"problem: unknown section(s) {_names(unknown)}; expected {', '.join(sorted(_SECTIONS))}")
-    title = _text("name", data.get("name", name))
-    description = _text("description", data.get("description", "")).strip()
-    spec, params = _model(data)
-    base = _build(spec, params, "system.params")
-    F, m, input_names = input_force(base, _table(data, "inputs"))
+        raise InputError(f"problem: unknown section(s) {quoted_names(unknown)}; expected {', '.join(sorted(_SECTIONS))}")
+    title = entry_text("name", data.get("name", name))
+    description = entry_text("description", data.get("description", "")).strip()
+    spec, params = entry_model(data)
+    base = build_model_system(spec, params, "system.params")
+    F, m, input_names = input_force(base, entry_table(data, "inputs"))
     system = base.with_force(F, inputs=m)
-    start = _table(data, "start", required=False)
-    _known_keys(start, "start", {"q0", "v0", "R0", "project_v0"})
-    q0, v0, R0 = _start(start, system, spec, params)
-    project_v0 = _flag("start.project_v0", start.get("project_v0", False))
-    horizon = _table(data, "horizon")
-    _known_keys(horizon, "horizon", {"h", "steps"})
-    h = _number("horizon.h", horizon.get("h"), positive=True)
+    start = entry_table(data, "start", required=False)
+    refuse_unknown_keys(start, "start", {"q0", "v0", "R0", "project_v0"})
+    q0, v0, R0 = entry_start(start, system, spec, params)
+    project_v0 = entry_flag("start.project_v0", start.get("project_v0", False))
+    horizon = entry_table(data, "horizon")
+    refuse_unknown_keys(horizon, "horizon", {"h", "steps"})
+    h = entry_number("horizon.h", horizon.get("h"), positive=True)
     if h < MIN_STEP_SIZE:
         raise InputError(f"horizon.h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision")
-    steps = _integer("horizon.steps", horizon.get("steps"), 1, MAX_TOTAL_STEPS)
+    steps = entry_integer("horizon.steps", horizon.get("steps"), 1, MAX_TOTAL_STEPS)
     if not math.isfinite(h * steps):
         raise InputError(f"horizon: the horizon h x steps = {h!r} x {steps} is not a finite time")
-    target = _target(_table(data, "target"), system)
-    solver = _table(data, "solver", required=False)
-    _known_keys(solver, "solver", {"method", "bounds", "effort", "smoothness", "max_iterations", "segments"})
-    method = _method("solver.method", solver.get("method", "gni-trapezoid"))
+    target = _target(entry_table(data, "target"), system)
+    solver = entry_table(data, "solver", required=False)
+    refuse_unknown_keys(solver, "solver", {"method", "bounds", "effort", "smoothness", "max_iterations", "segments"})
+    method = entry_method("solver.method", solver.get("method", "gni-trapezoid"))
     bounds = _bounds(solver.get("bounds"), m)
-    effort = _number("solver.effort", solver.get("effort", 1.0), nonnegative=True)
-    smoothness = _number("solver.smoothness", solver.get("smoothness", 0.0), nonnegative=True)
-    max_iterations = _integer("solver.max_iterations", solver.get("max_iterations", 500), 1, MAX_ITERATIONS)
-    segments = _integer("solver.segments", solver.get("segments", 1), 1, steps, "horizon.steps")
+    effort = entry_number("solver.effort", solver.get("effort", 1.0), nonnegative=True)
+    smoothness = entry_number("solver.smoothness", solver.get("smoothness", 0.0), nonnegative=True)
+    max_iterations = entry_integer("solver.max_iterations", solver.get("max_iterations", 500), 1, MAX_ITERATIONS)
+    segments = entry_integer("solver.segments", solver.get("segments", 1), 1, steps, "horizon.steps")
     size = sum(system.group.dim if k == "R" else 1 for k in target)
     if size > steps * m:
         raise InputError(f"horizon.steps: the target's {size} conditions need at least as many controls; "
                          f"{steps} steps x {m} inputs are {steps * m}")
     # refused before the warm start (K x m numbers) is built or anything is compiled
     check_control_memory(system, steps, size, segments, max_bytes, key="horizon.steps")
-    warm = _table(data, "warm_start", required=False)
+    warm = entry_table(data, "warm_start", required=False)
     controls0 = _warm_start(warm, steps, m, h)
     return ControlProblem(
         name=title, description=description, system=system, input_names=input_names, target=target, q0=q0, v0=v0,
@@ -267,9 +268,9 @@ def _target(table: Mapping, system: System) -> dict:
     target = {}
     for key, value in table.items():
         if key == "R" and system.group is not None:
-            target[key] = _rotation("target.R", value, system)
+            target[key] = entry_rotation("target.R", value, system)
         elif key in names:
-            target[key] = _number(f"target.{key}", value)
+            target[key] = entry_number(f"target.{key}", value)
         else:
             raise InputError(f"target: unknown name {key!r}; expected one of {', '.join(names)}")
     return target
@@ -280,15 +281,15 @@ def _bounds(value, m: int):
     if value is None:
         return None
     if not isinstance(value, list) or len(value) != 2:
-        raise InputError(f"solver.bounds: expected [lower, upper], got {_got(value)}")
+        raise InputError(f"solver.bounds: expected [lower, upper], got {describe_entry(value)}")
     sides = []
     for side, b in zip(("lower", "upper"), value):
         if isinstance(b, list):
-            if len(b) != m or not all(_is_number(x) for x in b):
+            if len(b) != m or not all(is_entry_number(x) for x in b):
                 raise InputError(f"solver.bounds: the {side} bound must be a number or a list of {m} numbers (one per "
-                                 f"input), got {_got(b)}")
-        elif not _is_number(b):
-            raise InputError(f"solver.bounds: the {side} bound must be a number, got {_got(b)}")
+                                 f"input), got {describe_entry(b)}")
+        elif not is_entry_number(b):
+            raise InputError(f"solver.bounds: the {side} bound must be a number, got {describe_entry(b)}")
         arr = np.broadcast_to(np.asarray(b, dtype=np.float64), (m,))
         if np.any(np.isnan(arr)):
             raise InputError(f"solver.bounds: the {side} bound is NaN")
@@ -302,11 +303,11 @@ def _bounds(value, m: int):
 def _warm_start(warm, steps: int, m: int, h: float) -> np.ndarray:
     if not warm:
         return np.zeros((steps, m))
-    _known_keys(warm, "warm_start", {"amplitude", "phase", "periods"})
+    refuse_unknown_keys(warm, "warm_start", {"amplitude", "phase", "periods"})
     names = tuple(f"input {j + 1}" for j in range(m))
-    amp = np.asarray(_numbers("warm_start.amplitude", warm.get("amplitude", [0.0] * m), names))
-    phase = np.asarray(_numbers("warm_start.phase", warm.get("phase", [0.0] * m), names))
-    periods = _number("warm_start.periods", warm.get("periods", 1.0))
+    amp = np.asarray(entry_numbers("warm_start.amplitude", warm.get("amplitude", [0.0] * m), names))
+    phase = np.asarray(entry_numbers("warm_start.phase", warm.get("phase", [0.0] * m), names))
+    periods = entry_number("warm_start.periods", warm.get("periods", 1.0))
     T = steps * h
     t = (np.arange(steps) + 0.5) * h  # the middle of each step
     with np.errstate(invalid="ignore", over="ignore"):  # checked below
@@ -322,7 +323,7 @@ def write_control_result(result, problem: ControlProblem | None, path, *, overwr
     run's nodes (as `gni run` writes them), the controls `u(step, input)` with the step's start
     time `t_step(step)`, and the solver's figures as attributes (cost, target and KKT residuals,
     iterations, wall time, the problem file's text)."""
-    import xarray as xr
+    xr = require("xarray", extra="files")
 
     from .. import schema
     from ..io import write_netcdf

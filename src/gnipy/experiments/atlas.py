@@ -3,7 +3,7 @@ recommended method (`gni atlas`; the report is :mod:`gnipy.experiments.atlas_rep
 
 **One run per (model, method)** where the method applies (:meth:`Integrator.check` raises
 :class:`~gnipy.MethodError` elsewhere), at the fixed step h of :data:`H` (the step of the rule,
-:mod:`gnipy.experiments.method_choice`) for `steps` steps (:func:`plan`: 10⁵ or 10⁶ in the full
+:mod:`gnipy.experiments.choice_rule`) for `steps` steps (:func:`plan`: 10⁵ or 10⁶ in the full
 atlas, chosen per model so that the whole atlas fits half an hour on 2 cores), saving the nodes
 of every 10 steps up to the reference horizon `t_ref` and :data:`LONG_NODES` more nodes spread
 over the rest. Measured (:class:`PairResult`):
@@ -30,7 +30,7 @@ over the rest. Measured (:class:`PairResult`):
   that compiles the same program (a run's compiled program depends only on how many nodes it saves),
   so it excludes compilation (reported apart: the first call's time).
 
-**The recommendation** is :func:`gnipy.experiments.method_choice.choose` (the documented rule,
+**The recommendation** is :func:`gnipy.experiments.choice_rule.choose` (the documented rule,
 stated there once) on these measurements: a method qualifies when the long run completes, raises no
 warning and keeps every invariant to 1e-2; the smallest error against the reference wins, with the
 rule's tie-breaks. The atlas is the source of the recorded defaults
@@ -50,7 +50,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ..errors import verdicts_reported_by_caller
-from .method_choice import H, T_FINAL
+from .choice_rule import H, T_FINAL, MethodMeasurement, choose
 
 __all__ = ["H", "QUICK_MODELS", "LONG_NODES", "Plan", "plan", "PairResult", "ModelResult", "AtlasResult",
            "measure_model", "run_atlas"]
@@ -163,9 +163,7 @@ class PairResult:
 
     @property
     def measurement(self):
-        """This pair as a :class:`~gnipy.experiments.method_choice.MethodMeasurement` (the rule's input)."""
-        from .method_choice import MethodMeasurement
-
+        """This pair as a :class:`~gnipy.experiments.choice_rule.MethodMeasurement` (the rule's input)."""
         return MethodMeasurement(self.method, self.error if self.completed else math.inf, self.invariant_drift,
                                  self.warnings, not self.completed, self.iterations, self.constraint_residual,
                                  self.order, self.hidden_max is not None)
@@ -255,12 +253,13 @@ class _Invariant:
                               dtype=np.float64)
 
 
-def _invariant_functions(spec, params) -> dict[str, _Invariant]:
+def invariant_functions(spec, params) -> dict[str, _Invariant]:
     """name -> the invariant over the saved nodes (:class:`_Invariant`)."""
     return {name: _Invariant(f, params) for name, f in spec.invariants.items()}
 
 
-def _invariant_values(functions, sol) -> dict[str, np.ndarray]:
+def invariants_along(functions, sol) -> dict[str, np.ndarray]:
+    """Each invariant of `functions` (:func:`invariant_functions`) at the saved nodes of `sol`, name -> (T,)."""
     q, v = np.asarray(sol.q), np.asarray(sol.v)
     R = None if sol.R is None else np.asarray(sol.R)
     return {name: g(q, v, R) for name, g in functions.items()}
@@ -354,7 +353,7 @@ def _measure_pair(system, method: str, p: Plan, ref, ref_inv, energy_scale, func
     if sol.energy_invariant:
         E = np.asarray(sol.energy)
         out.energy_error, out.energy_growth = relative_error(E, energy_scale), growth(sol.t, E, energy_scale)
-    for name, values in _invariant_values(functions, sol).items():
+    for name, values in invariants_along(functions, sol).items():
         if np.all(np.isfinite(ref_inv[name])):
             s = _scale(ref_inv[name])
             out.invariants[name] = (relative_error(values, s), growth(sol.t, values, s))
@@ -377,8 +376,6 @@ def measure_model(name: str, p: Plan | None = None, *, methods: Sequence[str] | 
     by plan `p` (default :func:`plan`); `progress(model, method)` is called after each method."""
     import gnipy
 
-    from .method_choice import choose
-
     t_start = time.perf_counter()
     p = p or plan(name, quick)
     spec = gnipy.get_model(name)
@@ -391,8 +388,8 @@ def measure_model(name: str, p: Plan | None = None, *, methods: Sequence[str] | 
     ref_ts = ts[idx <= p.ref_steps]
     ref = gnipy.simulate(system, "reference", h=p.h, steps=p.ref_steps, saveat=gnipy.SaveAt(ts=tuple(ref_ts)))
     reference_s = time.perf_counter() - t
-    functions = _invariant_functions(spec, params)
-    ref_inv = _invariant_values(functions, ref)
+    functions = invariant_functions(spec, params)
+    ref_inv = invariants_along(functions, ref)
     energy_scale = _scale(np.asarray(ref.energy))
     pairs, not_applicable = [], {}
     for method in methods:

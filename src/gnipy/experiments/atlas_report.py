@@ -217,10 +217,10 @@ SUMMARY_HEADER = ["model", "recommended", "recorded default (gni models)", "agre
 
 
 def _meta(result, command: str | None) -> dict:
-    from .reproduce import _machine, _versions
+    from .reproduce import machine_description, version_info
 
-    meta = {**_versions(), "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-            "machine": _machine(), "mode": "quick" if result.quick else "full", "runtime_s": result.runtime_s}
+    meta = {**version_info(), "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
+            "machine": machine_description(), "mode": "quick" if result.quick else "full", "runtime_s": result.runtime_s}
     if command:
         meta["command"] = command
     return meta
@@ -235,12 +235,12 @@ def _counts(result) -> str:
 
 
 def _markdown(result, meta, figures: list[Path], out_dir: Path) -> str:
-    from .report import _md_table, _meta_items
+    from .report import markdown_table, meta_items
 
     lines = [f"# {TITLE}", "", "## Provenance", ""]
-    lines += _md_table(["", ""], _meta_items(meta))
+    lines += markdown_table(["", ""], meta_items(meta))
     lines += ["", f"**{_counts(result)}**", "", "## Recommendations", ""]
-    lines += _md_table(SUMMARY_HEADER, summary_rows(result))
+    lines += markdown_table(SUMMARY_HEADER, summary_rows(result))
     lines += ["", f"The rule: {RULE}", "", f"What is measured: {MEASURED}", "",
               "To record these recommendations as the defaults that `gni models` shows (a full atlas), copy "
               "`default_methods.py`, written beside this report, over `src/gnipy/models/default_methods.py`.",
@@ -256,7 +256,7 @@ def _markdown(result, meta, figures: list[Path], out_dir: Path) -> str:
                   f"over t <= {m.plan.t_ref:g}; {m.runtime_s:.0f} s (reference {m.reference_s:.1f} s). "
                   f"Recommended: **{m.recommended[0]}** (recorded default: {m.recorded}; "
                   f"{'agrees' if m.agrees else 'differs'}).", ""]
-        lines += _md_table(PAIR_HEADER, (pair_row(p) for p in m.pairs))
+        lines += markdown_table(PAIR_HEADER, (pair_row(p) for p in m.pairs))
         if m.not_applicable:
             lines += ["", "Not applicable: " + "; ".join(f"{k} ({_short(v)})" for k, v in m.not_applicable.items())]
         lines += [""]
@@ -271,26 +271,26 @@ def _short(text: str, n: int = 110) -> str:
 def _html(result, meta, figures: list[Path]) -> str:
     import html as _h
 
-    from .report import _CSS, _data_uri, _html_table, _meta_items
+    from .report import REPORT_CSS, png_data_uri, html_table, meta_items
 
     def e(x) -> str:
         return _h.escape(str(x))
 
     parts = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">', f"<title>{e(TITLE)}</title>",
-             f"<style>{_CSS} td {{ font-size: .9em; }} .no {{ color: #b00020; font-weight: bold; }}</style>",
+             f"<style>{REPORT_CSS} td {{ font-size: .9em; }} .no {{ color: #b00020; font-weight: bold; }}</style>",
              "</head>", "<body>", f"<h1>{e(TITLE)}</h1>", f'<p class="summary">{e(_counts(result))}</p>',
              "<h2>Provenance</h2>"]
-    parts += _html_table(["item", "value"], _meta_items(meta))
+    parts += html_table(["item", "value"], meta_items(meta))
     parts.append("<h2>Recommendations</h2>")
     rows = [[c.replace("**", "") for c in r] for r in summary_rows(result)]
-    parts += _html_table(SUMMARY_HEADER, rows)
+    parts += html_table(SUMMARY_HEADER, rows)
     parts += [f"<p><b>The rule.</b> {e(RULE)}</p>", f"<p><b>What is measured.</b> {e(MEASURED)}</p>",
               "<p>To record these recommendations as the defaults that <code>gni models</code> shows (a full atlas), "
               "copy <code>default_methods.py</code>, written beside this report, over "
               "<code>src/gnipy/models/default_methods.py</code>.</p>", "<h2>Heat maps</h2>"]
     for f in figures:
         if f.suffix == ".png":
-            uri = _data_uri(f)
+            uri = png_data_uri(f)
             title, what = FIGURES[f.stem]
             parts.append(f"<h3>{e(title)}</h3>")
             parts.append(f'<figure><img alt="{e(f.stem)}" src="{uri}"></figure>' if uri else
@@ -303,7 +303,7 @@ def _html(result, meta, figures: list[Path]) -> str:
         parts.append(f"<p>{m.plan.steps:,} steps of h = {m.plan.h:g} (T = {m.plan.t_final:g}), error against the "
                      f"reference over t &le; {m.plan.t_ref:g}; {m.runtime_s:.0f} s (reference {m.reference_s:.1f} s). "
                      f"Recommended: <b>{e(m.recommended[0])}</b> (recorded default: {e(m.recorded)}; {verdict}).</p>")
-        parts += _html_table(PAIR_HEADER, (pair_row(p) for p in m.pairs))
+        parts += html_table(PAIR_HEADER, (pair_row(p) for p in m.pairs))
         if m.not_applicable:
             parts.append('<p class="small">Not applicable: '
                          + e("; ".join(f"{k} ({_short(v)})" for k, v in m.not_applicable.items())) + "</p>")

@@ -16,8 +16,8 @@ from ..integrators.gni import GNI, GNIState
 from ..models import rolling_ball as rb
 from ..saveat import SaveAt
 from ..spaces import Point
-from .figure_tools import (_RUN_OVERHEAD, FigureResult, Progress, _errors, _fine_order, _fmt_h, _new_figure,
-                           _order, _Progress, _run, _write)
+from .figure_tools import (RUN_OVERHEAD, FigureProgress, FigureResult, Progress, asymptotic_order, ball_errors, format_h,
+                           new_figure, observed_order, run_saved_nodes, write_figure)
 
 __all__ = ["figure_3", "paper_start"]
 
@@ -97,15 +97,15 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     def run(start, N):
         h = T / N
         if start == "paper":  # from the state at node 1 (time h)
-            return _run(system, method, h, N - 1, save, state0=paper_start(system, q0, omega0, h), t0=h)
-        return _run(system, method, h, N, save, q0, v0)
+            return run_saved_nodes(system, method, h, N - 1, save, state0=paper_start(system, q0, omega0, h), t0=h)
+        return run_saved_nodes(system, method, h, N, save, q0, v0)
 
     # full runs also measure everything against the continuous reference solver (Dopri8, tol 1e-12)
     continuous = not quick
-    work = _Progress(progress, len(starts) * (N_ref + sum(Ns) + (len(Ns) + 1) * _RUN_OVERHEAD)
+    work = FigureProgress(progress, len(starts) * (N_ref + sum(Ns) + (len(Ns) + 1) * RUN_OVERHEAD)
                      + (N_ref if continuous else 0))
     if continuous:
-        x_cont, v_cont = (a[1:] for a in _run(system, "reference", T / n_saves, n_saves, SaveAt(steps=True), q0, v0))
+        x_cont, v_cont = (a[1:] for a in run_saved_nodes(system, "reference", T / n_saves, n_saves, SaveAt(steps=True), q0, v0))
         work(N_ref, "figure 3: continuous reference")
     errors_cont: dict[str, np.ndarray] = {}
     quantities = ("position", "omega", "energy")
@@ -115,21 +115,21 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     for start in starts:
         x_ref, v_ref = run(start, N_ref)
         refs[start] = (x_ref, v_ref)
-        work(N_ref + _RUN_OVERHEAD, f"figure 3: {start} start, reference h = {_fmt_h(h_ref)}")
+        work(N_ref + RUN_OVERHEAD, f"figure 3: {start} start, reference h = {format_h(h_ref)}")
         errs, errs_cont = [], []
         for N, h in zip(Ns, hs):
             x, v = run(start, N)
-            e = _errors(x, v, x_ref, v_ref, p)
+            e = ball_errors(x, v, x_ref, v_ref, p)
             errs.append(e)
             row = {"start": start, "h": h, "steps": N, "error_position": e[0], "error_omega": e[1],
                    "error_energy": e[2]}
             if continuous:
-                ec = _errors(x, v, x_cont, v_cont, p)
+                ec = ball_errors(x, v, x_cont, v_cont, p)
                 errs_cont.append(ec)
                 row.update(error_position_vs_continuous=ec[0], error_omega_vs_continuous=ec[1],
                            error_energy_vs_continuous=ec[2])
             table.append(row)
-            work(N + _RUN_OVERHEAD, f"figure 3: {start} start, h = {_fmt_h(h)}")
+            work(N + RUN_OVERHEAD, f"figure 3: {start} start, h = {format_h(h)}")
         errors[start] = np.array(errs)
         if continuous:
             errors_cont[start] = np.array(errs_cont)
@@ -140,20 +140,20 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     floors = {(start, qn): ROUND_OFF for start in starts for qn in quantities}
     if continuous:
         for start in starts:
-            ref_err = _errors(refs[start][0], refs[start][1], x_cont, v_cont, p)
+            ref_err = ball_errors(refs[start][0], refs[start][1], x_cont, v_cont, p)
             for i, qn in enumerate(quantities):
                 metrics[f"{start}_reference_error_{qn}_vs_continuous"] = ref_err[i]
                 floors[start, qn] = max(ROUND_OFF, 3.0 * ref_err[i])
-                metrics[f"{start}_start_order_{qn}_vs_continuous"] = _order(hs, errors_cont[start][:, i])
-                metrics[f"{start}_start_order_{qn}_vs_continuous_fine"] = _fine_order(hs, errors_cont[start][:, i])
+                metrics[f"{start}_start_order_{qn}_vs_continuous"] = observed_order(hs, errors_cont[start][:, i])
+                metrics[f"{start}_start_order_{qn}_vs_continuous_fine"] = asymptotic_order(hs, errors_cont[start][:, i])
     for start in starts:
         for i, qn in enumerate(quantities):
             floor = floors[start, qn]
-            metrics[f"{start}_start_order_{qn}"] = _order(hs, errors[start][:, i], floor)
-            metrics[f"{start}_start_order_{qn}_fine"] = _fine_order(hs, errors[start][:, i], floor)
+            metrics[f"{start}_start_order_{qn}"] = observed_order(hs, errors[start][:, i], floor)
+            metrics[f"{start}_start_order_{qn}_fine"] = asymptotic_order(hs, errors[start][:, i], floor)
             metrics[f"{start}_start_points_fitted_{qn}"] = float(fit_points(hs, errors[start][:, i], floor, stop_at_minimum=True).sum())
     # how far apart the two references are (both converge to the continuous solution)
-    gap = _errors(refs["paper"][0], refs["paper"][1], refs["momentum"][0], refs["momentum"][1], p)
+    gap = ball_errors(refs["paper"][0], refs["paper"][1], refs["momentum"][0], refs["momentum"][1], p)
     for i, qn in enumerate(quantities):
         metrics[f"reference_gap_{qn}"] = gap[i]
 
@@ -169,7 +169,7 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     metrics["momentum_start_matches_caption"] = float(matches("momentum"))
 
     rows = [("fine GNI run", errors, "")] + ([("continuous solution", errors_cont, "_vs_continuous")] if continuous else [])
-    fig = _new_figure(13.5, 4.2 * len(rows))
+    fig = new_figure(13.5, 4.2 * len(rows))
     axes = np.atleast_2d(fig.subplots(len(rows), 3))
     ylabels = ("max error in position $(x, y)$", "max error in angular velocity $\\omega$", "max error in energy")
     hs_arr = np.asarray(hs)
@@ -194,14 +194,14 @@ def figure_3(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     fig.suptitle(title + "\n(a) paper's start: $(x_1, y_1)$ from the constraints at node 0, $\\sigma_0 = h\\omega^0$, "
                  "$p^+_1 = FL^+$;  (b) momentum start $p^+_0 = \\mathbb{G}v_0$;  dotted: $h$, $h$, $h^2$"
                  + ("; grey: the fine runs' own errors" if continuous else ""), fontsize=10)
-    files = _write(fig, out_dir, "figure3")
+    files = write_figure(fig, out_dir, "figure3")
     work.finish("figure 3: done")
 
     caption = (
         "Rolling ball on a rotating table (paper §7.4), example 2: I = (1, 1.1, 1.2), m = 3, r = 1, Ω = 0.2, "
         "(x0, y0) = (1, 0), ω⁰ = (−0.2, 0, 0.4), R0 = I; GNI with the paper's l_d (Euler A) and the Cayley map; "
-        f"total time {T:g}; h = 15/N for N = {', '.join(str(N) for N in Ns)} (h from {_fmt_h(hs[0])} to "
-        f"{_fmt_h(hs[-1])}, decreasing geometrically). Errors against a reference GNI run with the same start and "
+        f"total time {T:g}; h = 15/N for N = {', '.join(str(N) for N in Ns)} (h from {format_h(hs[0])} to "
+        f"{format_h(hs[-1])}, decreasing geometrically). Errors against a reference GNI run with the same start and "
         f"h = 15/{N_ref} ≈ {h_ref:.4g}" + (" (quick run: a coarser reference than the paper's 2.7e-5)" if quick
                                              else " (the paper's h ≈ 2.7e-5)")
         + f", taken at the {n_saves} nodes t = 1.5, 3, ..., 15 as the maximum of the Euclidean norm of the error in "

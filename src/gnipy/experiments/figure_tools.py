@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..extras import require
 from ..analysis.orders import ROUND_OFF, fit_points, fitted_order
 from ..errors import verdicts_reported_by_caller
 from ..saveat import SaveAt
@@ -46,20 +47,20 @@ class FigureResult:
 # ------------------------------------------------------------------------------------------------
 # Numerics shared by the figures
 # ------------------------------------------------------------------------------------------------
-def _order(hs, errors, floor: float = ROUND_OFF) -> float:
+def observed_order(hs, errors, floor: float = ROUND_OFF) -> float:
     """The fitted slope (:func:`gnipy.analysis.fitted_order` with `stop_at_minimum=True`)."""
     return fitted_order(hs, errors, floor, stop_at_minimum=True)
 
 
-def _fine_order(hs, errors, floor: float = ROUND_OFF, points: int = 3) -> float:
+def asymptotic_order(hs, errors, floor: float = ROUND_OFF, points: int = 3) -> float:
     """The slope over the `points` smallest h among the fitted points (the asymptotic order)."""
     hs, errors = np.asarray(hs, dtype=np.float64), np.asarray(errors, dtype=np.float64)
     keep = fit_points(hs, errors, floor, stop_at_minimum=True)
     finest = np.argsort(hs[keep])[:points]
-    return _order(hs[keep][finest], errors[keep][finest], floor)
+    return observed_order(hs[keep][finest], errors[keep][finest], floor)
 
 
-def _run(system, method, h: float, steps: int, saveat: SaveAt, q0=None, v0=None, *, state0=None, t0: float = 0.0):
+def run_saved_nodes(system, method, h: float, steps: int, saveat: SaveAt, q0=None, v0=None, *, state0=None, t0: float = 0.0):
     """`(x, v)` at the saved nodes of one :func:`gnipy.simulate` call, as numpy arrays (v is the
     velocity the method reports: the GNI's $\\bar v_k$, DLA's $\\mathbb{G}^{-1}p^+_k$)."""
     with verdicts_reported_by_caller():  # the paper's figures show failing runs on purpose
@@ -73,7 +74,7 @@ def _energy(p, v):
     return 0.5 * p["m"] * (v[..., 0] ** 2 + v[..., 1] ** 2) + 0.5 * np.sum(inertia * v[..., 2:] ** 2, axis=-1)
 
 
-def _errors(x, v, x_ref, v_ref, p):
+def ball_errors(x, v, x_ref, v_ref, p):
     """Max over the saved nodes of |(x, y) − ref|₂, |ω − ref|₂ and |E − E_ref|."""
     return (
         float(np.max(np.linalg.norm(x - x_ref, axis=-1))),
@@ -82,7 +83,7 @@ def _errors(x, v, x_ref, v_ref, p):
     )
 
 
-class _Progress:
+class FigureProgress:
     """Feeds `progress(advance, description)` with advances that add up to 1.0 per figure."""
 
     def __init__(self, progress: Progress, total: float):
@@ -100,11 +101,11 @@ class _Progress:
             self.done = self.total
 
 
-# Work estimate of one run in steps: the fixed cost (dispatch, transfers) as this many steps.
-_RUN_OVERHEAD = 4000
+#: Work estimate of one run in steps: the fixed cost (dispatch, transfers) as this many steps.
+RUN_OVERHEAD = 4000
 
 
-def _write(fig, out_dir: Path, name: str) -> list[Path]:
+def write_figure(fig, out_dir: Path, name: str) -> list[Path]:
     """`NAME.png` and `NAME.pdf` in `out_dir`, each written atomically; an existing file is replaced
     only in a folder gnipy created or when asked (:func:`gnipy.experiments.report.save_figure`)."""
     from .report import save_figure
@@ -112,8 +113,10 @@ def _write(fig, out_dir: Path, name: str) -> list[Path]:
     return save_figure(fig, out_dir, name, dpi=150)
 
 
-def _new_figure(width: float, height: float):
-    # the object-oriented API (no pyplot): no global backend or state is touched
+def new_figure(width: float, height: float):
+    """A matplotlib Figure of `width` x `height` inches with constrained layout, made with the
+    object-oriented API (no pyplot): no global backend or state is touched."""
+    require("matplotlib", extra="plots")
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -122,6 +125,7 @@ def _new_figure(width: float, height: float):
     return fig
 
 
-def _fmt_h(h: float) -> str:
+def format_h(h: float) -> str:
+    """A step size as the figures label it (3 significant digits)."""
     return f"{h:.3g}"
 

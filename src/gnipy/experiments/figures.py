@@ -42,8 +42,8 @@ from ..integrators.gni import GNI
 from ..models import rolling_ball as rb
 from ..saveat import SaveAt
 from .figure3 import figure_3, paper_start
-from .figure_tools import (_RUN_OVERHEAD, FigureResult, Progress, _errors, _fine_order, _fmt_h, _new_figure,
-                           _order, _Progress, _run, _write)
+from .figure_tools import (RUN_OVERHEAD, FigureProgress, FigureResult, Progress, asymptotic_order, ball_errors, format_h,
+                           new_figure, observed_order, run_saved_nodes, write_figure)
 
 __all__ = ["FIGURES", "FigureResult", "figure_1", "figure_2", "figure_3", "paper_start"]
 
@@ -71,28 +71,28 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
         "gni": (GNI(EulerA(), start="rest"), "GNI", "-", "o"),
         "dla": (DiscreteLagrangeDAlembert(), "DLA [IMMM]", "--", "s"),
     }
-    work = _Progress(progress, len(methods) * sum(N + _RUN_OVERHEAD for N in Ns))
+    work = FigureProgress(progress, len(methods) * sum(N + RUN_OVERHEAD for N in Ns))
     errors: dict[str, list[tuple[float, float, float]]] = {k: [] for k in methods}
     table: list[dict] = []
     for key, (method, *_rest) in methods.items():
         for N, h in zip(Ns, hs):
-            x, v = _run(system, method, h, N, save, q0, v0)
-            e = _errors(x, v, x_ex, v_ex, p)
+            x, v = run_saved_nodes(system, method, h, N, save, q0, v0)
+            e = ball_errors(x, v, x_ex, v_ex, p)
             errors[key].append(e)
             table.append({"method": key, "h": h, "steps": N, "error_position": e[0], "error_omega": e[1],
                           "error_energy": e[2]})
-            work(N + _RUN_OVERHEAD, f"figure 1: {key} h = {_fmt_h(h)}")
+            work(N + RUN_OVERHEAD, f"figure 1: {key} h = {format_h(h)}")
 
     quantities = ("position", "omega", "energy")
     metrics: dict[str, float] = {}
     for key in methods:
         arr = np.array(errors[key])
         for i, qn in enumerate(quantities):
-            metrics[f"{key}_order_{qn}"] = _order(hs, arr[:, i])
-            metrics[f"{key}_order_{qn}_fine"] = _fine_order(hs, arr[:, i])
+            metrics[f"{key}_order_{qn}"] = observed_order(hs, arr[:, i])
+            metrics[f"{key}_order_{qn}_fine"] = asymptotic_order(hs, arr[:, i])
             metrics[f"{key}_error_{qn}_smallest_h"] = float(arr[-1, i])
 
-    fig = _new_figure(13.5, 4.2)
+    fig = new_figure(13.5, 4.2)
     axes = fig.subplots(1, 3)
     ylabels = ("max error in position $(x, y)$", "max error in angular velocity $\\omega$", "max error in energy")
     for i, (ax, qn, yl) in enumerate(zip(axes, quantities, ylabels)):
@@ -107,14 +107,14 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     title = "Figure 1 — homogeneous rolling ball (§7.4, example 1): errors against the exact solution"
     fig.suptitle(title + "\nsolid: GNI with the paper's $l_d = h\\,l(q_k, \\Delta, \\omega_k)$ (Euler A) and Cayley; "
                  "dashed: discrete Lagrange–d'Alembert [IMMM]", fontsize=10)
-    files = _write(fig, out_dir, "figure1")
+    files = write_figure(fig, out_dir, "figure1")
     work.finish("figure 1: done")
 
     caption = (
         "Rolling ball on a rotating table (paper §7.4, model rolling-ball, example 1): homogeneous ball "
         "I1 = I2 = I3 = 2/3, m = r = Ω = 1, (x0, y0, ẋ0, ẏ0) = (1, 1, 1, 1), ω0 = (0, 2, 0), R0 = I, "
         f"total time {T:g}. Time steps h = 10/N for N = {Ns[0]}, {Ns[1]}, ..., {Ns[-1]} "
-        f"(h from {_fmt_h(hs[0])} to {_fmt_h(hs[-1])}). Solid: the GNI with the paper's discrete Lagrangian "
+        f"(h from {format_h(hs[0])} to {format_h(hs[-1])}). Solid: the GNI with the paper's discrete Lagrangian "
         "l_d = h l(q_k, (q_{k+1} − q_k)/h, ω_k) (Euler A) and the Cayley retraction; dashed: the discrete "
         "Lagrange–d'Alembert method of [IMMM] (gnipy method dla: p⁺_k − p⁻_k = μᵀλ_k with the constraint "
         "imposed at the step's midpoint). Errors are taken against the exact solution (circular motion of "
@@ -139,7 +139,7 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
         f"{metrics['dla_order_omega_fine']:.2f} and {metrics['dla_order_energy_fine']:.2f} over the finest h "
         f"(1 expected); over all h the slopes are {metrics['dla_order_position']:.2f}, "
         f"{metrics['dla_order_omega']:.2f}, {metrics['dla_order_energy']:.2f}.",
-        f"At the smallest h ({_fmt_h(hs[-1])}) the position errors are "
+        f"At the smallest h ({format_h(hs[-1])}) the position errors are "
         f"{metrics['gni_error_position_smallest_h']:.2e} (GNI) and {metrics['dla_error_position_smallest_h']:.2e} "
         "(DLA).",
     ]
@@ -159,15 +159,15 @@ def figure_2(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     p = system.parameters
     q0, v0 = system.defaults
     h, steps = 0.1, (1000 if quick else 10000)
-    work = _Progress(progress, 3 * steps + 2 * _RUN_OVERHEAD)
+    work = FigureProgress(progress, 3 * steps + 2 * RUN_OVERHEAD)
     method = GNI(EulerA(), start="rest")
-    path, v_path = _run(system, method, h, steps, SaveAt(steps=True), q0, v0)  # nodes 0 .. steps
-    work(steps + _RUN_OVERHEAD, "figure 2: GNI h = 0.1")
+    path, v_path = run_saved_nodes(system, method, h, steps, SaveAt(steps=True), q0, v0)  # nodes 0 .. steps
+    work(steps + RUN_OVERHEAD, "figure 2: GNI h = 0.1")
     # the same total time with h/2 (not plotted): the distance from the circle should fall by 2² = 4
     # (saved at every second node, i.e. at the times of the h run: as many nodes, the same program)
-    x2, _ = _run(system, method, h / 2, 2 * steps, SaveAt(every=2), q0, v0)
+    x2, _ = run_saved_nodes(system, method, h / 2, 2 * steps, SaveAt(every=2), q0, v0)
     x2 = x2[1:]
-    work(2 * steps + _RUN_OVERHEAD, "figure 2: GNI h = 0.05")
+    work(2 * steps + RUN_OVERHEAD, "figure 2: GNI h = 0.05")
     t = h * np.arange(steps + 1)
 
     # the exact motion: z = x + iy runs round a circle at rate κ = IΩ/(I + mr²)
@@ -211,7 +211,7 @@ def figure_2(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
         for k in np.linspace(0, steps, 11).astype(int)
     ]
 
-    fig = _new_figure(6.4, 6.0)
+    fig = new_figure(6.4, 6.0)
     ax = fig.subplots()
     th = np.linspace(0.0, 2 * np.pi, 721)
     ax.plot(centre.real + radius * np.cos(th), centre.imag + radius * np.sin(th), color="0.6", lw=3.0,
@@ -226,7 +226,7 @@ def figure_2(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     ax.legend(fontsize=7, loc="center")
     title = f"Figure 2 — contact point of the homogeneous ball, h = {h:g}, {steps} steps"
     ax.set_title(title, fontsize=9)
-    files = _write(fig, out_dir, "figure2")
+    files = write_figure(fig, out_dir, "figure2")
     work.finish("figure 2: done")
 
     caption = (

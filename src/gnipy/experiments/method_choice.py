@@ -1,5 +1,5 @@
-"""The rule that chooses each zoo model's default method (`gni models` shows the choice), and the
-measurements it reads.
+"""The measurements behind each zoo model's default method (`gni models` shows the choice), and the
+command that makes them.
 
 The measurements are the method atlas's (:mod:`gnipy.experiments.atlas`, `gni atlas`): for every
 model and every method that applies to it, one long run at h = 0.01 (10⁵ or 10⁶ steps) against
@@ -12,16 +12,8 @@ the continuous reference (Dopri8 at tolerance 1e-12, at the same times, up to T 
 - the run-time verdicts of :mod:`gnipy.diagnostics` (hidden momentum, energy drift) over the whole
   run, and solver failures.
 
-Rule: a method qualifies when the run completes, raises no warning, and keeps every invariant to
-1e-2 relative; the default is the qualifying method with the smallest position error, where
-methods within a factor 1.5 of the best, or below `REFERENCE_FLOOR` (1e-9: the reference's own
-error, measured against the exact solutions over T = 200, is up to 2.4e-10, on the knife edge),
-count as tied and the tie goes to the one that keeps the
-constraints to round-off (the GNI family, mp; dla's reported velocity misses them by O(h)), then
-to the higher order, then to a method whose failure modes the run-time diagnostics watch (the GNI
-family's hidden momentum), then to fewer Newton iterations per step. Methods are compared at the
-same h (euler-ab takes two half steps per step). When none qualifies, the default is
-the continuous reference itself. The registry holds the outcome
+The rule that chooses among them is :mod:`gnipy.experiments.choice_rule` (:func:`choose`, re-exported
+here). The registry holds the outcome
 (`ModelSpec.default_method`, `ModelSpec.default_reason`, recorded in
 :mod:`gnipy.models.default_methods`). The atlas is the one source of the record: `gni atlas --out
 DIR` writes `DIR/default_methods.py` (its recommendations; copy it over
@@ -34,64 +26,20 @@ measurement with the reference horizon the whole run).
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import sys
 
-__all__ = ["MethodMeasurement", "measure_model", "choose", "main", "H", "T_FINAL", "REFERENCE_FLOOR"]
+from .atlas import Plan, invariant_functions, invariants_along, measure_model as atlas_model, run_atlas
+from .atlas_report import default_methods_source
+from .choice_rule import H, INVARIANT_TOL, NODES, REFERENCE_FLOOR, T_FINAL, MethodMeasurement, choose
 
-H = 0.01
-T_FINAL = 200.0
-NODES = 2000
-INVARIANT_TOL = 1e-2
-#: Position errors below this are at the reference's accuracy and count as tied (module docstring).
-REFERENCE_FLOOR = 1e-9
+__all__ = ["MethodMeasurement", "measure_model", "registered_invariants_along", "choose", "main", "H", "T_FINAL",
+           "REFERENCE_FLOOR", "INVARIANT_TOL", "NODES"]
 
 
-@dataclasses.dataclass(frozen=True)
-class MethodMeasurement:
-    """One method on one model (see the module docstring).
-
-    Attributes:
-        method: the method name.
-        position_error: the largest position (and orientation) error against the reference.
-        invariant_drift: the largest relative drift of the energy (where conserved) and of the
-            registered invariants.
-        warnings: the run's warnings (empty when healthy).
-        failed: whether a step failed.
-        iterations: Newton iterations per step (mean).
-        constraint_residual: the largest constraint residual of the reported velocities.
-        order: the method's expected order (0 when unknown).
-        diagnosed: whether the run carries the hidden-momentum diagnostic (the GNI family).
-    """
-
-    method: str
-    position_error: float
-    invariant_drift: float
-    warnings: tuple[str, ...]
-    failed: bool
-    iterations: float
-    constraint_residual: float = 0.0
-    order: int = 0
-    diagnosed: bool = False
-
-    @property
-    def exact_constraints(self) -> bool:
-        """Whether the reported velocities satisfy the constraints to round-off (1e-10)."""
-        return self.constraint_residual <= 1e-10
-
-    @property
-    def qualifies(self) -> bool:
-        """Completed, no warning, invariants kept to `INVARIANT_TOL`."""
-        return (not self.failed and not self.warnings and math.isfinite(self.position_error)
-                and self.invariant_drift <= INVARIANT_TOL)
-
-
-def _invariant_values(spec, params, sol):
-    """Each registered invariant along the run, name -> (T,) (computed as the atlas does)."""
-    from .atlas import _invariant_functions, _invariant_values as values
-
-    return values(_invariant_functions(spec, params), sol)
+def registered_invariants_along(spec, params, sol):
+    """Each registered invariant of the model `spec` (with parameters `params`) along the run `sol`,
+    name -> (T,) (computed as the atlas does)."""
+    return invariants_along(invariant_functions(spec, params), sol)
 
 
 def measure_model(name: str, *, h: float = H, t_final: float = T_FINAL, nodes: int = NODES,
@@ -99,48 +47,15 @@ def measure_model(name: str, *, h: float = H, t_final: float = T_FINAL, nodes: i
     """Measure every applicable method on the zoo model `name` over one run of `t_final` (the
     atlas's measurement, :func:`gnipy.experiments.atlas.measure_model`, with the reference horizon
     the whole run and no reversibility run); `progress(name, method)` after each method."""
-    from .atlas import Plan, measure_model as atlas_model
-
     steps = round(t_final / h)
     p = Plan(h=h, steps=steps, t_ref=t_final, ref_every=max(1, steps // nodes), long_nodes=0, reverse=False)
     return [r.measurement for r in atlas_model(name, p, methods=methods, progress=progress).pairs]
-
-
-def choose(measurements: list[MethodMeasurement], *, h: float = H, t_final: float = T_FINAL,
-           t_ref: float | None = None) -> tuple[str, str]:
-    """`(method, reason)` by the rule of the module docstring, for measurements at step `h` over
-    `t_final` (the error against the reference over t <= `t_ref`, default the whole run; the reason
-    states them)."""
-    where = f"h = {h:g}, T = {t_final:g}" + ("" if t_ref is None or t_ref >= t_final else f", error over t <= {t_ref:g}")
-    ok = [m for m in measurements if m.qualifies]
-    if not ok:
-        bad = ", ".join(f"{m.method} ({'failed' if m.failed else 'warning' if m.warnings else f'drift {m.invariant_drift:.1e}'})"
-                        for m in measurements)
-        return "reference", (f"no discrete method qualifies ({where}): {bad}; "
-                             "the continuous reference is the default")
-    best = min(ok, key=lambda m: m.position_error)
-    near = [m for m in ok if m.position_error <= max(1.5 * best.position_error, REFERENCE_FLOOR)]
-    choice = min(near, key=lambda m: (not m.exact_constraints, -m.order, not m.diagnosed, m.iterations,
-                                      m.position_error))
-    others = sorted((m for m in ok if m is not choice), key=lambda m: m.position_error)[:2]
-    failing = [m.method for m in measurements if not m.qualifies]
-    reason = (f"best error against the reference among the methods without warnings, ties within a factor 1.5 "
-              f"or below {REFERENCE_FLOOR:g} broken by the rule ({where}): "
-              f"{choice.position_error:.1e}, invariants to {choice.invariant_drift:.1e}")
-    if others:
-        reason += "; next " + ", ".join(f"{m.method} {m.position_error:.1e}" for m in others)
-    if failing:
-        reason += "; disqualified: " + ", ".join(failing)
-    return choice.method, reason
 
 
 def main(argv=None) -> None:
     """The full atlas's measurements of the named models (default: all), without its report files:
     prints each model's table, its choice, and the module :mod:`gnipy.models.default_methods` that
     records the choices (:func:`gnipy.experiments.atlas_report.default_methods_source`)."""
-    from .atlas import run_atlas
-    from .atlas_report import default_methods_source
-
     names = list(argv if argv is not None else sys.argv[1:]) or None
     result = run_atlas(models=names)
     print("| model | method | error vs reference | invariant drift | constraint residual | verdict |")

@@ -83,7 +83,8 @@ def _fmt_meta(key: str, value: Any) -> str:
     return _fmt(value)
 
 
-def _meta_items(meta: Mapping[str, Any]) -> list[tuple[str, str]]:
+def meta_items(meta: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """`(label, text)` of each provenance entry of `meta`, the known keys first in their order."""
     items = [(label, _fmt_meta(k, meta[k])) for k, label in _META_LABELS.items() if k in meta]
     items += [(k.removesuffix("_s").replace("_", " "), _fmt_meta(k, v)) for k, v in meta.items() if k not in _META_LABELS]
     return items
@@ -110,7 +111,8 @@ def _md_cell(x: Any) -> str:
     return " ".join(str(text).split()).replace("|", "\\|")
 
 
-def _md_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> list[str]:
+def markdown_table(header: Sequence[str], rows: Iterable[Sequence[Any]]) -> list[str]:
+    """The lines of a Markdown table (numbers formatted as the reports show them, `|` escaped)."""
     lines = ["| " + " | ".join(_md_cell(h) for h in header) + " |", "|" + "---|" * len(header)]
     lines += ["| " + " | ".join(_md_cell(c) for c in row) + " |" for row in rows]
     return lines
@@ -132,11 +134,11 @@ def _md_figure(out_dir: Path, fig) -> list[str]:
         lines += ["Also: " + ", ".join(f"[{n}]({n})" for n in others), ""]
     lines += [f"*{' '.join(str(fig.caption).split())}*", ""]
     if fig.table:
-        lines += _md_table(_columns(fig.table), ([row.get(c, "") for c in _columns(fig.table)] for row in fig.table))
+        lines += markdown_table(_columns(fig.table), ([row.get(c, "") for c in _columns(fig.table)] for row in fig.table))
         lines += [""]
     if fig.metrics:
         lines += ["Metrics:", ""]
-        lines += _md_table(["metric", "value"], fig.metrics.items())
+        lines += markdown_table(["metric", "value"], fig.metrics.items())
         lines += [""]
     if fig.notes:
         lines += [f"- {' '.join(str(n).split())}" for n in fig.notes] + [""]
@@ -146,7 +148,7 @@ def _md_figure(out_dir: Path, fig) -> list[str]:
 def _markdown(out_dir: Path, figures, theorems, errata, meta, struggles=()) -> str:
     n_pass = sum(bool(r.passed) for r in theorems)
     lines = [f"# {REPORT_TITLE}", "", f"Paper: {PAPER}.", "", "## Provenance", ""]
-    lines += _md_table(["", ""], _meta_items(meta))
+    lines += markdown_table(["", ""], meta_items(meta))
     summary = (f"**Theorem table: {n_pass} of {len(theorems)} claims pass.** "
                f"Errata measured: {len(errata)}. Figures: {len(figures)}.")
     lines += ["", summary, ""]
@@ -160,7 +162,7 @@ def _markdown(out_dir: Path, figures, theorems, errata, meta, struggles=()) -> s
             lines += _md_figure(out_dir, fig)
 
     lines += ["## Theorems", "", f"{n_pass} of {len(theorems)} pass.", ""]
-    lines += _md_table(["#", "claim", "paper", "expected", "measured", "result"],
+    lines += markdown_table(["#", "claim", "paper", "expected", "measured", "result"],
                        ([i, r.claim, r.paper_ref, r.expected, r.measured, f"**{_pass_text(r.passed)}**"]
                         for i, r in enumerate(theorems, 1)))
     lines += ["", "How each claim was measured:", ""]
@@ -178,7 +180,8 @@ def _markdown(out_dir: Path, figures, theorems, errata, meta, struggles=()) -> s
 # ------------------------------------------------------------------------------------------------
 # HTML
 # ------------------------------------------------------------------------------------------------
-_CSS = """
+#: The style sheet of the HTML reports.
+REPORT_CSS = """
 body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; margin: 0 auto;
        max-width: 1100px; padding: 1.5em; color: #1d1d1f; line-height: 1.45; }
 h1 { font-size: 1.6em; border-bottom: 2px solid #444; padding-bottom: .2em; }
@@ -204,7 +207,9 @@ def _e(x: Any) -> str:
     return html.escape(x if isinstance(x, str) else _fmt(x))
 
 
-def _html_table(header: Sequence[str], rows: Iterable[Sequence[Any]], raw_last: bool = False) -> list[str]:
+def html_table(header: Sequence[str], rows: Iterable[Sequence[Any]], raw_last: bool = False) -> list[str]:
+    """The lines of an HTML table, its cells escaped (the last column as given with `raw_last`), numbers
+    right-aligned."""
     out = ["<table>", "<tr>" + "".join(f"<th>{_e(h)}</th>" for h in header) + "</tr>"]
     for row in rows:
         cells = []
@@ -220,7 +225,8 @@ def _html_table(header: Sequence[str], rows: Iterable[Sequence[Any]], raw_last: 
     return out
 
 
-def _data_uri(path: Path) -> str | None:
+def png_data_uri(path: Path) -> str | None:
+    """The PNG image `path` as a `data:` URI (for a self-contained page), None when it cannot be read."""
     try:
         data = Path(path).read_bytes()
     except OSError:
@@ -233,7 +239,7 @@ def _html_figure(fig) -> list[str]:
     parts = [f"<h3>{_e(fig.title)}</h3>"]
     for f in fig.files:
         if Path(f).suffix.lower() == ".png":
-            uri = _data_uri(Path(f))
+            uri = png_data_uri(Path(f))
             if uri is None:
                 parts.append(f'<p class="fail">Image missing: {_e(Path(f).name)}</p>')
             else:
@@ -244,9 +250,9 @@ def _html_figure(fig) -> list[str]:
     parts.append(f'<p class="caption">{_e(fig.caption)}</p>')
     if fig.table:
         cols = _columns(fig.table)
-        parts += _html_table(cols, ([row.get(c, "") for c in cols] for row in fig.table))
+        parts += html_table(cols, ([row.get(c, "") for c in cols] for row in fig.table))
     if fig.metrics:
-        parts += _html_table(["metric", "value"], fig.metrics.items())
+        parts += html_table(["metric", "value"], fig.metrics.items())
     if fig.notes:
         parts.append("<ul>" + "".join(f"<li>{_e(n)}</li>" for n in fig.notes) + "</ul>")
     return parts
@@ -255,12 +261,12 @@ def _html_figure(fig) -> list[str]:
 def _html(out_dir: Path, figures, theorems, errata, meta, struggles=()) -> str:
     n_pass = sum(bool(r.passed) for r in theorems)
     parts = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
-             f"<title>{_e(REPORT_TITLE)}</title>", f"<style>{_CSS}</style>", "</head>", "<body>",
+             f"<title>{_e(REPORT_TITLE)}</title>", f"<style>{REPORT_CSS}</style>", "</head>", "<body>",
              f"<h1>{_e(REPORT_TITLE)}</h1>", f"<p>Paper: {_e(PAPER)}.</p>"]
     status = "pass" if n_pass == len(theorems) else "fail"
     parts.append(f'<p class="summary">Theorem table: <span class="{status}">{n_pass} of {len(theorems)} claims '
                  f"pass</span>. Errata measured: {len(errata)}. Figures: {len(figures)}.</p>")
-    parts += ["<h2>Provenance</h2>"] + _html_table(["item", "value"], _meta_items(meta))
+    parts += ["<h2>Provenance</h2>"] + html_table(["item", "value"], meta_items(meta))
 
     parts.append("<h2>Figures</h2>")
     for fig in figures:
@@ -271,7 +277,7 @@ def _html(out_dir: Path, figures, theorems, errata, meta, struggles=()) -> str:
             parts += _html_figure(fig)
 
     parts += ["<h2>Theorems</h2>", f"<p>{n_pass} of {len(theorems)} pass.</p>"]
-    parts += _html_table(
+    parts += html_table(
         ["#", "claim", "paper", "expected", "measured", "result"],
         ([i, r.claim, r.paper_ref, r.expected, r.measured,
           f'<span class="{"pass" if r.passed else "fail"}">{_pass_text(r.passed)}</span>']

@@ -74,14 +74,16 @@ class ReproductionResult:
         return not self.failures and all(r.passed for r in self.theorems)
 
 
-def _machine() -> str:
+def machine_description() -> str:
+    """The machine a report was made on: host name, operating system, processor and CPU count."""
     import os
 
     cpu = platform.processor() or platform.machine()
     return f"{platform.node()} ({platform.system()} {platform.release()}, {cpu}, {os.cpu_count()} CPUs)"
 
 
-def _versions() -> dict:
+def version_info() -> dict:
+    """The versions a report was made with: gnipy, Python and JAX (with its devices and whether x64 is on)."""
     import sys
 
     import jax
@@ -262,9 +264,9 @@ def _run_stages(out_dir: Path, quick: bool, console, t_start: float) -> Reproduc
 
     runtime = time.perf_counter() - t_start
     meta = {
-        **_versions(),
+        **version_info(),
         "date": datetime.datetime.now().astimezone().isoformat(timespec="seconds"),
-        "machine": _machine(),
+        "machine": machine_description(),
         "mode": "quick" if quick else "full",
         "runtime_s": runtime,
         "stage_runtimes_s": stage_times,

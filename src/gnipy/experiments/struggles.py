@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..extras import require
 from ..errors import verdicts_reported_by_caller
 
 __all__ = ["struggle_figures", "sleigh_figure", "suslov_figure", "oscillator_figure", "STRUGGLES"]
@@ -77,7 +78,7 @@ def _energy_and_diagnostic(fig, axes, runs, gni, label: str, out_dir: Path, name
     fig.suptitle(title)
     fig.tight_layout()
     files = _save(fig, Path(out_dir), name)
-    import matplotlib.pyplot as plt
+    plt = require("matplotlib.pyplot", extra="plots")
 
     plt.close(fig)
     return files
@@ -91,7 +92,7 @@ def _save(fig, out_dir: Path, name: str) -> list[Path]:
     try:
         return save_figure(fig, out_dir, name, dpi=110)
     except BaseException:  # a failed write (a full disk): the pyplot figure is not left open
-        import matplotlib.pyplot as plt
+        plt = require("matplotlib.pyplot", extra="plots")
 
         plt.close(fig)
         raise
@@ -105,7 +106,7 @@ def _figure_result(**fields):
 
 def sleigh_figure(out_dir: Path, quick: bool, progress: Progress = None):
     """Case 1: the Chaplygin sleigh (see the module docstring)."""
-    import matplotlib.pyplot as plt
+    plt = require("matplotlib.pyplot", extra="plots")
 
     t0 = time.perf_counter()
     h, T = 0.05, (30.0 if quick else 60.0)
@@ -160,7 +161,7 @@ def sleigh_figure(out_dir: Path, quick: bool, progress: Progress = None):
 
 def suslov_figure(out_dir: Path, quick: bool, progress: Progress = None):
     """Case 2: the Suslov problem (see the module docstring)."""
-    import matplotlib.pyplot as plt
+    plt = require("matplotlib.pyplot", extra="plots")
 
     t0 = time.perf_counter()
     h, T = 0.01, (60.0 if quick else 200.0)
@@ -201,7 +202,7 @@ def suslov_figure(out_dir: Path, quick: bool, progress: Progress = None):
 
 def oscillator_figure(out_dir: Path, quick: bool, progress: Progress = None):
     """Case 3: the first-order GNIs on the contact oscillator (see the module docstring)."""
-    import matplotlib.pyplot as plt
+    plt = require("matplotlib.pyplot", extra="plots")
 
     t0 = time.perf_counter()
     h, T = 0.05, 100.0

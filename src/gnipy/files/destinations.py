@@ -36,7 +36,8 @@ def free_bytes(directory) -> int | None:
 
 
 
-def _kind(st: os.stat_result) -> str:
+def file_kind(st: os.stat_result) -> str:
+    """What the `lstat` result `st` is, in words for a message (`"a regular file"`, `"a symbolic link"`, ...)."""
     mode = st.st_mode
     if stat.S_ISREG(mode):
         return "a regular file"
@@ -102,7 +103,7 @@ def check_destination(path, *, overwrite: bool = False, argument: str = "out") -
     except OSError as e:
         raise OutputError(f"{argument}: cannot write {path}: {e.strerror or e}") from None
     if st is not None:
-        kind = _kind(st)
+        kind = file_kind(st)
         if stat.S_ISLNK(st.st_mode) or not stat.S_ISREG(st.st_mode):
             raise OutputError(f"{argument}: {path} is {kind}; gnipy writes only regular files it may replace "
                               "(choose another path)")
@@ -131,7 +132,7 @@ def check_directory_destination(path, *, overwrite: bool = False, argument: str 
         raise OutputError(f"{argument}: cannot use {path}: {e.strerror or e}") from None
     if st is not None:
         if not stat.S_ISDIR(st.st_mode):
-            raise OutputError(f"{argument}: {path} is {_kind(st)}, not a directory gnipy created "
+            raise OutputError(f"{argument}: {path} is {file_kind(st)}, not a directory gnipy created "
                               "(choose another path)")
         if is_owned_dir(path):
             if not (reuse or overwrite):

@@ -9,7 +9,7 @@ import threading
 from pathlib import Path
 
 from ..errors import OutputBusy, OutputError
-from .destinations import _kind
+from .destinations import file_kind
 
 
 __all__ = ["lock_path", "output_lock", "pid_alive"]
@@ -127,7 +127,7 @@ class output_lock:
                 st = os.fstat(fd)
                 if not stat.S_ISREG(st.st_mode):
                     raise OutputError(f"{self.argument}: {lock} (the lock file of {self.path}) is "
-                                      f"{_kind(st)}; remove it")
+                                      f"{file_kind(st)}; remove it")
                 try:
                     if fcntl is None:
                         raise OSError(errno.ENOSYS, "no flock")

@@ -16,7 +16,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
 from ..linalg import solve as small_solve
 from ..linalg import solve_spd
@@ -37,6 +36,8 @@ class StepInfo(NamedTuple):
 def default_root_finder():
     """Newton's method with tolerances near round-off, as an optimistix solver (pass it as
     `root_finder=` to use optimistix instead of the built-in :func:`newton`)."""
+    import optimistix as optx  # imported where used (~0.1 s): the built-in Newton is the default
+
     return optx.Newton(rtol=1e-12, atol=1e-12)
 
 
@@ -261,6 +262,8 @@ def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: in
     # about eps·|dF/dz|·|z| (e.g. G(z - q)/h), which passes atol once |z|/h is large, and the solve
     # then never terminates. Dividing F by that scale leaves the Newton iterates unchanged and
     # makes the f-space test relative; the y-space test still sets the accuracy.
+    import optimistix as optx
+
     scale = jax.lax.stop_gradient(
         jnp.maximum(1.0, jnp.max(jnp.abs(jax.jacfwd(F)(guess))) * jnp.max(jnp.abs(guess)))
     )

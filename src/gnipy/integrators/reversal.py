@@ -157,8 +157,9 @@ def symmetric_methods(system) -> list[str]:
     symmetric on `system` and apply to it (their `check` passes at its default point): those whose
     run with h < 0 is the exact inverse of a run with h > 0. No runs: `symmetric_on` and `check`
     only (host-side probes, compiled once per system structure)."""
-    from ..methods import get_method, method_names
+    from ..registry import method_table
 
+    get_method, method_names = method_table()
     b0 = system._default_point()
     out = []
     for name in method_names():

@@ -17,13 +17,15 @@ Conventions (paper §7 and Appendix; the docs' conventions page):
 
 The base class :class:`MatrixLieGroup` implements every operation generically from `hat`, `vee` and
 the basis of generators (`exp` by `jax.scipy.linalg.expm`); the concrete groups override them with
-closed forms.
+closed forms. Each group owns its retraction maps (paper, Appendix): the Cayley map and the
+exponential, their inverses and their (inverse) right-trivialized tangents, which
+:mod:`gnipy.retractions` only calls; a new group is one file (see :mod:`gnipy.lie_groups.base`).
 """
 
-# The package's modules: `series` (even functions of an angle, safe at zero), `base`
-# (MatrixLieGroup and the argument checks), `so3`, `se2`, `abelian` (Rn, TrivialGroup) and
-# `product` (ProductGroup). The names are imported in the order the API page lists them.
-from . import base, se2, series, so3
+# The package's modules: `series` (even functions of an angle, safe at zero, and the paper's
+# series of dexp), `base` (MatrixLieGroup and the argument checks), `so3`, `se2`, `abelian`
+# (Rn, TrivialGroup) and `product` (ProductGroup). The names are imported in the order the API
+# page lists them.
 from .base import MatrixLieGroup
 from .so3 import SO3
 from .se2 import SE2
@@ -52,17 +54,3 @@ __all__ = [
     "sinc_sq",
     "theta_minus_sin_sq",
 ]
-
-# The private helpers of the former single module, still importable from here
-# (gnipy.retractions imports some of them).
-_TAYLOR_T = series._TAYLOR_T
-_TAYLOR_TERMS = series._TAYLOR_TERMS
-_bernoulli_numbers = series._bernoulli_numbers
-_BERNOULLI = series._BERNOULLI
-_even_series_safe = series._even_series_safe
-_as_float = base._as_float
-_check_vector = base._check_vector
-_check_matrix = base._check_matrix
-_quaternion_from_rotation = so3._quaternion_from_rotation
-_rotation_from_quaternion = so3._rotation_from_quaternion
-_J2 = se2._J2

@@ -7,14 +7,15 @@ import jax
 import jax.numpy as jnp
 from jax.scipy.linalg import block_diag
 
-from .base import MatrixLieGroup, _check_matrix, _check_vector
+from .base import MatrixLieGroup, check_matrix, check_vector
 
 
 class ProductGroup(MatrixLieGroup):
     """A direct product $G_1\\times\\dots\\times G_m$ as block-diagonal matrices.
 
     Algebra vectors are the concatenation of the factors' vectors; every operation (hat, vee, exp,
-    log, Ad, ad, inverse) acts blockwise with each factor's closed form.
+    log, Ad, ad, inverse, and the retraction maps: the Cayley map, its inverse, the tangents of
+    both retractions and their inverses) acts blockwise with each factor's closed form.
 
     Arguments:
         *factors: the groups $G_1, \\dots, G_m$ (at least one), e.g. `ProductGroup(SO3(), SE2())`.
@@ -61,7 +62,7 @@ class ProductGroup(MatrixLieGroup):
         Returns:
             a list of arrays of shapes $(d_i,)$.
         """
-        xi = _check_vector(xi, self.dim)
+        xi = check_vector(xi, self.dim)
         return [xi[s] for s in self._dim_slices()]
 
     def blocks(self, g):
@@ -73,36 +74,72 @@ class ProductGroup(MatrixLieGroup):
         Returns:
             a list of arrays of shapes $(k_i, k_i)$.
         """
-        g = _check_matrix(g, self.matrix_size)
+        g = check_matrix(g, self.matrix_size)
         return [g[s, s] for s in self._matrix_slices()]
+
+    def _diag(self, method, parts):
+        """$\\mathrm{diag}(f_1(a_1), \\dots, f_m(a_m))$ with $f_i$ the factor's `method`, $a_i$ its part."""
+        return block_diag(*[getattr(f, method)(a) for f, a in zip(self.factors, parts)])
+
+    def _concat(self, method, parts):
+        """$(f_1(a_1), \\dots, f_m(a_m))$ concatenated, with $f_i$ the factor's `method`, $a_i$ its part."""
+        return jnp.concatenate([getattr(f, method)(a) for f, a in zip(self.factors, parts)])
 
     def hat(self, xi):
         """$\\mathrm{diag}(\\hat\\xi_1, \\dots, \\hat\\xi_m)$."""
-        return block_diag(*[f.hat(x) for f, x in zip(self.factors, self.split(xi))])
+        return self._diag("hat", self.split(xi))
 
     def vee(self, X):
         """Concatenation of the blocks' vee (off-diagonal blocks are ignored)."""
-        return jnp.concatenate([f.vee(B) for f, B in zip(self.factors, self.blocks(X))])
+        return self._concat("vee", self.blocks(X))
 
     def inverse(self, g):
         """Blockwise inverse."""
-        return block_diag(*[f.inverse(B) for f, B in zip(self.factors, self.blocks(g))])
+        return self._diag("inverse", self.blocks(g))
 
     def exp(self, xi):
         """Blockwise exp (safe at 0 when each factor's is)."""
-        return block_diag(*[f.exp(x) for f, x in zip(self.factors, self.split(xi))])
+        return self._diag("exp", self.split(xi))
 
     def log(self, g):
         """Blockwise principal logarithm."""
-        return jnp.concatenate([f.log(B) for f, B in zip(self.factors, self.blocks(g))])
+        return self._concat("log", self.blocks(g))
+
+    def cayley(self, xi):
+        """Blockwise Cayley map."""
+        return self._diag("cayley", self.split(xi))
+
+    def cayley_inv(self, g):
+        """Blockwise inverse of the Cayley map."""
+        return self._concat("cayley_inv", self.blocks(g))
+
+    def dcayley(self, xi):
+        """$\\mathrm{diag}(\\mathrm{dcay}_{\\xi_1}, \\dots)$."""
+        return self._diag("dcayley", self.split(xi))
+
+    def dcayley_inv(self, xi):
+        """$\\mathrm{diag}(\\mathrm{dcay}^{-1}_{\\xi_1}, \\dots)$."""
+        return self._diag("dcayley_inv", self.split(xi))
+
+    def dcayley_inv_along(self, xi):
+        """The factors' $\\mathrm{dcay}^{-1}_{\\xi_i}\\xi_i$, concatenated."""
+        return self._concat("dcayley_inv_along", self.split(xi))
+
+    def dexp(self, xi):
+        """$\\mathrm{diag}(\\mathrm{dexp}_{\\xi_1}, \\dots)$."""
+        return self._diag("dexp", self.split(xi))
+
+    def dexp_inv(self, xi):
+        """$\\mathrm{diag}(\\mathrm{dexp}^{-1}_{\\xi_1}, \\dots)$."""
+        return self._diag("dexp_inv", self.split(xi))
 
     def Ad(self, g):
         """$\\mathrm{diag}(\\mathrm{Ad}_{g_1}, \\dots)$."""
-        return block_diag(*[f.Ad(B) for f, B in zip(self.factors, self.blocks(g))])
+        return self._diag("Ad", self.blocks(g))
 
     def ad(self, xi):
         """$\\mathrm{diag}(\\mathrm{ad}_{\\xi_1}, \\dots)$."""
-        return block_diag(*[f.ad(x) for f, x in zip(self.factors, self.split(xi))])
+        return self._diag("ad", self.split(xi))
 
     def ad_star(self, xi, m):
         """Blockwise $\\mathrm{ad}^*$."""

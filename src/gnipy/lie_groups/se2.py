@@ -1,4 +1,5 @@
-"""The planar rigid motions SE(2), with closed-form `exp`, `log`, `Ad` and `ad`."""
+"""The planar rigid motions SE(2), with closed-form `exp`, `log`, `Ad`, `ad`, $\\mathrm{dexp}$ and
+$\\mathrm{dexp}^{-1}$ (the Cayley map and its tangents are the base class's matrix formulas)."""
 
 from __future__ import annotations
 
@@ -7,10 +8,8 @@ from typing import ClassVar
 import jax
 import jax.numpy as jnp
 
-from .base import MatrixLieGroup, _check_matrix, _check_vector
-from .series import cos_sq, half_cot_half_sq, one_minus_cos_sq, sinc_sq
-
-_J2 = ((0.0, -1.0), (1.0, 0.0))
+from .base import MatrixLieGroup, check_matrix, check_vector
+from .series import cos_sq, half_cot_half_sq, one_minus_cos_sq, sinc_sq, theta_minus_sin_sq
 
 
 class SE2(MatrixLieGroup):
@@ -21,7 +20,10 @@ class SE2(MatrixLieGroup):
     Closed forms: $\\exp\\hat\\xi = (R(\\omega), V(\\omega)v)$ with
     $V(\\omega) = \\frac{\\sin\\omega}{\\omega} I + \\frac{1-\\cos\\omega}{\\omega} J$ (safe at $\\omega\\to0$),
     $J = \\begin{pmatrix}0&-1\\\\1&0\\end{pmatrix}$; $\\mathrm{Ad}_g = \\begin{pmatrix} R & -Jt\\\\ 0 & 1\\end{pmatrix}$;
-    $\\mathrm{ad}_\\xi = \\begin{pmatrix} \\omega J & -Jv\\\\ 0 & 0\\end{pmatrix}$.
+    $\\mathrm{ad}_\\xi = \\begin{pmatrix} \\omega J & -Jv\\\\ 0 & 0\\end{pmatrix}$;
+    $\\mathrm{dexp}_\\xi$ and $\\mathrm{dexp}^{-1}_\\xi$ in closed form (:meth:`dexp`); the Cayley map and
+    its tangents by the base class's matrix formulas (Appendix b), with
+    $\\mathrm{dcay}^{-1}_\\xi\\xi = \\xi(1 + \\omega^2/4)$ in closed form.
     """
 
     velocity_names: ClassVar[tuple[str, ...]] = ("v_x", "v_y", "omega")
@@ -43,7 +45,7 @@ class SE2(MatrixLieGroup):
         Returns:
             shape (3, 3).
         """
-        vx, vy, w = _check_vector(xi, 3)
+        vx, vy, w = check_vector(xi, 3)
         z = jnp.zeros_like(w)
         return jnp.array([[z, -w, vx], [w, z, vy], [z, z, z]])
 
@@ -56,7 +58,7 @@ class SE2(MatrixLieGroup):
         Returns:
             shape (3,).
         """
-        X = _check_matrix(X, 3, "X")
+        X = check_matrix(X, 3, "X")
         return jnp.stack([X[0, 2], X[1, 2], 0.5 * (X[1, 0] - X[0, 1])])
 
     @staticmethod
@@ -83,7 +85,7 @@ class SE2(MatrixLieGroup):
 
     def inverse(self, g):
         """$(R, t)^{-1} = (R^T, -R^T t)$."""
-        g = _check_matrix(g, 3)
+        g = check_matrix(g, 3)
         Rt = g[:2, :2].T
         return jnp.zeros_like(g).at[:2, :2].set(Rt).at[:2, 2].set(-Rt @ g[:2, 2]).at[2, 2].set(1.0)
 
@@ -96,7 +98,7 @@ class SE2(MatrixLieGroup):
         Returns:
             shape (3, 3). Safe at $\\omega = 0$ (values and gradients).
         """
-        xi = _check_vector(xi, 3)
+        xi = check_vector(xi, 3)
         v, w = xi[:2], xi[2]
         t = w * w
         c, s = cos_sq(t), w * sinc_sq(t)
@@ -113,21 +115,57 @@ class SE2(MatrixLieGroup):
         Returns:
             $(v_x, v_y, \\omega)$, shape (3,).
         """
-        g = _check_matrix(g, 3)
+        g = check_matrix(g, 3)
         w = jnp.arctan2(g[1, 0], g[0, 0])
         return jnp.concatenate([self.V_inv(w) @ g[:2, 2], w[None]])
 
     def Ad(self, g):
         """$\\mathrm{Ad}_g = \\begin{pmatrix} R & -Jt\\\\ 0 & 1\\end{pmatrix}$, i.e. the $\\omega$ column is $(t_y, -t_x, 1)$."""
-        g = _check_matrix(g, 3)
+        g = check_matrix(g, 3)
         out = jnp.zeros_like(g).at[:2, :2].set(g[:2, :2])
         return out.at[0, 2].set(g[1, 2]).at[1, 2].set(-g[0, 2]).at[2, 2].set(1.0)
 
     def ad(self, xi):
         """$\\mathrm{ad}_\\xi = \\begin{pmatrix} \\omega J & -Jv\\\\ 0 & 0\\end{pmatrix}$: $[\\xi, \\eta] = (\\omega J u - \\eta_\\omega J v,\\ 0)$."""
-        vx, vy, w = _check_vector(xi, 3)
+        vx, vy, w = check_vector(xi, 3)
         z = jnp.zeros_like(w)
         return jnp.array([[z, -w, vy], [w, z, -vx], [z, z, z]])
+
+    # -- retraction maps (paper, Appendix) ------------------------------------------------------
+
+    def dcayley_inv_along(self, xi):
+        """$\\mathrm{dcay}^{-1}_\\xi\\,\\xi = \\xi\\,(1 + \\omega^2/4)$: $\\hat\\xi - \\hat\\xi^3/4$ (Appendix b) with
+        $\\hat\\xi^3 = -\\omega^2\\hat\\xi$ on $\\mathfrak{se}(2)$."""
+        xi = check_vector(xi, 3)
+        return xi * (1.0 + 0.25 * (xi[2] * xi[2]))
+
+    def dexp(self, xi):
+        """$\\mathrm{dexp}_\\xi = \\begin{pmatrix} V(\\omega) & -W(\\omega)Jv\\\\ 0 & 1\\end{pmatrix}$ (Appendix a, summed).
+
+        $V = \\varphi_1(\\omega J)$, $W = \\varphi_2(\\omega J) = \\frac{1-\\cos\\omega}{\\omega^2}I + \\frac{\\omega-\\sin\\omega}{\\omega^2}J$
+        ($\\varphi_1(z) = (e^z - 1)/z$, $\\varphi_2(z) = (e^z - 1 - z)/z^2$; $\\mathrm{ad}_\\xi$ is block
+        upper-triangular). Safe at $\\omega = 0$.
+
+        Arguments:
+            xi: $(v_x, v_y, \\omega)$, shape (3,).
+
+        Returns:
+            shape (3, 3).
+        """
+        xi = check_vector(xi, 3)
+        v, w = xi[:2], xi[2]
+        return _block(self.V(w), -_W(w) @ _J(v))
+
+    def dexp_inv(self, xi):
+        """$\\mathrm{dexp}^{-1}_\\xi$, the block inverse of :meth:`dexp`:
+        $\\begin{pmatrix} V^{-1} & V^{-1}WJv\\\\ 0 & 1\\end{pmatrix}$ (valid for $|\\omega| < 2\\pi$; safe at 0),
+        a (3, 3) matrix for $\\xi = (v_x, v_y, \\omega)$ of shape (3,).
+        """
+        xi = check_vector(xi, 3)
+        v, w = xi[:2], xi[2]
+        Vinv = self.V_inv(w)
+        # [[V, c], [0, 1]]⁻¹ = [[V⁻¹, −V⁻¹c], [0, 1]] with c = −W J v
+        return _block(Vinv, Vinv @ (_W(w) @ _J(v)))
 
     def random(self, key):
         """$\\omega$ uniform in $(-\\pi, \\pi)$, translation standard normal."""
@@ -136,3 +174,21 @@ class SE2(MatrixLieGroup):
         t = jax.random.normal(k2, (2,))
         c, s = jnp.cos(w), jnp.sin(w)
         return jnp.array([[c, -s, t[0]], [s, c, t[1]], [0.0, 0.0, 1.0]])
+
+
+def _J(v):
+    """$Jv$ with $J$ the rotation by $\\pi/2$."""
+    return jnp.stack([-v[1], v[0]])
+
+
+def _W(w):
+    """$W(\\omega) = \\frac{1-\\cos\\omega}{\\omega^2}I + \\frac{\\omega-\\sin\\omega}{\\omega^2}J$ (safe at 0)."""
+    t = w * w
+    a, b = one_minus_cos_sq(t), w * theta_minus_sin_sq(t)
+    return jnp.array([[a, -b], [b, a]])
+
+
+def _block(top_left, top_right):
+    """$\\begin{pmatrix} A & c\\\\ 0 & 1\\end{pmatrix}$ (3x3)."""
+    out = jnp.zeros((3, 3), dtype=top_left.dtype)
+    return out.at[:2, :2].set(top_left).at[:2, 2].set(top_right).at[2, 2].set(1.0)

@@ -1,4 +1,5 @@
-"""The rotation group SO(3): Rodrigues' `exp` and a quaternion-based principal `log`."""
+"""The rotation group SO(3): Rodrigues' `exp`, a quaternion-based principal `log`, and the closed
+forms of the Cayley map, of $\\mathrm{dexp}$ and of their inverses (paper, Appendix)."""
 
 from __future__ import annotations
 
@@ -6,9 +7,10 @@ from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
-from .base import MatrixLieGroup, _check_matrix, _check_vector
-from .series import one_minus_cos_sq, sinc_sq
+from .base import MatrixLieGroup, check_matrix, check_vector
+from .series import dexp_inv_coefficient_sq, one_minus_cos_sq, sinc_sq, theta_minus_sin_sq
 
 
 def _quaternion_from_rotation(R):
@@ -49,7 +51,9 @@ class SO3(MatrixLieGroup):
     """The rotation group SO(3) ($d = k = 3$), with the paper's hat map (hatso).
 
     Closed forms: Rodrigues' `exp`, a quaternion-based principal `log` (robust up to angle $\\pi$),
-    $\\mathrm{Ad}_R = R$, $\\mathrm{ad}_\\omega = \\hat\\omega$, $\\mathrm{ad}^*_\\omega M = M\\times\\omega$.
+    $\\mathrm{Ad}_R = R$, $\\mathrm{ad}_\\omega = \\hat\\omega$, $\\mathrm{ad}^*_\\omega M = M\\times\\omega$;
+    the Cayley map, its inverse and tangents from the Appendix ("Applications to matrix groups",
+    SO(3)); $\\mathrm{dexp}$ and $\\mathrm{dexp}^{-1}$ in closed form (safe at 0, Taylor branches).
     """
 
     velocity_names: ClassVar[tuple[str, ...]] = ("omega1", "omega2", "omega3")
@@ -71,7 +75,7 @@ class SO3(MatrixLieGroup):
         Returns:
             shape (3, 3), skew-symmetric.
         """
-        w1, w2, w3 = _check_vector(xi, 3)
+        w1, w2, w3 = check_vector(xi, 3)
         z = jnp.zeros_like(w1)
         return jnp.array([[z, -w3, w2], [w3, z, -w1], [-w2, w1, z]])
 
@@ -84,12 +88,12 @@ class SO3(MatrixLieGroup):
         Returns:
             shape (3,).
         """
-        X = _check_matrix(X, 3, "X")
+        X = check_matrix(X, 3, "X")
         return 0.5 * jnp.stack([X[2, 1] - X[1, 2], X[0, 2] - X[2, 0], X[1, 0] - X[0, 1]])
 
     def inverse(self, g):
         """$R^{-1} = R^T$."""
-        return _check_matrix(g, 3).T
+        return check_matrix(g, 3).T
 
     def exp(self, xi):
         """Rodrigues: $\\exp\\hat\\omega = I + \\frac{\\sin\\theta}{\\theta}\\hat\\omega + \\frac{1-\\cos\\theta}{\\theta^2}\\hat\\omega^2$, $\\theta = |\\omega|$.
@@ -100,7 +104,7 @@ class SO3(MatrixLieGroup):
         Returns:
             shape (3, 3). Safe at $\\omega = 0$ (values and gradients).
         """
-        w = _check_vector(xi, 3)
+        w = check_vector(xi, 3)
         t = w @ w
         W = self.hat(w)
         return jnp.eye(3) + sinc_sq(t) * W + one_minus_cos_sq(t) * (W @ W)
@@ -118,7 +122,7 @@ class SO3(MatrixLieGroup):
         Returns:
             shape (3,).
         """
-        q = _quaternion_from_rotation(_check_matrix(g, 3))
+        q = _quaternion_from_rotation(check_matrix(g, 3))
         q = jnp.where(q[0] < 0, -q, q)
         w, v = q[0], q[1:]
         n2 = v @ v
@@ -136,7 +140,7 @@ class SO3(MatrixLieGroup):
 
     def Ad(self, g):
         """$\\mathrm{Ad}_R = R$."""
-        return _check_matrix(g, 3)
+        return check_matrix(g, 3)
 
     def ad(self, xi):
         """$\\mathrm{ad}_\\omega = \\hat\\omega$ (the bracket is the cross product)."""
@@ -144,8 +148,77 @@ class SO3(MatrixLieGroup):
 
     def ad_star(self, xi, m):
         """$\\mathrm{ad}^*_\\omega M = \\hat\\omega^T M = M\\times\\omega$."""
-        return jnp.cross(jnp.asarray(m), _check_vector(xi, 3))
+        return jnp.cross(jnp.asarray(m), check_vector(xi, 3))
 
     def random(self, key):
         """A uniformly distributed rotation (normalized Gaussian quaternion)."""
         return _rotation_from_quaternion(jax.random.normal(key, (4,)))
+
+    # -- retraction maps (paper, Appendix, "Applications to matrix groups": SO(3)) -------------
+
+    def cayley(self, xi):
+        """$\\mathrm{cay}(\\hat\\omega) = I + \\frac{4}{4 + |\\omega|^2}\\bigl(\\hat\\omega + \\tfrac12\\hat\\omega^2\\bigr)$ (Appendix, SO(3))."""
+        w = check_vector(xi, 3)
+        W = self.hat(w)
+        return jnp.eye(3) + (4.0 / (4.0 + w @ w)) * (W + 0.5 * (W @ W))
+
+    def cayley_inv(self, g):
+        """$R = \\mathrm{cay}(\\hat\\omega) \\Leftrightarrow \\omega = 2\\,(R - R^T)^\\vee/(1 + \\mathrm{tr}\\,R)$
+        (Appendix, SO(3); defined for rotation angles below $\\pi$)."""
+        g = check_matrix(g, 3)
+        return (4.0 / (1.0 + jnp.trace(g))) * self.vee(g)
+
+    def dcayley(self, xi):
+        """$\\mathrm{dcay}_\\omega = \\frac{2}{4 + |\\omega|^2}(2I + \\hat\\omega)$ (Appendix, SO(3))."""
+        w = check_vector(xi, 3)
+        return (2.0 / (4.0 + w @ w)) * (2.0 * jnp.eye(3) + self.hat(w))
+
+    def dcayley_inv(self, xi):
+        """$\\mathrm{dcay}^{-1}_\\omega = I - \\tfrac12\\hat\\omega + \\tfrac14\\omega\\omega^T$ (Appendix, SO(3))."""
+        w = check_vector(xi, 3)
+        return jnp.eye(3) - 0.5 * self.hat(w) + 0.25 * jnp.outer(w, w)
+
+    def dcayley_inv_along(self, xi):
+        """$\\mathrm{dcay}^{-1}_\\omega\\,\\omega = \\omega\\,(1 + |\\omega|^2/4)$ ($\\hat\\omega\\omega = 0$)."""
+        w = check_vector(xi, 3)
+        return w * (1.0 + 0.25 * (w @ w))  # (I − ω̂/2 + ωωᵀ/4) ω
+
+    def dexp(self, xi):
+        """$\\mathrm{dexp}_\\omega = I + \\frac{1-\\cos\\theta}{\\theta^2}\\hat\\omega + \\frac{\\theta-\\sin\\theta}{\\theta^3}\\hat\\omega^2$,
+        $\\theta = |\\omega|$ (Appendix a, summed; safe at 0)."""
+        w = check_vector(xi, 3)
+        t = w @ w
+        W = self.hat(w)
+        return jnp.eye(3) + one_minus_cos_sq(t) * W + theta_minus_sin_sq(t) * (W @ W)
+
+    def dexp_inv(self, xi):
+        """$\\mathrm{dexp}^{-1}_\\omega = I - \\tfrac12\\hat\\omega + \\frac{1}{\\theta^2}\\bigl(1 - \\frac\\theta2\\cot\\frac\\theta2\\bigr)\\hat\\omega^2$
+        (Appendix a, summed; safe at 0, valid for $\\theta < 2\\pi$)."""
+        w = check_vector(xi, 3)
+        W = self.hat(w)
+        return jnp.eye(3) - 0.5 * W + dexp_inv_coefficient_sq(w @ w) * (W @ W)
+
+    # -- host-side checks ----------------------------------------------------------------------
+
+    def is_element(self, g, tol: float = 1e-10):
+        """Rotation matrices: $|R^TR - I| \\le$ `tol` (largest entry) and $\\det R > 0$ (host side, NumPy)."""
+        err, det = _orthogonality_defect(g)
+        return ~((err > tol) | (det <= 0))
+
+    def why_not_element(self, g) -> str:
+        """`"not a rotation matrix (|RᵀR − I| = …, det = …)"`."""
+        err, det = _orthogonality_defect(g)
+        return f"not a rotation matrix (|RᵀR − I| = {float(err):.3e}, det = {float(det):.3g})"
+
+    def is_bi_invariant(self, metric, atol):
+        """The bi-invariant metrics on $\\mathfrak{so}(3)$ are $cI$ (SO(3) is simple): whether every
+        entry of $M - M_{00}I$ is within `atol` (host side, NumPy)."""
+        M = np.asarray(metric)
+        return np.max(np.abs(M - M[..., :1, :1] * np.eye(3)), axis=(-2, -1)) <= atol
+
+
+def _orthogonality_defect(g):
+    """$\\max|R^TR - I|$ and $\\det R$ of the matrices `g` (shape (..., 3, 3), NumPy)."""
+    g = np.asarray(g)
+    err = np.max(np.abs(np.einsum("...ji,...jk->...ik", g, g) - np.eye(3)), axis=(-2, -1))
+    return err, np.linalg.det(g)

@@ -21,20 +21,22 @@ from ..registry import ModelSpec, register
 __all__ = ["MODEL"]
 
 
-def _lagrangian(eps, q, v):
+def lagrangian(eps, q, v):
+    """l(q, v) of the contact oscillator with coupling `eps`."""
     x, _, z = q
     return 0.5 * (v @ v) - 0.5 * (q @ q + eps * x**2 * z**2)
 
 
-def _constraints(q):
+def constraints(q):
+    """The constraint ẋ + y ż = 0 as the row μ(q) = (1, 0, y)."""
     y = q[1]
     return jnp.stack([jnp.ones_like(y), jnp.zeros_like(y), y])[None, :]
 
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["epsilon"])),
-        _constraints,
+        jtu.Partial(lagrangian, jnp.asarray(p["epsilon"])),
+        constraints,
         coordinates=("x", "y", "z"),
         name="contact-oscillator",
         params=p,
@@ -42,12 +44,14 @@ def _build(p):
     )
 
 
-def _H(p, q, v):
+def total_energy(p, q, v):
+    """The energy H (conserved), with the parameters `p`."""
     x, _, z = q
     return 0.5 * (v @ v + q @ q + p["epsilon"] * x**2 * z**2)
 
 
-def _Hy(p, q, v):
+def y_energy(p, q, v):
+    """The energy of the y oscillator, H_y = (y² + ẏ²)/2 (conserved)."""
     return 0.5 * (q[1] ** 2 + v[1] ** 2)
 
 
@@ -60,7 +64,7 @@ MODEL = register(
         coordinates=("x", "y", "z"),
         q0=(1.0, 1.0, 1.0),
         v0=(-1.0, 1.0, 1.0),
-        invariants={"H": _H, "H_y": _Hy},
+        invariants={"H": total_energy, "H_y": y_energy},
         notes=__doc__,
     )
 )

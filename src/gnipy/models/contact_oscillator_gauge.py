@@ -46,7 +46,7 @@ import numpy as np
 
 from ..system import System
 from ..registry import ModelSpec, register
-from .contact_oscillator import _constraints as _base_constraints
+from .contact_oscillator import constraints as _base_constraints
 from .contact_oscillator_mp import setup_initial_condition
 from .gauge import gauge_momentum, kaluza_klein_term, lift_constraints, lift_initial_condition
 

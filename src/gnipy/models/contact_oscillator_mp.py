@@ -42,7 +42,7 @@ import numpy as np
 
 from ..system import System
 from ..registry import ModelSpec, register
-from .contact_oscillator import _H, _Hy, _constraints, _lagrangian
+from .contact_oscillator import constraints, lagrangian, total_energy, y_energy
 
 __all__ = ["MODEL", "Z0_GRID", "Z0_DEFAULT", "ENERGY", "ENERGY_Y", "setup_initial_condition", "poincare_step"]
 
@@ -82,8 +82,8 @@ def _default_ic(p):
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["epsilon"])),
-        _constraints,
+        jtu.Partial(lagrangian, jnp.asarray(p["epsilon"])),
+        constraints,
         coordinates=("x", "y", "z"),
         name="contact-oscillator-mp",
         params=p,
@@ -103,7 +103,7 @@ MODEL = register(
         q0=_default_ic(_DEFAULTS)[0],
         v0=_default_ic(_DEFAULTS)[1],
         default_ic=_default_ic,
-        invariants={"H": _H, "H_y": _Hy},
+        invariants={"H": total_energy, "H_y": y_energy},
         notes=__doc__,
     )
 )

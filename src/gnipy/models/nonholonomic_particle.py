@@ -17,19 +17,21 @@ from ..registry import ModelSpec, register
 __all__ = ["MODEL"]
 
 
-def _lagrangian(k, q, v):
+def lagrangian(k, q, v):
+    """l(q, v) of the nonholonomic particle with spring constant `k`."""
     x, y, _ = q
     return 0.5 * (v @ v) - 0.5 * k * (x**2 + y**2)
 
 
-def _constraints(q):
+def constraints(q):
+    """The constraint ż = y ẋ as the row μ(q) = (−y, 0, 1)."""
     return jnp.stack([-q[1], jnp.zeros_like(q[1]), jnp.ones_like(q[1])])[None, :]
 
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["k"])),
-        _constraints,
+        jtu.Partial(lagrangian, jnp.asarray(p["k"])),
+        constraints,
         coordinates=("x", "y", "z"),
         name="nonholonomic-particle",
         params=p,

@@ -45,7 +45,7 @@ import numpy as np
 from ..system import System
 from ..registry import ModelSpec, register
 from .gauge import gauge_momentum, kaluza_klein_term, lift_constraints, lift_initial_condition
-from .nonholonomic_particle import _constraints as _base_constraints
+from .nonholonomic_particle import constraints as _base_constraints
 
 __all__ = ["MODEL", "S", "grad_S"]
 

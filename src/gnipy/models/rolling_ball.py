@@ -73,8 +73,9 @@ import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
 
+from ..inputs import provenance_number
 from ..lie_groups import SO3
-from ..system import System, _number
+from ..system import System
 from . import rotating_table_ball
 from ..registry import ModelSpec, register
 
@@ -154,7 +155,7 @@ def build_system(p, *, retraction="cayley", defaults=None, reconstruction="right
     traced = any(isinstance(v, jax.core.Tracer) for v in p.values())  # differentiated: kept traced
     p = {k: v if isinstance(v, jax.core.Tracer) else float(v) for k, v in p.items()}
     if traced:  # the provenance numbers and the note from the values known now; no default start
-        known = {k: _number(v) for k, v in p.items()}
+        known = {k: provenance_number(v) for k, v in p.items()}
         note = orientation_note(known) if reconstruction == "right" else None
     return System(
         jtu.Partial(_lagrangian, jnp.asarray(p["m"]), jnp.asarray([p["I1"], p["I2"], p["I3"]])),

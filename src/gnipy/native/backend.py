@@ -33,10 +33,10 @@ import numpy as np
 
 from ..compilation import jit
 from ..errors import InputError
-from ..monitor import SIZE
-from ..stepping import watched_run
+from ..monitor import SIZE, initial
+from ..stepping import finish_native, initial_carry, loop_step, report_progress, split_arrays, watched_run
 from .lowering import Unsupported
-from .program import available, build_loop
+from .program import available, build_loop, default_lanes
 
 __all__ = ["BACKENDS", "NATIVE_MIN_STEPS", "check_backend", "choose", "run_native", "native_loop", "system_params"]
 
@@ -64,12 +64,10 @@ def check_backend(backend) -> str:
 def _loop_key(method, system, params: bool = False):
     """The key of a built loop: the structure of `(method, system)` and the values of its array
     leaves (with `params`, the system's values are inputs of the program: only their shapes)."""
-    from ..preparation import _split
-
-    leaves, key, _ = _split((method, system))
+    leaves, key, _ = split_arrays((method, system))
     if key is None:
         return None
-    n_method = len(_split(method)[0])
+    n_method = len(split_arrays(method)[0])
     try:
         return key, params, tuple((np.asarray(a).dtype.str, np.shape(a),
                                    None if params and i >= n_method else np.asarray(a).tobytes())
@@ -84,7 +82,7 @@ def _why_not(system, *, traced: bool = False) -> str | None:
     if getattr(system, "force", None) is not None:
         return "forced systems (their drive) run on XLA"
     if not available():
-        return "llvmlite is not installed"
+        return "llvmlite is not installed (pip install 'gnipy[native]')"
     return None
 
 
@@ -123,24 +121,20 @@ def native_loop(method, system, state0, *, batch: bool = False, params: bool = F
     :class:`Unsupported` reason. With `params`, the system's array leaves (its parameter values,
     :func:`system_params`) are inputs of the loop, so one program runs every value: `system` is
     then an example (one member of a parameter batch)."""
-    from ..monitor import initial
-    from ..stepping import _carry0, _stepper
-    from .program import default_lanes
-
     lanes = default_lanes() if batch else 1
     key = _loop_key(method, system, params)
     key = None if key is None else (key, lanes)
     hit = _LOOPS.get(key) if key is not None else None
     if hit is not None:
         return hit
-    carry0 = _carry0(state0, initial(0.01, 1.0, 0.0))  # every native run checks every node (gnipy.monitor)
+    carry0 = initial_carry(state0, initial(0.01, 1.0, 0.0))  # every native run checks every node (gnipy.monitor)
     try:
         if params:
             values, rebuild = system_params(system)
-            loop = build_loop(lambda c, hh, vs: _stepper(method, rebuild(vs))(c, hh), carry0, 0.01,
+            loop = build_loop(lambda c, hh, vs: loop_step(method, rebuild(vs))(c, hh), carry0, 0.01,
                               lanes=lanes, params=values)
         else:
-            loop = build_loop(_stepper(method, system), carry0, 0.01, lanes=lanes)
+            loop = build_loop(loop_step(method, system), carry0, 0.01, lanes=lanes)
     except Unsupported as e:
         loop = e
     if key is not None:
@@ -162,8 +156,6 @@ def _flat_state(treedef, shapes, flat):
 @jit
 def _post(method, system, layout, saved, carry, h, h_last, times, partial: bool, save_final: bool,
           save_states: bool, batched: bool, system_batched: bool, complete):
-    from ..stepping import finish_native
-
     treedef, shapes, S = layout
 
     def one(system, sv, c):
@@ -189,8 +181,6 @@ def _flatten_states(state):
 def _run_reporting(loop, carry, h, blocks, stride: int):
     """`loop.run` in pieces of about `stride` steps, the steps done reported after each
     (:class:`gnipy.stepping.progress_reporter`); the same result as one call."""
-    from ..stepping import _report
-
     pieces, ends = [], []  # sub-blocks, and whether each ends a block
     for n in blocks:
         n = int(n)
@@ -209,7 +199,7 @@ def _run_reporting(loop, carry, h, blocks, stride: int):
         rows.append(saved)
         done += sum(chunk)
         i += len(chunk)
-        _report(done)
+        report_progress(done)
     saved = np.concatenate(rows, axis=-2)
     return carry, saved[..., np.asarray(ends), :]
 

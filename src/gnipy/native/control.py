@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .lowering import _closed, _rule, lower_jaxpr
-from .scalars import Const, Reg, Unsupported, scalars_of
+from .rules import lower_closed, lower_jaxpr, rule
+from .scalars import Const, Unsupported, flatten, unflatten
 
 __all__ = ["emit_loop"]
 
 
-@_rule("pjit", "jit", "closed_call", "core_call", "custom_jvp_call", "custom_vjp_call", "custom_vjp_call_jaxpr",
+@rule("pjit", "jit", "closed_call", "core_call", "custom_jvp_call", "custom_vjp_call", "custom_vjp_call_jaxpr",
        "remat", "checkpoint", "custom_lin")
 def _call(fn, eqn, ins):
     p = eqn.params
@@ -24,110 +24,88 @@ def _call(fn, eqn, ins):
     n_args = len(inner.jaxpr.invars) if hasattr(inner, "jaxpr") else len(inner.invars)
     args = ins[len(ins) - n_args:] if eqn.primitive.name.startswith("custom_vjp") else ins
     if hasattr(inner, "consts"):
-        return _closed(fn, inner, args)
+        return lower_closed(fn, inner, args)
     return lower_jaxpr(fn, inner, [], args)
 
 
-@_rule("custom_linear_solve")
+@rule("custom_linear_solve")
 def _linear_solve(fn, eqn, ins):
     lens = eqn.params["const_lengths"]
     jaxprs = eqn.params["jaxprs"]
     start = lens.matvec + lens.vecmat
     consts = ins[start:start + lens.solve]
     b = ins[lens.matvec + lens.vecmat + lens.solve + lens.transpose_solve:]
-    return _closed(fn, jaxprs.solve, list(consts) + list(b))
-
-
-def _flatten(arrays):
-    shapes = [a.shape for a in arrays]
-    flat = [s for a in arrays for s in scalars_of(a)]
-    return flat, shapes
-
-
-def _unflatten(flat, shapes):
-    out, i = [], 0
-    for s in shapes:
-        n = int(np.prod(s, dtype=np.int64))
-        a = np.empty(n, dtype=object)
-        for j in range(n):
-            a[j] = flat[i + j]
-        out.append(a.reshape(s))
-        i += n
-    return out
+    return lower_closed(fn, jaxprs.solve, list(consts) + list(b))
 
 
 def emit_loop(fn, init: list, cond, body):
     """A loop over the carried arrays `init`: `cond(carry) -> i1 scalar`, `body(carry) -> carry`.
     Returns the carry at exit."""
-    flat0, shapes = _flatten(init)
+    flat0, shapes = flatten(init)
     pre = fn.block
     head, body_l, exit_l = fn.label("head"), fn.label("body"), fn.label("exit")
     fn.br(head)
     fn.start(head)
-    pos = len(fn.lines)
-    regs = [Reg(fn.fresh("p"), v.ty) for v in flat0]
-    carry = _unflatten(regs, shapes)
+    regs, phis = fn.open_phis([v.ty for v in flat0])
+    carry = unflatten(regs, shapes)
     c = cond(carry)
     if isinstance(c, Const) and not bool(c.value):  # the loop never runs
         fn.br(exit_l)
-        fn.lines[pos:pos] = [f"  {r.name} = phi {fn.T(r.ty)} [ {fn.V(v)}, %{pre} ]" for r, v in zip(regs, flat0)]
+        fn.close_phis(regs, phis, [[(v, pre)] for v in flat0])
         fn.start(exit_l)
-        return _unflatten(flat0, shapes)
+        return unflatten(flat0, shapes)
     fn.condbr(fn.any(c), body_l, exit_l)
     fn.start(body_l)
-    new_flat, _ = _flatten(body(carry))
+    new_flat, _ = flatten(body(carry))
     if fn.lanes > 1 and not isinstance(c, Const):  # only the lanes whose condition holds move on
         new_flat = [fn.select(c, n, r) for n, r in zip(new_flat, regs)]
     end = fn.block
     fn.br(head)
-    phis = [f"  {r.name} = phi {fn.T(r.ty)} [ {fn.V(v)}, %{pre} ], [ {fn.V(n)}, %{end} ]"
-            for r, v, n in zip(regs, flat0, new_flat)]
-    fn.lines[pos:pos] = phis
+    fn.close_phis(regs, phis, [[(v, pre), (n, end)] for v, n in zip(flat0, new_flat)])
     fn.start(exit_l)
     return carry
 
 
-@_rule("while")
+@rule("while")
 def _while(fn, eqn, ins):
     p = eqn.params
     cn, bn = p["cond_nconsts"], p["body_nconsts"]
     cconsts, bconsts, init = ins[:cn], ins[cn:cn + bn], ins[cn + bn:]
 
     def cond(carry):
-        return _closed(fn, p["cond_jaxpr"], list(cconsts) + list(carry))[0][()]
+        return lower_closed(fn, p["cond_jaxpr"], list(cconsts) + list(carry))[0][()]
 
     def body(carry):
-        return _closed(fn, p["body_jaxpr"], list(bconsts) + list(carry))
+        return lower_closed(fn, p["body_jaxpr"], list(bconsts) + list(carry))
 
     return emit_loop(fn, list(init), cond, body)
 
 
-@_rule("cond")
+@rule("cond")
 def _cond(fn, eqn, ins):
     branches = eqn.params["branches"]
     index, args = ins[0][()], ins[1:]
     if isinstance(index, Const):
         j = min(max(int(index.value), 0), len(branches) - 1)
-        return _closed(fn, branches[j], list(args))
+        return lower_closed(fn, branches[j], list(args))
     if fn.lanes > 1:  # every branch, then each lane's (as jax.vmap runs a cond)
-        outs = [_flatten(_closed(fn, br, list(args))) for br in branches]
+        outs = [flatten(lower_closed(fn, br, list(args))) for br in branches]
         (acc, shapes) = outs[-1]
         for j in range(len(branches) - 2, -1, -1):
             pick = fn.not_(index) if index.ty == "i1" else fn.cmp("le", index, Const(j, index.ty))
             acc = [fn.select(pick, x, y) for x, y in zip(outs[j][0], acc)]
-        return _unflatten(acc, shapes)
+        return unflatten(acc, shapes)
     labels = [fn.label("case") for _ in branches]
     merge = fn.label("merge")
     if index.ty == "i1":
         fn.condbr(index, labels[1], labels[0])
     else:
-        cases = " ".join(f"{index.ty} {j}, label %{lab}" for j, lab in enumerate(labels[:-1]))
-        fn.emit(f"switch {index.ty} {index.text}, label %{labels[-1]} [ {cases} ]")
+        fn.switch(index, labels[-1], labels[:-1])
     results = []
     for lab, br in zip(labels, branches):
         fn.start(lab)
-        outs = _closed(fn, br, list(args))
-        results.append((_flatten(outs), fn.block))
+        outs = lower_closed(fn, br, list(args))
+        results.append((flatten(outs), fn.block))
         fn.br(merge)
     fn.start(merge)
     (flat0, shapes), _ = results[0]
@@ -137,12 +115,11 @@ def _cond(fn, eqn, ins):
         if all(x is incoming[0][0] for x, _ in incoming):
             merged.append(incoming[0][0])
             continue
-        r = fn.op(v.ty, "phi " + fn.T(v.ty) + " " + ", ".join(f"[ {fn.V(x)}, %{blk} ]" for x, blk in incoming))
-        merged.append(r)
-    return _unflatten(merged, shapes)
+        merged.append(fn.phi(v.ty, incoming))
+    return unflatten(merged, shapes)
 
 
-@_rule("scan")
+@rule("scan")
 def _scan(fn, eqn, ins):
     p = eqn.params
     nc, ncar, length = p["num_consts"], p["num_carry"], int(p["length"])
@@ -157,7 +134,7 @@ def _scan(fn, eqn, ins):
             return fn.cmp("lt", carry[0][()], Const(length, "i64"))
 
         def step(carry):
-            out = _closed(fn, body, list(consts) + list(carry[1:]))
+            out = lower_closed(fn, body, list(consts) + list(carry[1:]))
             k = np.empty((), dtype=object)
             k[()] = fn.binary("add", carry[0][()], Const(1, "i64"))
             return [k] + list(out)
@@ -168,7 +145,7 @@ def _scan(fn, eqn, ins):
     carry, ys = list(init), []
     order = range(length - 1, -1, -1) if p["reverse"] else range(length)
     for i in order:
-        out = _closed(fn, body, list(consts) + carry + [x[i] for x in xs])
+        out = lower_closed(fn, body, list(consts) + carry + [x[i] for x in xs])
         carry, y = out[:ncar], out[ncar:]
         ys.append((i, y))
     ys.sort(key=lambda t: t[0])

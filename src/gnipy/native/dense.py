@@ -6,13 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .lowering import _rule
+from .rules import rule
 from .scalars import Const, Unsupported
 
 __all__: list[str] = []
 
 
-@_rule("lu")
+@rule("lu")
 def _lu(fn, eqn, ins):
     a = ins[0]
     if a.ndim != 2 or a.shape[0] != a.shape[1]:
@@ -58,7 +58,7 @@ def _lu(fn, eqn, ins):
     return [out, piv_a, perm_a]
 
 
-@_rule("triangular_solve")
+@rule("triangular_solve")
 def _triangular_solve(fn, eqn, ins):
     a, b = ins
     p = eqn.params
@@ -84,7 +84,7 @@ def _triangular_solve(fn, eqn, ins):
     return [x if p["left_side"] else x.T]
 
 
-@_rule("sort")
+@rule("sort")
 def _sort(fn, eqn, ins):
     if len(ins[0].shape) != 1 or eqn.params["num_keys"] != 1 or ins[0].shape[0] > 16:
         raise Unsupported("sort beyond one short key")

@@ -9,10 +9,10 @@ import ctypes
 
 import numpy as np
 
-from .control import _flatten
 from .lowering import lower_jaxpr
-from .program import _load
-from .scalars import Function, _const_array, llvm_type
+from .module import Program, ir_type
+from .program import load_program
+from .scalars import Function, const_array, flatten, llvm_type
 
 __all__ = ["NativeFunction", "build_function"]
 
@@ -49,24 +49,26 @@ def build_function(f, *example_args) -> NativeFunction:
 
     closed = jax.make_jaxpr(lambda *a: tuple(jax.tree_util.tree_leaves(f(*a))))(*example_args)
     fn = Function()
-    args, k = [], 0
+    args = []
     for v in closed.jaxpr.invars:
-        ty = llvm_type(v.aval.dtype)
         a = np.empty(v.aval.shape, dtype=object)
+        ty = llvm_type(v.aval.dtype)
         for idx in np.ndindex(v.aval.shape):
-            p = fn.op("ptr", f"getelementptr double, ptr %in, i64 {k}")
-            x = fn.op("double", f"load double, ptr {p.text}")
-            a[idx] = fn.cast(x, ty)
-            k += 1
+            a[idx] = fn.cast(fn.arguments(["double"])[0], ty)
         args.append(a)
-    outs = lower_jaxpr(fn, closed.jaxpr, [_const_array(np.asarray(c)) for c in closed.consts], args)
-    flat, _ = _flatten(outs)
-    for j, v in enumerate(flat):
-        p = fn.op("ptr", f"getelementptr double, ptr %out, i64 {j}")
-        fn.emit(f"store double {fn.cast(v, 'double').text}, ptr {p.text}")
-    fn.emit("ret void")
-    ir = (f"{chr(10).join(sorted(fn.decls))}\n\ndefine void @gnipy_fn(ptr noalias %in, ptr noalias %out) {{\n"
-          f"entry:\n{chr(10).join(fn.allocas)}\n{chr(10).join(fn.lines)}\n}}\n")
-    engine, source, _ = _load(ir)
+    outs = lower_jaxpr(fn, closed.jaxpr, [const_array(np.asarray(c)) for c in closed.consts], args)
+    flat, _ = flatten(outs)
+    prog = Program("gnipy native function")
+    body = prog.body(fn, "gnipy_fn_body", flat, ["double"] * len(flat))
+    # gnipy_fn(in, out): the inputs from `in`, the body, its outputs to `out` (all float64)
+    g, b = prog.function("gnipy_fn", [("in", "ptr", True), ("out", "ptr", True)])
+    src, dst = g.args
+    f64 = ir_type("double")
+    i64 = ir_type("i64")
+    result = b.call(body, [b.load(b.gep(src, [i64(k)], source_etype=f64), typ=f64) for k in range(len(fn.params))])
+    for j in range(len(flat)):
+        b.store(b.extract_value(result, j), b.gep(dst, [i64(j)], source_etype=f64))
+    b.ret_void()
+    engine, source, _ = load_program(prog.texts)
     return NativeFunction(engine, [v.aval for v in closed.jaxpr.invars], [v.aval for v in closed.jaxpr.outvars],
                           source)

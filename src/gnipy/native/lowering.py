@@ -16,114 +16,68 @@ such generated code (issue 16), while LLVM itself, through llvmlite, compiles it
 second.
 
 A primitive without a rule raises :class:`Unsupported`; the backend then runs the XLA path.
+
+The modules, each importing only those listed before it: :mod:`gnipy.native.scalars` (the scalars
+and the function being written), :mod:`gnipy.native.rules` (the registry of rules and the jaxpr
+walk), the rules (:mod:`gnipy.native.control`, :mod:`gnipy.native.dense`, and this module's rules
+of arithmetic, arrays and indexing), then this module as the translator's entry point: importing
+it registers every rule, so its :func:`lower_jaxpr` and :func:`lowered_primitives` know them all.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .scalars import Const, Function, Reg, Unsupported, _const_array, _fold2, _map, _NP, llvm_type, scalars_of
+from . import control, dense
+from .rules import RULES, lower_jaxpr, lowered_primitives, rule
+from .scalars import NUMPY_TYPES, Const, Function, Reg, Unsupported, const_array, llvm_type, map_scalars, scalars_of
 
-__all__ = ["Unsupported", "Reg", "Const", "Function", "lower_jaxpr", "llvm_type", "scalars_of"]
+__all__ = ["Unsupported", "Reg", "Const", "Function", "lower_jaxpr", "lowered_primitives", "llvm_type", "scalars_of"]
 
-
-# ---------------------------------------------------------------------------------------------
-# The jaxpr walk
-# ---------------------------------------------------------------------------------------------
-
-def lower_jaxpr(fn: Function, jaxpr, consts, args) -> list:
-    """Emit `jaxpr` (a `Jaxpr`) into `fn` with `consts` and `args` (object arrays of scalars);
-    returns its outputs (object arrays)."""
-    env = {}
-
-    def read(v):
-        if type(v).__name__ == "Literal":  # jax.extend.core.Literal (its home moved between JAX versions)
-            return _const_array(v.val, llvm_type(v.aval.dtype))
-        return env[v]
-
-    for v, x in zip(jaxpr.constvars, consts):
-        env[v] = x
-    for v, x in zip(jaxpr.invars, args):
-        env[v] = x
-    for eqn in jaxpr.eqns:
-        rule = _RULES.get(eqn.primitive.name)
-        if rule is None:
-            raise Unsupported(f"primitive {eqn.primitive.name!r}")
-        for o in eqn.outvars:
-            llvm_type(o.aval.dtype)
-        outs = rule(fn, eqn, [read(v) for v in eqn.invars])
-        for v, o in zip(eqn.outvars, outs):
-            if type(v).__name__ != "DropVar":
-                o = np.asarray(o, dtype=object)
-                if o.shape != tuple(v.aval.shape):
-                    o = np.reshape(o, v.aval.shape)
-                env[v] = o
-    return [read(v) for v in jaxpr.outvars]
-
-
-def _closed(fn, closed, args):
-    return lower_jaxpr(fn, closed.jaxpr, [_const_array(c) for c in closed.consts], args)
-
-
-_RULES: dict = {}
-
-
-def _rule(*names):
-    def deco(f):
-        for n in names:
-            _RULES[n] = f
-        return f
-    return deco
+#: The modules whose rules are registered with this module's (on import): calls, loops and
+#: branches; dense linear algebra.
+RULE_MODULES = (control, dense)
 
 
 # ---- elementwise ----------------------------------------------------------------------------
 
 def _binary_rule(kind):
-    return lambda fn, eqn, ins: [_map(lambda a, b: fn.binary(kind, a, b), *ins)]
+    return lambda fn, eqn, ins: [map_scalars(lambda a, b: fn.binary(kind, a, b), *ins)]
 
 
 for _k in ("add", "sub", "mul", "div", "rem"):
-    _RULES[_k] = _binary_rule(_k)
-_RULES["add_any"] = _binary_rule("add")
+    RULES[_k] = _binary_rule(_k)
+RULES["add_any"] = _binary_rule("add")
 for _k in ("eq", "ne", "lt", "le", "gt", "ge"):
-    _RULES[_k] = (lambda k: lambda fn, eqn, ins: [_map(lambda a, b: fn.cmp(k, a, b), *ins)])(_k)
+    RULES[_k] = (lambda k: lambda fn, eqn, ins: [map_scalars(lambda a, b: fn.cmp(k, a, b), *ins)])(_k)
 for _k in ("and", "or", "xor"):
-    _RULES[_k] = (lambda k: lambda fn, eqn, ins: [_map(lambda a, b: fn.logic(k, a, b), *ins)])(_k)
+    RULES[_k] = (lambda k: lambda fn, eqn, ins: [map_scalars(lambda a, b: fn.logic(k, a, b), *ins)])(_k)
 for _k in ("sqrt", "rsqrt", "sin", "cos", "tan", "exp", "exp2", "log", "log1p", "expm1", "abs", "floor", "ceil",
            "asin", "acos", "atan", "sinh", "cosh", "tanh", "asinh", "acosh", "atanh", "cbrt", "square", "logistic",
            "sign", "is_finite", "erf", "erfc"):
-    _RULES[_k] = (lambda k: lambda fn, eqn, ins: [_map(lambda a: fn.unary(k, a), ins[0])])(_k)
-_RULES["neg"] = lambda fn, eqn, ins: [_map(fn.neg, ins[0])]
-_RULES["not"] = lambda fn, eqn, ins: [_map(fn.not_, ins[0])]
-_RULES["max"] = lambda fn, eqn, ins: [_map(lambda a, b: fn.maxmin("max", a, b), *ins)]
-_RULES["min"] = lambda fn, eqn, ins: [_map(lambda a, b: fn.maxmin("min", a, b), *ins)]
+    RULES[_k] = (lambda k: lambda fn, eqn, ins: [map_scalars(lambda a: fn.unary(k, a), ins[0])])(_k)
+RULES["neg"] = lambda fn, eqn, ins: [map_scalars(fn.neg, ins[0])]
+RULES["not"] = lambda fn, eqn, ins: [map_scalars(fn.not_, ins[0])]
+RULES["max"] = lambda fn, eqn, ins: [map_scalars(lambda a, b: fn.maxmin("max", a, b), *ins)]
+RULES["min"] = lambda fn, eqn, ins: [map_scalars(lambda a, b: fn.maxmin("min", a, b), *ins)]
 for _k in ("stop_gradient", "copy", "copy_p", "optimization_barrier", "device_put"):
-    _RULES[_k] = lambda fn, eqn, ins: list(ins)
+    RULES[_k] = lambda fn, eqn, ins: list(ins)
 
 
-@_rule("round")
+@rule("round")
 def _round(fn, eqn, ins):
     if int(eqn.params.get("rounding_method", 0)) != 0:
         raise Unsupported("round to nearest even")
-    return [_map(lambda a: fn.unary("round", a), ins[0])]
+    return [map_scalars(lambda a: fn.unary("round", a), ins[0])]
 
 
-@_rule("atan2", "pow")
+@rule("atan2", "pow")
 def _atan2_pow(fn, eqn, ins):
     name = eqn.primitive.name
-
-    def f(a, b):
-        if b.ty != "double" or a.ty != "double":
-            raise Unsupported(f"{name} of integers")
-        if isinstance(a, Const) and isinstance(b, Const):
-            with np.errstate(all="ignore"):
-                return Const(_fold2(name, a.value, b.value), "double")
-        return fn.call(name, "double", a, b)
-
-    return [_map(f, *ins)]
+    return [map_scalars(lambda a, b: fn.call2(name, a, b), *ins)]
 
 
-@_rule("integer_pow")
+@rule("integer_pow")
 def _integer_pow(fn, eqn, ins):
     y = int(eqn.params["y"])
 
@@ -140,10 +94,10 @@ def _integer_pow(fn, eqn, ins):
                 base = fn.binary("mul", base, base)
         return fn.binary("div", Const(1.0, x.ty), acc) if y < 0 else acc
 
-    return [_map(power, ins[0])]
+    return [map_scalars(power, ins[0])]
 
 
-@_rule("select_n")
+@rule("select_n")
 def _select_n(fn, eqn, ins):
     pred, cases = ins[0], ins[1:]
 
@@ -157,22 +111,22 @@ def _select_n(fn, eqn, ins):
             out = fn.select(fn.cmp("eq", p, Const(j, p.ty)), cs[j], out)
         return out
 
-    return [_map(f, pred, *cases)]
+    return [map_scalars(f, pred, *cases)]
 
 
-@_rule("clamp")
+@rule("clamp")
 def _clamp(fn, eqn, ins):
     lo, x, hi = ins
-    return [_map(lambda a, x_, b: fn.maxmin("min", fn.maxmin("max", x_, a), b), lo, x, hi)]
+    return [map_scalars(lambda a, x_, b: fn.maxmin("min", fn.maxmin("max", x_, a), b), lo, x, hi)]
 
 
-@_rule("convert_element_type")
+@rule("convert_element_type")
 def _convert(fn, eqn, ins):
     ty = llvm_type(eqn.params["new_dtype"])
-    return [_map(lambda a: fn.cast(a, ty), ins[0])]
+    return [map_scalars(lambda a: fn.cast(a, ty), ins[0])]
 
 
-@_rule("reduce_precision")
+@rule("reduce_precision")
 def _reduce_precision(fn, eqn, ins):
     if (eqn.params["exponent_bits"], eqn.params["mantissa_bits"]) != (11, 52):
         raise Unsupported("reduce_precision below float64")
@@ -181,7 +135,7 @@ def _reduce_precision(fn, eqn, ins):
 
 # ---- structure ------------------------------------------------------------------------------
 
-@_rule("broadcast_in_dim")
+@rule("broadcast_in_dim")
 def _broadcast(fn, eqn, ins):
     shape, dims = eqn.params["shape"], eqn.params["broadcast_dimensions"]
     x = ins[0]
@@ -191,37 +145,37 @@ def _broadcast(fn, eqn, ins):
     return [np.broadcast_to(x.reshape(expanded), shape).copy()]
 
 
-@_rule("reshape")
+@rule("reshape")
 def _reshape(fn, eqn, ins):
     if eqn.params.get("dimensions") not in (None, ()):
         raise Unsupported("reshape with dimensions")
     return [ins[0].reshape(eqn.params["new_sizes"])]
 
 
-_RULES["squeeze"] = lambda fn, eqn, ins: [ins[0].reshape(eqn.outvars[0].aval.shape)]
-_RULES["expand_dims"] = lambda fn, eqn, ins: [ins[0].reshape(eqn.outvars[0].aval.shape)]
-_RULES["transpose"] = lambda fn, eqn, ins: [np.transpose(ins[0], eqn.params["permutation"])]
-_RULES["rev"] = lambda fn, eqn, ins: [np.flip(ins[0], tuple(eqn.params["dimensions"]))]
-_RULES["concatenate"] = lambda fn, eqn, ins: [np.concatenate(ins, axis=eqn.params["dimension"])]
-_RULES["unstack"] = lambda fn, eqn, ins: [np.take(ins[0], i, axis=eqn.params["axis"])
+RULES["squeeze"] = lambda fn, eqn, ins: [ins[0].reshape(eqn.outvars[0].aval.shape)]
+RULES["expand_dims"] = lambda fn, eqn, ins: [ins[0].reshape(eqn.outvars[0].aval.shape)]
+RULES["transpose"] = lambda fn, eqn, ins: [np.transpose(ins[0], eqn.params["permutation"])]
+RULES["rev"] = lambda fn, eqn, ins: [np.flip(ins[0], tuple(eqn.params["dimensions"]))]
+RULES["concatenate"] = lambda fn, eqn, ins: [np.concatenate(ins, axis=eqn.params["dimension"])]
+RULES["unstack"] = lambda fn, eqn, ins: [np.take(ins[0], i, axis=eqn.params["axis"])
                                           for i in range(ins[0].shape[eqn.params["axis"]])]
-_RULES["stack"] = lambda fn, eqn, ins: [np.stack(ins, axis=eqn.params["axis"])]
+RULES["stack"] = lambda fn, eqn, ins: [np.stack(ins, axis=eqn.params["axis"])]
 
 
-@_rule("slice")
+@rule("slice")
 def _slice(fn, eqn, ins):
     st, lim, strides = eqn.params["start_indices"], eqn.params["limit_indices"], eqn.params["strides"]
     strides = strides or (1,) * len(st)
     return [ins[0][tuple(slice(a, b, s) for a, b, s in zip(st, lim, strides))]]
 
 
-@_rule("split")
+@rule("split")
 def _split(fn, eqn, ins):
     axis, sizes = eqn.params["axis"], [int(s) for s in eqn.params["sizes"]]
     return np.split(ins[0], np.cumsum(sizes)[:-1], axis=axis)
 
 
-@_rule("pad")
+@rule("pad")
 def _pad(fn, eqn, ins):
     x, pv = ins
     for axis, (lo, hi, interior) in enumerate(eqn.params["padding_config"]):
@@ -258,12 +212,12 @@ def _pad(fn, eqn, ins):
     return [np.array(x, dtype=object)]
 
 
-@_rule("iota")
+@rule("iota")
 def _iota(fn, eqn, ins):
     shape, dim = eqn.params["shape"], eqn.params["dimension"]
     ty = llvm_type(eqn.params["dtype"])
     vals = np.broadcast_to(np.arange(shape[dim]).reshape([-1 if i == dim else 1 for i in range(len(shape))]), shape)
-    return [_const_array(vals, ty)]
+    return [const_array(vals, ty)]
 
 
 def _reducer(kind):
@@ -281,7 +235,7 @@ def _reducer(kind):
                 ty = llvm_type(eqn.outvars[0].aval.dtype)
                 lo, hi = {"double": (-np.inf, np.inf), "i1": (False, True)}.get(ty, (None, None))
                 if lo is None:
-                    lo, hi = np.iinfo(_NP[ty]).min, np.iinfo(_NP[ty]).max
+                    lo, hi = np.iinfo(NUMPY_TYPES[ty]).min, np.iinfo(NUMPY_TYPES[ty]).max
                 ident = {"add": 0, "mul": 1, "max": lo, "min": hi, "and": True, "or": False, "xor": False}[kind]
                 out[idx] = Const(ident, ty)
                 continue
@@ -302,10 +256,10 @@ def _reducer(kind):
 
 for _k, _v in (("reduce_sum", "add"), ("reduce_prod", "mul"), ("reduce_max", "max"), ("reduce_min", "min"),
                ("reduce_and", "and"), ("reduce_or", "or"), ("reduce_xor", "xor")):
-    _RULES[_k] = _reducer(_v)
+    RULES[_k] = _reducer(_v)
 
 
-@_rule("argmax", "argmin")
+@rule("argmax", "argmin")
 def _argmax(fn, eqn, ins):
     axes = tuple(eqn.params["axes"])
     ty = llvm_type(eqn.params["index_dtype"])
@@ -328,7 +282,7 @@ def _argmax(fn, eqn, ins):
     return [out]
 
 
-@_rule("dot_general")
+@rule("dot_general")
 def _dot_general(fn, eqn, ins):
     (lc, rc), (lb, rb) = eqn.params["dimension_numbers"]
     a, b = ins
@@ -377,7 +331,7 @@ def _clamped(fn, i, lo: int, hi: int):
     return fn.maxmin("min", fn.maxmin("max", i, Const(lo, i.ty)), Const(hi, i.ty))
 
 
-@_rule("dynamic_slice")
+@rule("dynamic_slice")
 def _dynamic_slice(fn, eqn, ins):
     x, starts = ins[0], [s[()] for s in ins[1:]]
     sizes = eqn.params["slice_sizes"]
@@ -392,7 +346,7 @@ def _dynamic_slice(fn, eqn, ins):
     return [out]
 
 
-@_rule("dynamic_update_slice")
+@rule("dynamic_update_slice")
 def _dynamic_update_slice(fn, eqn, ins):
     x, upd, starts = ins[0], ins[1], [s[()] for s in ins[2:]]
     starts = [_clamped(fn, s, 0, x.shape[d] - upd.shape[d]) for d, s in enumerate(starts)]
@@ -403,7 +357,7 @@ def _dynamic_update_slice(fn, eqn, ins):
     return [out]
 
 
-@_rule("gather")
+@rule("gather")
 def _gather(fn, eqn, ins):
     x, ind = ins
     dn = eqn.params["dimension_numbers"]
@@ -444,7 +398,7 @@ def _gather(fn, eqn, ins):
     return [out]
 
 
-@_rule("scatter-add", "scatter_add", "scatter")
+@rule("scatter-add", "scatter_add", "scatter")
 def _scatter(fn, eqn, ins):
     x, ind, upd = ins
     if not all(isinstance(i, Const) for i in ind.flat):
@@ -472,5 +426,3 @@ def _scatter(fn, eqn, ins):
         out[full] = fn.binary("add", out[full], upd[u]) if add else upd[u]
     return [out]
 
-
-from . import control, dense  # noqa: E402,F401  (their rules: calls, loops and branches; dense linear algebra)

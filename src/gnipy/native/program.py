@@ -30,6 +30,15 @@ file-size limit) removes its temporary file and the run goes on with the compile
 Batches run the members in chunks, one per core (threads: the compiled code runs without the
 GIL), and within a chunk several members at a time in vector lanes (`gnipy_run_lanes`, built with
 :class:`~gnipy.native.lowering.Function`'s `lanes`).
+
+**The program** (:class:`~gnipy.native.module.Program`): the step, lowered into a body function
+`gnipy_step` (`gnipy_step_lanes` on vectors) that takes the carry's scalars and `h` and returns
+the new carry, and around it the exported functions, built with llvmlite's IR builder:
+`gnipy_run(io, h, lengths, nblocks, saved)` (one trajectory: `io` its carry, `lengths` the steps
+of each of the `nblocks` blocks, `saved` the state after each block), `gnipy_run_lanes` (the same
+for consecutive trajectories, one per lane) and `gnipy_run_batch(.., lo, hi)` (trajectories lo..hi-1
+of a batch). Before -O3, LLVM's always-inliner puts the step in place: the machine code is what
+the same loop written as one function gives (for the benchmarked models byte for byte).
 """
 
 from __future__ import annotations
@@ -38,6 +47,7 @@ import ctypes
 import ctypes.util
 import functools
 import hashlib
+import importlib
 import os
 import threading
 import time
@@ -47,11 +57,11 @@ from pathlib import Path
 import numpy as np
 
 from ..private_cache import open_private_cache
-from .control import _flatten, _unflatten
 from .lowering import lower_jaxpr
-from .scalars import Function, Reg, Unsupported, _const_array, llvm_type
+from .module import Program, convert, ir_type
+from .scalars import Function, Unsupported, const_array, flatten, llvm_type, unflatten
 
-__all__ = ["NativeLoop", "build_loop", "cache_dir", "available", "cores"]
+__all__ = ["NativeLoop", "build_loop", "trace_step", "load_program", "default_lanes", "cache_dir", "available", "cores"]
 
 _LOCK = threading.Lock()
 _ENGINES: dict = {}
@@ -62,7 +72,7 @@ _INIT = []
 def available() -> bool:
     """Whether llvmlite can be imported (the native backend's compiler)."""
     try:
-        import llvmlite.binding  # noqa: F401
+        importlib.import_module("llvmlite.binding")
     except Exception:
         return False
     return True
@@ -110,18 +120,41 @@ _CACHE_TEXT = dict(
            "0700; the cache is its 'native' folder), or GNIPY_NATIVE_CACHE=0 to keep no native code on disk.")
 
 
-def _compile(ir: str) -> bytes:
+def _texts(ir) -> tuple[str, ...]:
+    return (ir,) if isinstance(ir, str) else tuple(ir)
+
+
+def _compile(ir) -> bytes:
+    """The object code of `ir`: one module's LLVM IR, or several (:attr:`Program.texts
+    <gnipy.native.module.Program.texts>`) linked into the first, optimized at -O3 for this CPU."""
     llvm = _llvm()
-    module = llvm.parse_assembly(ir)
+    texts = _texts(ir)
+    module = llvm.parse_assembly(texts[0])
+    for text in texts[1:]:
+        module.link_in(llvm.parse_assembly(text))
     module.verify()
     tm = _target_machine()
     pto = llvm.create_pipeline_tuning_options(speed_level=3)
     pb = llvm.create_pass_builder(tm, pto)
+    if len(texts) > 1:
+        # the bodies inlined where they are called, and dropped, before anything is optimized: -O3
+        # then sees each exported function as if its body had been written in place (the same
+        # optimized code; inlined by -O3's own inliner, a body would be optimized on its own first)
+        inline = llvm.create_new_module_pass_manager()
+        inline.add_always_inliner_pass()
+        inline.add_global_dead_code_eliminate_pass()
+        inline.run(module, pb)
+        # LLVM's linker does not compare a declaration with the definition it links: a call that
+        # does not match its body's signature is left as a call (undefined behaviour), so refuse it
+        left = [f.name for f in module.functions if not f.is_declaration and f.linkage == llvm.Linkage.linkonce_odr]
+        if left:
+            raise RuntimeError(f"native program: {', '.join(left)} not inlined (a call that does not match the "
+                               "body's signature)")
     pb.getModulePassManager().run(module, pb)
     return tm.emit_object(module)
 
 
-def _object_code(ir: str, key: str) -> tuple[bytes, str]:
+def _object_code(ir, key: str) -> tuple[bytes, str]:
     """The object code of `ir` and where it came from ("disk" or "compiled"). Only an entry of a
     private cache folder authenticated for `key` is loaded (see the module docstring); anything
     else is compiled again, and the entry written (when the folder is usable)."""
@@ -142,12 +175,16 @@ def _object_code(ir: str, key: str) -> tuple[bytes, str]:
             cache.close()
 
 
-def _load(ir: str):
-    """`(engine, source, seconds)`: the program of `ir`, from memory, disk or LLVM."""
+def load_program(ir):
+    """`(engine, source, seconds)`: the program of `ir` (one module's LLVM IR, or the texts of a
+    :class:`~gnipy.native.module.Program`) compiled and loaded: an llvmlite MCJIT engine whose
+    functions are the program's exported ones, where its object code came from ("memory": built
+    before in this process; "disk": the cache, see the module docstring; "compiled"), and the
+    seconds that took."""
     import llvmlite
 
     llvm = _llvm()
-    key = hashlib.sha256("\n".join([ir, llvmlite.__version__, llvm.get_host_cpu_name(),
+    key = hashlib.sha256("\n".join([*_texts(ir), llvmlite.__version__, llvm.get_host_cpu_name(),
                                     llvm.get_host_cpu_features().flatten()]).encode()).hexdigest()
     with _LOCK:
         hit = _ENGINES.get(key)
@@ -205,189 +242,185 @@ class NativeLoop:
         return carry, saved
 
 
-def _loop_heads(fn: Function) -> None:
-    """The two loops of a driver, up to the step's block `sbody`: over the blocks (`%b` of
-    `%nblocks`, each `%len` steps from `%lengths`; after a block, `bsave`) and over a block's
-    steps (`%i`; the next step from `slatch`); `done` after the last block."""
-    fn.br("bhead")
-    fn.start("bhead")
-    fn.emit("%b = phi i64 [ 0, %entry ], [ %bnext, %bsave ]")
-    fn.emit("%bc = icmp slt i64 %b, %nblocks")
-    fn.emit("br i1 %bc, label %bbody, label %done")
-    fn.start("bbody")
-    fn.emit("%lp = getelementptr i32, ptr %lengths, i64 %b")
-    fn.emit("%len32 = load i32, ptr %lp")
-    fn.emit("%len = sext i32 %len32 to i64")
-    fn.br("shead")
-    fn.start("shead")
-    fn.emit("%i = phi i64 [ 0, %bbody ], [ %inext, %slatch ]")
-    fn.emit("%sc = icmp slt i64 %i, %len")
-    fn.emit("br i1 %sc, label %sbody, label %bsave")
-    fn.start("sbody")
+#: The arguments of `gnipy_run` and `gnipy_run_lanes`: (name, type, noalias).
+_RUN_ARGS = [("io", "ptr", True), ("h", "double", False), ("lengths", "ptr", True), ("nblocks", "i64", False),
+             ("saved", "ptr", True)]
 
 
-def _driver(fn: Function, n_carry_types: list[str], n_state: int, emit_step, k_index: int, fail_index: int) -> str:
-    """The LLVM IR of `gnipy_run` (one trajectory) and `gnipy_run_batch` around the step."""
-    slots = [fn.alloca(ty) for ty in n_carry_types]
-    # entry: the carry from io
-    for j, (slot, ty) in enumerate(zip(slots, n_carry_types)):
-        p = fn.op("ptr", f"getelementptr double, ptr %io, i64 {j}")
-        v = fn.op("double", f"load double, ptr {p.text}")
-        fn.emit(f"store {ty} {fn.cast(v, ty).text}, ptr {slot}")
-    _loop_heads(fn)
-    carry = [fn.op(ty, f"load {ty}, ptr {slot}") for slot, ty in zip(slots, n_carry_types)]
-    new = emit_step(carry, Reg("%h", "double"))
-    for slot, ty, v in zip(slots, n_carry_types, new):
-        fn.emit(f"store {ty} {fn.cast(v, ty).text}, ptr {slot}")
-    fn.br("slatch")
-    fn.start("slatch")
-    fn.emit("%inext = add i64 %i, 1")
-    fk_ty = n_carry_types[fail_index]
-    fn.emit(f"%fk = load {fk_ty}, ptr {slots[fail_index]}")
-    fn.emit(f"%failed = icmp sge {fk_ty} %fk, 0")
-    fn.emit("br i1 %failed, label %sskip, label %shead")
-    fn.start("sskip")  # failed: the state stays; only the step index moves on to the block's end
-    k_ty = n_carry_types[k_index]
-    fn.emit("%rest = sub i64 %len, %inext")
-    fn.emit(f"%rest_k = trunc i64 %rest to {k_ty}" if k_ty != "i64" else "%rest_k = add i64 %rest, 0")
-    fn.emit(f"%k_old = load {k_ty}, ptr {slots[k_index]}")
-    fn.emit(f"%k_new = add {k_ty} %k_old, %rest_k")
-    fn.emit(f"store {k_ty} %k_new, ptr {slots[k_index]}")
-    fn.br("bsave")
-    fn.start("bsave")
-    fn.emit(f"%row = mul i64 %b, {n_state}")
+def _i64(n: int):
+    return ir_type("i64")(int(n))
+
+
+def _at(b, base, index, ty: str = "double"):
+    """The address of element `index` (an int or an i64 value) of `base`, an array of `ty`."""
+    return b.gep(base, [_i64(index) if isinstance(index, int) else index], source_etype=ir_type(ty))
+
+
+class _Loops:
+    """The two loops of a driver, the builder `b` left in the step's block `sbody`: over the
+    blocks (`block` of `nblocks`, each `length` steps from `lengths`; after a block, `bsave`)
+    and over a block's steps (`step`; the next step from `slatch`); `done` after the last block.
+    The blocks are laid out in that order (`sskip` after `slatch`)."""
+
+    def __init__(self, f, b, lengths, nblocks, skip: bool):
+        from llvmlite import ir
+
+        names = ("bhead", "bbody", "shead", "sbody", "slatch") + (("sskip",) if skip else ()) + ("bsave", "done")
+        blocks = {n: f.append_basic_block(n) for n in names}
+        self.bhead, self.bbody, self.shead, self.sbody, self.slatch, self.bsave, self.done = (
+            blocks[n] for n in ("bhead", "bbody", "shead", "sbody", "slatch", "bsave", "done"))
+        #: with `skip`: where a failed step goes (the rest of its block is skipped)
+        self.sskip = blocks.get("sskip")
+        pre = b.block
+        b.branch(self.bhead)
+        b.position_at_end(self.bhead)
+        self.block = b.phi(ir.IntType(64), "b")
+        self.block.add_incoming(_i64(0), pre)
+        b.cbranch(b.icmp_signed("<", self.block, nblocks), self.bbody, self.done)
+        b.position_at_end(self.bbody)
+        n = b.load(_at(b, lengths, self.block, "i32"), typ=ir_type("i32"))
+        self.length = b.sext(n, ir.IntType(64), "len")
+        b.branch(self.shead)
+        b.position_at_end(self.shead)
+        self.step = b.phi(ir.IntType(64), "i")
+        self.step.add_incoming(_i64(0), self.bbody)
+        b.cbranch(b.icmp_signed("<", self.step, self.length), self.sbody, self.bsave)
+        b.position_at_end(self.sbody)
+
+    def latch(self, b):
+        """End the step's block; the builder in `slatch`: returns the next step's index."""
+        b.branch(self.slatch)
+        b.position_at_end(self.slatch)
+        following = b.add(self.step, _i64(1), "inext")
+        self.step.add_incoming(following, self.slatch)
+        return following
+
+    def next_block(self, b):
+        """End the block's save (`bsave`): on to the next block; the builder in `done`."""
+        self.block.add_incoming(b.add(self.block, _i64(1), "bnext"), b.block)
+        b.branch(self.bhead)
+        b.position_at_end(self.done)
+
+
+def _run_function(prog: Program, step, types: list[str], n_state: int, k_index: int, fail_index: int):
+    """`gnipy_run` (one trajectory): the carry from `io` into one slot per scalar, then the blocks
+    of steps (each a call of `step`, the lowered step); after a failed step the loop skips to its
+    block's end, only the step index moving on; after each block the state goes to `saved`; at
+    the end the carry goes back to `io`."""
+    f, b = prog.function("gnipy_run", _RUN_ARGS)
+    io, h, lengths, nblocks, saved = f.args
+    slots = [b.alloca(ir_type(ty)) for ty in types]
+    for j, (slot, ty) in enumerate(zip(slots, types)):
+        b.store(convert(b, b.load(_at(b, io, j), typ=ir_type("double")), "double", ty), slot)
+    loops = _Loops(f, b, lengths, nblocks, skip=True)
+    new = b.call(step, [b.load(slot, typ=ir_type(ty)) for slot, ty in zip(slots, types)] + [h])
+    for j, slot in enumerate(slots):
+        b.store(b.extract_value(new, j), slot)
+    following = loops.latch(b)
+    fk = b.load(slots[fail_index], typ=ir_type(types[fail_index]), name="fk")
+    failed = b.icmp_signed(">=", fk, ir_type(types[fail_index])(0), "failed")
+    b.cbranch(failed, loops.sskip, loops.shead)
+    b.position_at_end(loops.sskip)  # failed: the state stays; only the step index moves on to the block's end
+    k_ty = ir_type(types[k_index])
+    rest = b.sub(loops.length, following, "rest")
+    if types[k_index] != "i64":
+        rest = b.trunc(rest, k_ty, "rest_k")
+    b.store(b.add(b.load(slots[k_index], typ=k_ty, name="k_old"), rest, "k_new"), slots[k_index])
+    b.branch(loops.bsave)
+    b.position_at_end(loops.bsave)
+    row = b.mul(loops.block, _i64(n_state), "row")
     for j in range(n_state):
-        ty = n_carry_types[j]
-        v = fn.op(ty, f"load {ty}, ptr {slots[j]}")
-        d = fn.cast(v, "double")
-        idx = fn.op("i64", f"add i64 %row, {j}")
-        p = fn.op("ptr", f"getelementptr double, ptr %saved, i64 {idx.text}")
-        fn.emit(f"store double {d.text}, ptr {p.text}")
-    fn.emit("%bnext = add i64 %b, 1")
-    fn.br("bhead")
-    fn.start("done")
-    for j, (slot, ty) in enumerate(zip(slots, n_carry_types)):
-        v = fn.op(ty, f"load {ty}, ptr {slot}")
-        p = fn.op("ptr", f"getelementptr double, ptr %io, i64 {j}")
-        fn.emit(f"store double {fn.cast(v, 'double').text}, ptr {p.text}")
-    fn.emit("ret void")
-    return _define(fn, "gnipy_run")
+        v = convert(b, b.load(slots[j], typ=ir_type(types[j])), types[j], "double")
+        b.store(v, _at(b, saved, b.add(row, _i64(j))))
+    loops.next_block(b)
+    for j, (slot, ty) in enumerate(zip(slots, types)):
+        b.store(convert(b, b.load(slot, typ=ir_type(ty)), ty, "double"), _at(b, io, j))
+    b.ret_void()
+    return f
 
 
-def _define(fn: Function, name: str) -> str:
-    return (f"define void @{name}(ptr noalias %io, double %h, ptr noalias %lengths, i64 %nblocks, "
-            f"ptr noalias %saved) {{\nentry:\n" + "\n".join(fn.allocas) + "\n" + "\n".join(fn.lines) + "\n}\n")
-
-
-def _lanes_driver(fn: Function, types: list[str], n_state: int, emit_step) -> str:
-    """`gnipy_run_lanes`: `fn.lanes` consecutive trajectories at once, one per vector lane (no early
+def _lanes_function(prog: Program, step, types: list[str], n_state: int, lanes: int):
+    """`gnipy_run_lanes`: `lanes` consecutive trajectories at once, one per vector lane (no early
     exit after a failure: a failed lane keeps its state through the step's own bookkeeping)."""
-    W, M = fn.lanes, len(types)
-    slots = [fn.alloca(fn.T(ty)) for ty in types]
+    from llvmlite import ir
 
-    def gather(base_index):  # <W x double> of io[l*M + i] over the lanes
-        acc = "poison"
-        for lane in range(W):
-            p = fn.op("ptr", f"getelementptr double, ptr %io, i64 {lane * M + base_index}")
-            x = fn.fresh()
-            fn.emit(f"{x} = load double, ptr {p.text}")
-            nxt = fn.fresh()
-            fn.emit(f"{nxt} = insertelement {fn.T('double')} {acc}, double {x}, i32 {lane}")
-            acc = nxt
-        return Reg(acc, "double")
+    W, M = lanes, len(types)
+    f, b = prog.function("gnipy_run_lanes", _RUN_ARGS)
+    io, h, lengths, nblocks, saved = f.args
+    lane = [ir.IntType(32)(j) for j in range(W)]
+    vector = ir_type("double", W)
 
+    def gather(value_of):  # <W x double> of value_of(lane) over the lanes
+        acc = ir.Constant(vector, ir.Undefined)
+        for j in range(W):
+            acc = b.insert_element(acc, value_of(j), lane[j])
+        return acc
+
+    slots = [b.alloca(ir_type(ty, W)) for ty in types]
     for i, (slot, ty) in enumerate(zip(slots, types)):
-        fn.emit(f"store {fn.T(ty)} {fn.V(fn.cast(gather(i), ty))}, ptr {slot}")
-    hv = "poison"
-    for lane in range(W):
-        nxt = fn.fresh()
-        fn.emit(f"{nxt} = insertelement {fn.T('double')} {hv}, double %h, i32 {lane}")
-        hv = nxt
-    h_reg = Reg(hv, "double")
-    fn.emit(f"%rowlen = mul i64 %nblocks, {n_state}")
-    _loop_heads(fn)
-    carry = [fn.op(ty, f"load {fn.T(ty)}, ptr {slot}") for slot, ty in zip(slots, types)]
-    new = emit_step(carry, h_reg)
-    for slot, ty, v in zip(slots, types, new):
-        fn.emit(f"store {fn.T(ty)} {fn.V(fn.cast(v, ty))}, ptr {slot}")
-    fn.br("slatch")
-    fn.start("slatch")
-    fn.emit("%inext = add i64 %i, 1")
-    fn.br("shead")
-    fn.start("bsave")
-    fn.emit(f"%row = mul i64 %b, {n_state}")
-
-    def scatter(value, offset_text):  # lane l to base[l*stride + offset]
-        for lane in range(W):
-            e = fn.fresh()
-            fn.emit(f"{e} = extractelement {fn.T('double')} {value.text}, i32 {lane}")
-            p = fn.op("ptr", offset_text(lane))
-            fn.emit(f"store double {e}, ptr {p.text}")
-
+        v = gather(lambda j, i=i: b.load(_at(b, io, j * M + i), typ=ir_type("double")))
+        b.store(convert(b, v, "double", ty, W), slot)
+    h_lanes = gather(lambda j: h)
+    rowlen = b.mul(nblocks, _i64(n_state), "rowlen")
+    loops = _Loops(f, b, lengths, nblocks, skip=False)
+    new = b.call(step, [b.load(slot, typ=ir_type(ty, W)) for slot, ty in zip(slots, types)] + [h_lanes])
+    for j, slot in enumerate(slots):
+        b.store(b.extract_value(new, j), slot)
+    loops.latch(b)
+    b.branch(loops.shead)
+    b.position_at_end(loops.bsave)
+    row = b.mul(loops.block, _i64(n_state), "row")
     for j in range(n_state):
-        v = fn.op(types[j], f"load {fn.T(types[j])}, ptr {slots[j]}")
-        d = fn.cast(v, "double")
-        for lane in range(W):
-            e = fn.fresh()
-            fn.emit(f"{e} = extractelement {fn.T('double')} {fn.V(d)}, i32 {lane}")
-            a = fn.fresh()
-            fn.emit(f"{a} = mul i64 %rowlen, {lane}")
-            b = fn.fresh()
-            fn.emit(f"{b} = add i64 {a}, %row")
-            c = fn.fresh()
-            fn.emit(f"{c} = add i64 {b}, {j}")
-            p = fn.op("ptr", f"getelementptr double, ptr %saved, i64 {c}")
-            fn.emit(f"store double {e}, ptr {p.text}")
-    fn.emit("%bnext = add i64 %b, 1")
-    fn.br("bhead")
-    fn.start("done")
+        d = convert(b, b.load(slots[j], typ=ir_type(types[j], W)), types[j], "double", W)
+        for k in range(W):  # lane k's state to saved[k*nblocks*n_state + row + j]
+            e = b.extract_element(d, lane[k])
+            b.store(e, _at(b, saved, b.add(b.add(b.mul(rowlen, _i64(k)), row), _i64(j))))
+    loops.next_block(b)
     for i, (slot, ty) in enumerate(zip(slots, types)):
-        v = fn.op(ty, f"load {fn.T(ty)}, ptr {slot}")
-        d = fn.cast(v, "double")
-        scatter(Reg(fn.V(d), "double"), lambda lane, i=i: f"getelementptr double, ptr %io, i64 {lane * M + i}")
-    fn.emit("ret void")
-    return _define(fn, "gnipy_run_lanes")
+        d = convert(b, b.load(slot, typ=ir_type(ty, W)), ty, "double", W)
+        for k in range(W):
+            b.store(b.extract_element(d, lane[k]), _at(b, io, k * M + i))
+    b.ret_void()
+    return f
 
 
-def _batch_function(M: int, n_state: int, lanes: int) -> str:
-    """`gnipy_run_batch(.., lo, hi)`: trajectories lo..hi-1, `lanes` at a time while they last."""
-    vector = ""
+def _batch_function(prog: Program, run, run_lanes, M: int, n_state: int, lanes: int) -> None:
+    """`gnipy_run_batch(.., lo, hi)`: trajectories lo..hi-1, `lanes` at a time (`run_lanes`)
+    while they last, then one at a time (`run`)."""
+    from llvmlite import ir
+
+    f, b = prog.function("gnipy_run_batch", [(name, ty, False) for name, ty, _ in _RUN_ARGS]
+                         + [("lo", "i64", False), ("hi", "i64", False)])
+    io, h, lengths, nblocks, saved, lo, hi = f.args
+    names = ("head", "body") + (("vec",) if lanes > 1 else ()) + ("one", "out")
+    blocks = {n: f.append_basic_block(n) for n in names}
+    head, body, one, out = (blocks[n] for n in ("head", "body", "one", "out"))
+    entry = b.block
+    b.branch(head)
+    b.position_at_end(head)
+    j = b.phi(ir.IntType(64), "j")
+    j.add_incoming(lo, entry)
+    b.cbranch(b.icmp_signed("<", j, hi), body, out)
+
+    def call(fn, width):  # run trajectories j.. (width of them) and go on from the next j
+        pio = b.gep(io, [b.mul(j, _i64(M))], source_etype=ir_type("double"))
+        ps = b.gep(saved, [b.mul(b.mul(j, nblocks), _i64(n_state))], source_etype=ir_type("double"))
+        b.call(fn, [pio, h, lengths, nblocks, ps])
+        j.add_incoming(b.add(j, _i64(width)), b.block)
+        b.branch(head)
+
+    b.position_at_end(body)
     if lanes > 1:
-        vector = f"""  %left = sub i64 %hi, %j
-  %wide = icmp sge i64 %left, {lanes}
-  br i1 %wide, label %vec, label %one
-vec:
-  %voff = mul i64 %j, {M}
-  %vio = getelementptr double, ptr %io, i64 %voff
-  %vrows = mul i64 %j, %nblocks
-  %vsoff = mul i64 %vrows, {n_state}
-  %vs = getelementptr double, ptr %saved, i64 %vsoff
-  call void @gnipy_run_lanes(ptr %vio, double %h, ptr %lengths, i64 %nblocks, ptr %vs)
-  %jv = add i64 %j, {lanes}
-  br label %head
-one:
-"""
-    incoming = "[ %jnext, %one ]" + (", [ %jv, %vec ]" if lanes > 1 else "")
-    return f"""define void @gnipy_run_batch(ptr %io, double %h, ptr %lengths, i64 %nblocks, ptr %saved, i64 %lo, i64 %hi) {{
-entry:
-  br label %head
-head:
-  %j = phi i64 [ %lo, %entry ], {incoming}
-  %more = icmp slt i64 %j, %hi
-  br i1 %more, label %body, label %out
-body:
-{vector}{"" if lanes > 1 else "  br label %one" + chr(10) + "one:" + chr(10)}  %off = mul i64 %j, {M}
-  %pio = getelementptr double, ptr %io, i64 %off
-  %rows = mul i64 %j, %nblocks
-  %soff = mul i64 %rows, {n_state}
-  %ps = getelementptr double, ptr %saved, i64 %soff
-  call void @gnipy_run(ptr %pio, double %h, ptr %lengths, i64 %nblocks, ptr %ps)
-  %jnext = add i64 %j, 1
-  br label %head
-out:
-  ret void
-}}
-"""
+        b.cbranch(b.icmp_signed(">=", b.sub(hi, j), _i64(lanes)), blocks["vec"], one)
+    else:
+        b.branch(one)
+    b.position_at_end(one)
+    call(run, 1)
+    if lanes > 1:
+        b.position_at_end(blocks["vec"])
+        call(run_lanes, lanes)
+    b.position_at_end(out)
+    b.ret_void()
 
 
 def default_lanes() -> int:
@@ -398,9 +431,36 @@ def default_lanes() -> int:
     return 4 if feats.get("avx") else 2
 
 
+def trace_step(step, carry0, h, params=None):
+    """`(jaxpr, consts, leaves)`: the step that :func:`build_loop` lowers, traced (no
+    compilation): the `Jaxpr` of `step(carry, h)` (with `params`, `step(carry, h, params)`) on the
+    flat leaves of the carry (then of the params) and `h`, returning the new carry's leaves, with
+    what its outputs do not need dropped; its constants; and the example's leaves (arrays or
+    `jax.ShapeDtypeStruct`: only shapes and dtypes are used)."""
+    import jax
+
+    if params is not None:
+        inner, params = step, tuple(params)
+        carry0 = (carry0, params)
+
+        def step(c, hh):
+            return inner(c[0], hh, c[1]), c[1]
+    leaves, treedef = jax.tree_util.tree_flatten(carry0)
+    closed = jax.make_jaxpr(lambda ls, hh: jax.tree_util.tree_leaves(step(jax.tree_util.tree_unflatten(treedef, ls), hh)))(
+        leaves, h)
+    try:  # drop what the outputs do not need (e.g. the transposed solves of custom_linear_solve)
+        from jax._src.interpreters import partial_eval as pe
+
+        jaxpr, _ = pe.dce_jaxpr(closed.jaxpr, [True] * len(closed.jaxpr.outvars))
+        consts = [dict(zip(closed.jaxpr.constvars, closed.consts))[v] for v in jaxpr.constvars]
+    except Exception:
+        jaxpr, consts = closed.jaxpr, closed.consts
+    return jaxpr, consts, leaves
+
+
 def build_loop(step, carry0, h, lanes: int = 1, params=None) -> NativeLoop:
     """Trace `step(carry, h) -> carry` at the example `carry0` (a pytree whose leaves are the
-    state's arrays then the loop's counters, as :func:`gnipy.stepping._carry0` builds it), lower it
+    state's arrays then the loop's counters, as :func:`gnipy.stepping.initial_carry` builds it), lower it
     and compile the loop; with `lanes` > 1 also a version that runs that many trajectories at once
     in vector lanes (for batches). Raises :class:`~gnipy.native.lowering.Unsupported` when it
     cannot.
@@ -414,38 +474,12 @@ def build_loop(step, carry0, h, lanes: int = 1, params=None) -> NativeLoop:
 
     t0 = time.perf_counter()
     n_state_leaves = len(jax.tree_util.tree_leaves(carry0[0]))  # the state; then counters (and a monitor)
-    if params is not None:
-        inner, params = step, tuple(params)
-        carry0 = (carry0, params)
-
-        def step(c, hh):
-            return inner(c[0], hh, c[1]), c[1]
-    leaves, treedef = jax.tree_util.tree_flatten(carry0)
-    closed = jax.make_jaxpr(lambda ls, hh: jax.tree_util.tree_leaves(step(jax.tree_util.tree_unflatten(treedef, ls), hh)))(
-        leaves, h)
-    jaxpr = closed.jaxpr
-    try:  # drop what the outputs do not need (e.g. the transposed solves of custom_linear_solve)
-        from jax._src.interpreters import partial_eval as pe
-
-        jaxpr, _ = pe.dce_jaxpr(jaxpr, [True] * len(jaxpr.outvars))
-        consts = [dict(zip(closed.jaxpr.constvars, closed.consts))[v] for v in jaxpr.constvars]
-    except Exception:
-        jaxpr, consts = closed.jaxpr, closed.consts
+    jaxpr, consts, leaves = trace_step(step, carry0, h, params)
     shapes = [np.shape(x) for x in leaves]
     types = [llvm_type(np.asarray(x).dtype) if not hasattr(x, "dtype") else llvm_type(x.dtype) for x in leaves]
     n_state = int(sum(int(np.prod(s, dtype=np.int64)) for s in shapes[:n_state_leaves]))
     flat_types = [ty for s, ty in zip(shapes, types) for _ in range(int(np.prod(s, dtype=np.int64)))]
-    const_arrays = [_const_array(np.asarray(c)) for c in consts]
-
-    def emitter(fn):
-        def emit_step(flat, h_reg):
-            args = _unflatten(flat, shapes)
-            hh = np.empty((), dtype=object)
-            hh[()] = h_reg
-            outs = lower_jaxpr(fn, jaxpr, const_arrays, args + [hh])
-            out_flat, _ = _flatten(outs)
-            return out_flat
-        return emit_step
+    const_arrays = [const_array(np.asarray(c)) for c in consts]
 
     for i, (ty, x) in enumerate(zip(types, leaves)):
         if ty not in ("double", "i32", "i64"):
@@ -453,18 +487,29 @@ def build_loop(step, carry0, h, lanes: int = 1, params=None) -> NativeLoop:
             raise Unsupported(f"{what} has a leaf of dtype {np.asarray(x).dtype} (the loop carries float64, "
                               "int32 and int64)")
     t1 = time.perf_counter()
-    fn = Function()
-    parts = [_driver(fn, flat_types, n_state, emitter(fn), k_index=n_state, fail_index=n_state + 1)]
-    decls = set(fn.decls)
+    prog = Program("gnipy native step loop")
+    run = _run_function(prog, _step_body(prog, "gnipy_step", 1, jaxpr, const_arrays, shapes, flat_types), flat_types,
+                        n_state, k_index=n_state, fail_index=n_state + 1)
+    run_lanes = None
     if lanes > 1:
-        fv = Function(lanes)
-        parts.append(_lanes_driver(fv, flat_types, n_state, emitter(fv)))
-        decls |= fv.decls
-    parts.append(_batch_function(len(flat_types), n_state, lanes))
-    ir = "; gnipy native step loop\n" + "\n".join(sorted(decls)) + "\n\n" + "\n".join(parts)
+        step_lanes = _step_body(prog, "gnipy_step_lanes", lanes, jaxpr, const_arrays, shapes, flat_types)
+        run_lanes = _lanes_function(prog, step_lanes, flat_types, n_state, lanes)
+    _batch_function(prog, run, run_lanes, len(flat_types), n_state, lanes)
+    texts = prog.texts
     t2 = time.perf_counter()
-    engine, source, seconds = _load(ir)
+    engine, source, seconds = load_program(texts)
     timings = {"trace_s": t1 - t0, "lower_s": t2 - t1, "load_s": time.perf_counter() - t2}
-    loop = NativeLoop(engine, len(flat_types), n_state, source, seconds, ir.count("\n"), timings)
+    loop = NativeLoop(engine, len(flat_types), n_state, source, seconds, sum(t.count("\n") for t in texts), timings)
     loop.lanes = lanes
     return loop
+
+
+def _step_body(prog: Program, name: str, lanes: int, jaxpr, const_arrays, shapes, types: list[str]):
+    """The lowered step `name` of `prog` (:meth:`Program.body <gnipy.native.module.Program.body>`):
+    `(carry scalars..., h) -> {carry scalars}`, each of its type in `types`; with `lanes`, on vectors."""
+    fn = Function(lanes)
+    *flat, h = fn.arguments(list(types) + ["double"])
+    hh = np.empty((), dtype=object)
+    hh[()] = h
+    outs = lower_jaxpr(fn, jaxpr, const_arrays, unflatten(flat, shapes) + [hh])
+    return prog.body(fn, name, flatten(outs)[0], types)

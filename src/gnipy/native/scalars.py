@@ -2,9 +2,17 @@
 
 A value of a lowered jaxpr is a NumPy object array of scalars: SSA registers (:class:`Reg`) or
 constants known when lowering (:class:`Const`). :class:`Function` writes the LLVM IR of one
-function: an instruction per scalar operation, with IEEE semantics (no fast-math flags), constants
-folded only when every operand is one; with `lanes` the same instructions run on vectors, one
-trajectory per lane.
+function body: an instruction per scalar operation, with IEEE semantics (no fast-math flags),
+constants folded only when every operand is one; with `lanes` the same instructions run on
+vectors, one trajectory per lane. Its result is one function (:meth:`Function.define`) that the
+code around it (:mod:`gnipy.native.module`, built with llvmlite's IR builder) calls and LLVM
+inlines.
+
+Why text and not llvmlite's IR builder here: this is the hot path of a build (one call per scalar
+operation, about 7,400 instructions for a rolling-ball step), and llvmlite.ir takes about 5 times
+as long per instruction (7.3 µs against 1.5 µs to build and print one; the user guide's page "The
+native backend: design decisions"). The text stays inside this class: each method writes one
+instruction from a fixed template with typed operands, and no other module writes IR text.
 """
 
 from __future__ import annotations
@@ -14,7 +22,8 @@ import struct
 
 import numpy as np
 
-__all__ = ["Unsupported", "Reg", "Const", "Function", "llvm_type", "scalars_of", "LIBM_SYMBOLS"]
+__all__ = ["Unsupported", "Reg", "Const", "Function", "llvm_type", "scalars_of", "const_array", "map_scalars",
+           "flatten", "unflatten", "NUMPY_TYPES", "LIBM_SYMBOLS"]
 
 
 class Unsupported(Exception):
@@ -27,7 +36,8 @@ class Unsupported(Exception):
 
 _TYPES = {np.dtype(np.float64): "double", np.dtype(np.int32): "i32", np.dtype(np.int64): "i64",
           np.dtype(np.bool_): "i1"}
-_NP = {"double": np.float64, "i32": np.int32, "i64": np.int64, "i1": np.bool_}
+#: The NumPy scalar type of each LLVM type of a scalar.
+NUMPY_TYPES = {"double": np.float64, "i32": np.int32, "i64": np.int64, "i1": np.bool_}
 
 
 def llvm_type(dtype) -> str:
@@ -67,7 +77,7 @@ class Const:
     __slots__ = ("value", "ty")
 
     def __init__(self, value, ty: str):
-        self.value, self.ty = _NP[ty](value), ty
+        self.value, self.ty = NUMPY_TYPES[ty](value), ty
 
     @property
     def text(self) -> str:
@@ -78,7 +88,8 @@ class Const:
         return str(int(self.value))
 
 
-def _const_array(value, ty=None) -> np.ndarray:
+def const_array(value, ty=None) -> np.ndarray:
+    """`value` (an array) as an object array of :class:`Const` of LLVM type `ty` (default: its dtype's)."""
     a = np.asarray(value)
     ty = ty or llvm_type(a.dtype)
     out = np.empty(a.shape, dtype=object)
@@ -92,11 +103,32 @@ def scalars_of(a: np.ndarray) -> list:
     return list(np.asarray(a, dtype=object).reshape(-1))
 
 
-def _map(f, *arrays) -> np.ndarray:
+def map_scalars(f, *arrays) -> np.ndarray:
+    """`f` applied to the scalars of object arrays (broadcast together), element by element."""
     arrays = np.broadcast_arrays(*[np.asarray(a, dtype=object) for a in arrays])
     out = np.empty(arrays[0].shape, dtype=object)
     for idx in np.ndindex(out.shape):
         out[idx] = f(*(a[idx] for a in arrays))
+    return out
+
+
+def flatten(arrays) -> tuple[list, list]:
+    """`(scalars, shapes)`: the scalars of object arrays, one list in C order, and their shapes."""
+    shapes = [a.shape for a in arrays]
+    flat = [s for a in arrays for s in scalars_of(a)]
+    return flat, shapes
+
+
+def unflatten(flat, shapes) -> list[np.ndarray]:
+    """The object arrays of `shapes` holding the scalars `flat` (the inverse of :func:`flatten`)."""
+    out, i = [], 0
+    for s in shapes:
+        n = int(np.prod(s, dtype=np.int64))
+        a = np.empty(n, dtype=object)
+        for j in range(n):
+            a[j] = flat[i + j]
+        out.append(a.reshape(s))
+        i += n
     return out
 
 
@@ -116,7 +148,8 @@ LIBM_SYMBOLS = tuple(sorted(set(_LIBM.values())))
 
 
 class Function:
-    """The body of one LLVM function under construction: instructions, blocks, declarations.
+    """The body of one LLVM function under construction: its arguments (:meth:`arguments`),
+    instructions, blocks and declarations; :meth:`define` ends it and gives its text.
 
     With `lanes` > 1 every scalar is a vector of that many lanes, one trajectory each (the same
     instructions on `<lanes x double>`): loops run while any lane's condition holds and update
@@ -125,11 +158,39 @@ class Function:
 
     def __init__(self, lanes: int = 1):
         self.lanes = int(lanes)
-        self.lines: list[str] = []
+        self.lines: list = []  # instruction and label lines; a list in it holds phi nodes (open_phis)
         self.decls: set[str] = set()
         self.allocas: list[str] = []
+        self.params: list[Reg] = []
         self._n = 0
         self.block = "entry"
+
+    def arguments(self, types: list[str]) -> list[Reg]:
+        """New arguments of the function, of scalar types `types` (vectors with lanes)."""
+        regs = [Reg(f"%arg{len(self.params) + j}", ty) for j, ty in enumerate(types)]
+        self.params.extend(regs)
+        return regs
+
+    def result_type(self, types: list[str]) -> str:
+        """The LLVM type of the struct :meth:`define` returns for results of `types`."""
+        return "{" + ", ".join(self.T(ty) for ty in types) + "}"
+
+    def define(self, name: str, results: list, types: list[str]) -> str:
+        """End the body: return `results` (scalars, cast to `types`) as one struct, and give the
+        LLVM IR text of the function `@name` (its :meth:`arguments`, then the body). The function
+        is `linkonce_odr` and `alwaysinline`: the code that calls it (:mod:`gnipy.native.module`)
+        gets it inlined, and nothing of it is left in the object code."""
+        st = self.result_type(types)
+        acc = "poison"
+        for j, (v, ty) in enumerate(zip(results, types)):
+            nxt = self.fresh()
+            self.emit(f"{nxt} = insertvalue {st} {acc}, {self.T(ty)} {self.V(self.cast(v, ty))}, {j}")
+            acc = nxt
+        self.emit(f"ret {st} {acc}")
+        params = ", ".join(f"{self.T(r.ty)} {r.name}" for r in self.params)
+        body = [line for item in self.lines for line in ([item] if isinstance(item, str) else item)]
+        return "\n".join([f"define linkonce_odr {st} @{name}({params}) alwaysinline {{", "entry:", *self.allocas,
+                          *body, "}", ""])
 
     def T(self, ty: str) -> str:
         """The LLVM type of a scalar of type `ty` (a vector of them with lanes)."""
@@ -178,6 +239,29 @@ class Function:
         """Branch on a scalar i1 (reduce a lane vector with :meth:`any` first)."""
         self.emit(f"br i1 {c.text}, label %{yes}, label %{no}")
 
+    def switch(self, index, default: str, labels: list[str]) -> None:
+        """Branch to `labels[index]`, or to `default` for any other value of the scalar `index`."""
+        cases = " ".join(f"{index.ty} {j}, label %{lab}" for j, lab in enumerate(labels))
+        self.emit(f"switch {index.ty} {index.text}, label %{default} [ {cases} ]")
+
+    def phi(self, ty: str, incoming: list) -> Reg:
+        """A phi node of type `ty` here (at the top of a block): `incoming` is `(value, block)` pairs."""
+        return self.op(ty, f"phi {self.T(ty)} " + ", ".join(f"[ {self.V(x)}, %{blk} ]" for x, blk in incoming))
+
+    def open_phis(self, types: list[str]) -> tuple[list[Reg], list]:
+        """Phi nodes of `types` here (at the top of a block) whose incoming values are known
+        later (a loop's head, before its body is emitted): `(registers, handle)`; give the
+        incoming values with :meth:`close_phis`."""
+        regs = [Reg(self.fresh("p"), ty) for ty in types]
+        handle: list = []
+        self.lines.append(handle)  # the phi lines go here, wherever later lines are inserted
+        return regs, handle
+
+    def close_phis(self, regs: list[Reg], handle: list, incoming: list) -> None:
+        """The phi nodes `regs` of :meth:`open_phis`: `incoming[i]` is the `(value, block)` pairs of `regs[i]`."""
+        handle.extend(f"  {r.name} = phi {self.T(r.ty)} " + ", ".join(f"[ {self.V(x)}, %{blk} ]" for x, blk in inc)
+                      for r, inc in zip(regs, incoming))
+
     def alloca(self, ty: str, n: int = 1) -> str:
         name = self.fresh("a")
         self.allocas.append(f"  {name} = alloca {ty}, i64 {n}")
@@ -207,6 +291,15 @@ class Function:
         T = self.T(ty)
         self.decls.add(f"declare {T} @{name}({', '.join(T for _ in args)})")
         return self.op(ty, f"call {T} @{name}({', '.join(f'{T} {self.V(a)}' for a in args)})")
+
+    def call2(self, fn: str, a, b):
+        """`atan2` or `pow` of two doubles, folded when both are constants."""
+        if a.ty != "double" or b.ty != "double":
+            raise Unsupported(f"{fn} of integers")
+        if isinstance(a, Const) and isinstance(b, Const):
+            with np.errstate(all="ignore"):
+                return Const(_fold2(fn, a.value, b.value), "double")
+        return self.call(fn, "double", a, b)
 
     # ---- scalar arithmetic, folded when every operand is a constant --------------------------
 
@@ -323,7 +416,7 @@ class Function:
             if ty == "i1":
                 return Const(bool(a.value != 0), ty)
             with np.errstate(all="ignore"):
-                return Const(_NP[ty](a.value), ty)
+                return Const(NUMPY_TYPES[ty](a.value), ty)
         src = a.ty
         if ty == "i1":
             return self.cmp("ne", a, Const(0, src))

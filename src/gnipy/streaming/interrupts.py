@@ -7,7 +7,7 @@ import signal
 import threading
 
 
-class _DeferredInterrupt:
+class DeferredInterrupt:
     """While active, SIGINT only sets `pending` (the HDF5 call under way completes); `check()`
     raises `KeyboardInterrupt` between calls. Installed only in the main thread and only where
     SIGINT has Python's default handler (an ignored SIGINT or the caller's own handler is left
@@ -30,6 +30,7 @@ class _DeferredInterrupt:
         return self
 
     def check(self) -> None:
+        """Raise `KeyboardInterrupt` if SIGINT came while active."""
         if self.pending:
             raise KeyboardInterrupt
 

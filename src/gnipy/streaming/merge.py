@@ -10,12 +10,13 @@ from pathlib import Path
 
 import numpy as np
 
+from ..extras import require
 from .. import schema
 from ..monitor import RunVerdicts
 from ..files import DataChecksum, OutputError, atomic_write, remove_owned_dir
-from .interrupts import _DeferredInterrupt
-from .parts import _DATA_DIMS, _OWN_FILES, _Plan, _check_part, _own_temporaries, _part_path
-from .result import SPEC_ATTR, StreamResult, _failure
+from .interrupts import DeferredInterrupt
+from .parts import DATA_DIMS, OWN_FILES, ChunkPlan, check_part, clean_own_temporaries, part_path
+from .result import SPEC_ATTR, StreamResult, solver_failure
 
 #: For tests: called as `_merge_hook(i)` after the merge has copied part `i` (e.g. to send
 #: SIGINT to the process at a chosen moment). Looked up here, where the merge runs: set
@@ -27,7 +28,8 @@ def _global_attrs(system, method, h, steps, result, it_tot, it_max, n_chunks, at
     """The destination's global attributes, as :func:`gnipy.io.write_netcdf` writes them."""
     import datetime as _dt
 
-    from ..io import CHECKSUM_ATTR, _attr_value, cf_attributes, provenance
+    from ..file_attributes import attribute_value, cf_attributes, provenance
+    from ..io import CHECKSUM_ATTR
     from ..schema import CONVENTIONS, UNITS_CONVENTION
     from ..system import describe_orientations
 
@@ -50,7 +52,7 @@ def _global_attrs(system, method, h, steps, result, it_tot, it_max, n_chunks, at
     for k, v in attrs.items():
         out[str(k)] = v
     out.pop(CHECKSUM_ATTR, None)
-    return {k: _attr_value(v) for k, v in out.items()}
+    return {k: attribute_value(v) for k, v in out.items()}
 
 
 def _write_destination(tmp: Path, files, counts, system, first: dict, load, interrupt) -> tuple:
@@ -58,13 +60,13 @@ def _write_destination(tmp: Path, files, counts, system, first: dict, load, inte
     :meth:`gnipy.Solution.to_xarray` written by :func:`gnipy.io.write_netcdf`), acting on SIGINT
     between parts. `load(i)` reads and verifies part `i`. Returns the open file and the checksum
     of its data; the caller adds the global attributes and closes it."""
-    import netCDF4
+    netCDF4 = require("netCDF4", extra="files")
 
     data0 = first["data"]
-    names = [v for v in _DATA_DIMS if v in data0]
+    names = [v for v in DATA_DIMS if v in data0]
     sizes = {"time": int(sum(counts))}
     for v in names:
-        for d, n in zip(_DATA_DIMS[v][1:], data0[v].shape[1:]):
+        for d, n in zip(DATA_DIMS[v][1:], data0[v].shape[1:]):
             sizes[d] = int(n)
     coordinates = [str(x) for x in system.coordinates]
     velocities = [str(x) for x in system.velocities]
@@ -81,7 +83,7 @@ def _write_destination(tmp: Path, files, counts, system, first: dict, load, inte
         out = {}
         names_of = {"coordinate": coordinates, "velocity": velocities}
         for v in names:  # the attributes of gnipy.schema.apply, in write_netcdf's order
-            var = nc.createVariable(v, data0[v].dtype, _DATA_DIMS[v], fill_value=np.nan)
+            var = nc.createVariable(v, data0[v].dtype, DATA_DIMS[v], fill_value=np.nan)
             var.setncatts(schema.variable_attrs(v))
             components = schema.VARIABLES[v].components
             if components:
@@ -110,7 +112,7 @@ def _write_destination(tmp: Path, files, counts, system, first: dict, load, inte
             if n != counts[i]:
                 raise OutputError(f"{f} changed while it was merged; rerun with resume=True")
             d = part["data"]
-            if sorted(v for v in d if v in _DATA_DIMS) != sorted(names) or any(
+            if sorted(v for v in d if v in DATA_DIMS) != sorted(names) or any(
                     d[v].shape[1:] != data0[v].shape[1:] for v in names):
                 raise OutputError(f"{f}: its variables differ from those of {files[0].name}; rerun with "
                                   "resume=True to compute it again")
@@ -133,20 +135,20 @@ def _write_destination(tmp: Path, files, counts, system, first: dict, load, inte
         raise
 
 
-def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant=False, *,
-            overwrite, plan: _Plan, spec, notes):
+def merge_parts(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant=False, *,
+            overwrite, plan: ChunkPlan, spec, notes):
     """Copy the parts (one in memory at a time, each verified again) into `path`, atomically;
     then remove them."""
-    import netCDF4
+    netCDF4 = require("netCDF4", extra="files")
 
     from ..io import CHECKSUM_ATTR
 
-    files = [_part_path(parts, c) for c in range(n_chunks)]
+    files = [part_path(parts, c) for c in range(n_chunks)]
     stats = []
     watch = []  # the last part's monitor: the verdicts of the whole run (gnipy.monitor)
 
     def load(c: int) -> dict:
-        part, why = _check_part(files[c], c, plan)
+        part, why = check_part(files[c], c, plan)
         if part is None:
             raise OutputError(f"{files[c]} does not verify ({why}); rerun with resume=True to compute "
                               "it again")
@@ -196,10 +198,10 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
             nc.close()
         interrupt.check()
 
-    with _DeferredInterrupt() as interrupt:
+    with DeferredInterrupt() as interrupt:
         atomic_write(path, write, overwrite=overwrite, argument="path")
-    _own_temporaries(parts)
-    if not remove_owned_dir(parts, _OWN_FILES) and parts.exists():
+    clean_own_temporaries(parts)
+    if not remove_owned_dir(parts, OWN_FILES) and parts.exists():
         notes.append(f"{parts} is kept: it holds files gnipy did not write")
     if interrupt.pending:  # Ctrl-C as the file was renamed: it is complete; stop here
         raise KeyboardInterrupt
@@ -220,5 +222,5 @@ def _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs,
     )
     if result and throw:
         s = next(s for s in stats if s["result"])
-        raise _failure(method.name, failed_step, t0, h, s["residual"], path)
+        raise solver_failure(method.name, failed_step, t0, h, s["residual"], path)
     return out

@@ -13,18 +13,21 @@ from pathlib import Path
 
 import numpy as np
 
+from ..extras import require
 from .. import schema
 from ..files import MARKER, DataChecksum, OutputError, clean_stale_temporaries, is_owned_dir, make_owned_dir
 
-_SPEC_HASH_ATTR = "stream_spec_sha256"
-_CHUNK_ATTR = "stream_chunk"
+#: The attribute of a part file that holds the SHA-256 of the run's specification (what is computed).
+SPEC_HASH_ATTR = "stream_spec_sha256"
+#: The attribute of a part file that holds its chunk index.
+CHUNK_ATTR = "stream_chunk"
 _PURPOSE = "checkpoint parts of a streamed run (gnipy.simulate_to_file)"
 _PART = re.compile(r"^part_(\d{6,})\.nc$")
 #: gnipy's own files in a parts directory (all that starting afresh or finishing removes).
-_OWN_FILES = ("spec.json", "part_*.nc")
+OWN_FILES = ("spec.json", "part_*.nc")
 
-# the variables along `time` of a result file, with their dimensions (gnipy.schema)
-_DATA_DIMS = {name: schema.dims(name) for name in (
+#: The variables along `time` of a result file, with their dimensions (gnipy.schema).
+DATA_DIMS = {name: schema.dims(name) for name in (
     "q", "v", "p", "energy", "constraint_residual", "R", "hidden_momentum", "hidden_momentum_expected",
     "energy_plus")}
 
@@ -35,23 +38,24 @@ def parts_directory(path) -> Path:
     return path.with_name(path.name + ".parts")
 
 
-def _part_path(parts: Path, c: int) -> Path:
+def part_path(parts: Path, c: int) -> Path:
+    """The part file of chunk `c` in the parts directory `parts` (`part_000012.nc`)."""
     return parts / f"part_{c:06d}.nc"
 
 
 # ------------------------------------------------------------------------------------------
 # Part files
 # ------------------------------------------------------------------------------------------
-def _storage(a) -> np.ndarray:
+def storable_array(a) -> np.ndarray:
     """`a` as netCDF can store it (booleans as uint8)."""
     a = np.asarray(a)
     return a.astype(np.uint8) if a.dtype == np.bool_ else a
 
 
-def _write_part(tmp: Path, variables: dict[str, tuple[tuple[str, ...], np.ndarray]], attrs: dict) -> None:
+def write_part(tmp: Path, variables: dict[str, tuple[tuple[str, ...], np.ndarray]], attrs: dict) -> None:
     """Write one part file (netCDF4, no xarray) at `tmp`, with the checksum of its data (that of
     :func:`gnipy.io.netcdf_checksum`, computed from the arrays written)."""
-    import netCDF4
+    netCDF4 = require("netCDF4", extra="files")
 
     from ..io import CHECKSUM_ATTR
 
@@ -94,7 +98,7 @@ def _checksum_of(arrays: Mapping[str, np.ndarray]) -> str:
 
 
 @dataclass
-class _Plan:
+class ChunkPlan:
     """What the chunks of a run are: for checking parts against it."""
 
     steps: int
@@ -125,9 +129,9 @@ class _Plan:
 _REQUIRED = ("time", "step", "q", "v", "p", "energy", "constraint_residual")
 
 
-def _check_part(file: Path, c: int, plan: _Plan) -> tuple[dict | None, str]:
+def check_part(file: Path, c: int, plan: ChunkPlan) -> tuple[dict | None, str]:
     """Read and verify part `c`: `(part, "")`, or `(None, why)` when it does not verify."""
-    import netCDF4
+    netCDF4 = require("netCDF4", extra="files")
 
     try:
         with netCDF4.Dataset(os.fspath(file), "r") as nc:
@@ -141,15 +145,15 @@ def _check_part(file: Path, c: int, plan: _Plan) -> tuple[dict | None, str]:
         return None, f"its contents are not those of a checkpoint ({type(e).__name__}: {e})"
 
 
-def _check_contents(attrs: dict, data: dict, c: int, plan: _Plan) -> tuple[dict | None, str]:
-    for key in ("gnipy_checksum", _SPEC_HASH_ATTR, _CHUNK_ATTR, "result", "failed_step", "residual",
+def _check_contents(attrs: dict, data: dict, c: int, plan: ChunkPlan) -> tuple[dict | None, str]:
+    for key in ("gnipy_checksum", SPEC_HASH_ATTR, CHUNK_ATTR, "result", "failed_step", "residual",
                 "iterations_total", "iterations_max"):
         if key not in attrs:
             return None, f"it has no attribute {key!r} (not a checkpoint of this gnipy)"
-    if attrs[_SPEC_HASH_ATTR] != plan.spec_hash:
+    if attrs[SPEC_HASH_ATTR] != plan.spec_hash:
         return None, "it belongs to a different run (its spec hash differs from spec.json's)"
-    if int(attrs[_CHUNK_ATTR]) != c:
-        return None, f"it holds chunk {int(attrs[_CHUNK_ATTR])}, not chunk {c}"
+    if int(attrs[CHUNK_ATTR]) != c:
+        return None, f"it holds chunk {int(attrs[CHUNK_ATTR])}, not chunk {c}"
     actual = _checksum_of(data)
     if actual != attrs["gnipy_checksum"]:
         return None, f"its data do not match its checksum ({attrs['gnipy_checksum']}; computed {actual})"
@@ -160,7 +164,7 @@ def _check_contents(attrs: dict, data: dict, c: int, plan: _Plan) -> tuple[dict 
     leaves = []
     for i, x in enumerate(plan.leaves):
         a = data.get(f"state_{i}")
-        want = _storage(x)
+        want = storable_array(x)
         if a is None:
             return None, f"it lacks the integrator state state_{i}"
         if a.shape != want.shape or a.dtype != want.dtype:
@@ -175,7 +179,7 @@ def _check_contents(attrs: dict, data: dict, c: int, plan: _Plan) -> tuple[dict 
     want_steps = (k_start + k_local)[keep]
     want_times = plan.times(k_start, k_local)[keep]
     n = int(data["time"].shape[0])
-    for v, dims in (*_DATA_DIMS.items(), ("time", ("time",)), ("step", ("time",))):
+    for v, dims in (*DATA_DIMS.items(), ("time", ("time",)), ("step", ("time",))):
         if v in data and (data[v].ndim != len(dims) or data[v].shape[0] != n):
             return None, f"its variable {v} has shape {data[v].shape}, not {len(dims)} dimensions along {n} nodes"
     from ..monitor import SIZE
@@ -193,7 +197,7 @@ def _check_contents(attrs: dict, data: dict, c: int, plan: _Plan) -> tuple[dict 
     return {"data": data, "attrs": attrs, "n": n, "result": result, "failed": failed, "leaves": leaves}, ""
 
 
-def _own_temporaries(parts: Path) -> None:
+def clean_own_temporaries(parts: Path) -> None:
     """Remove the temporaries of dead processes inside the parts directory."""
     names = set()
     try:
@@ -209,7 +213,8 @@ def _own_temporaries(parts: Path) -> None:
         clean_stale_temporaries(parts / name)
 
 
-def _part_indices(parts: Path) -> list[tuple[int, Path]]:
+def part_indices(parts: Path) -> list[tuple[int, Path]]:
+    """`(chunk, file)` of every part file in `parts`, in chunk order (none when it cannot be read)."""
     out = []
     try:
         entries = list(os.scandir(parts))
@@ -232,7 +237,7 @@ def _remove(files, parts: Path) -> None:
             raise OutputError(f"cannot remove {f} (in {parts}): {e.strerror or e}") from None
 
 
-def _prepare_parts(parts: Path, path: Path, resume: bool, note) -> bool:
+def prepare_parts(parts: Path, path: Path, resume: bool, note) -> bool:
     """Make `parts` gnipy's working directory; returns whether it holds a run to resume."""
     try:
         st = os.lstat(parts)
@@ -264,10 +269,10 @@ def _prepare_parts(parts: Path, path: Path, resume: bool, note) -> bool:
         return False
     if not os.access(parts, os.W_OK | os.X_OK):
         raise OutputError(f"cannot write {parts}: permission denied")
-    _own_temporaries(parts)
+    clean_own_temporaries(parts)
     if resume and (parts / "spec.json").is_file():
         return True
-    old = _part_indices(parts)
+    old = part_indices(parts)
     if old:
         note(f"{parts}: the {len(old)} checkpoint part(s) of an earlier run are discarded (resume=True "
              "continues a run instead)")
@@ -275,18 +280,18 @@ def _prepare_parts(parts: Path, path: Path, resume: bool, note) -> bool:
     return False
 
 
-def _verify_parts(parts: Path, plan: _Plan, n_chunks: int, note) -> tuple[int, dict | None, int]:
+def verify_parts(parts: Path, plan: ChunkPlan, n_chunks: int, note) -> tuple[int, dict | None, int]:
     """Verify the parts of an interrupted run in order; remove the first bad one and every later
     one. Returns (good parts, the last good part, the number of chunks of the run)."""
-    existing = _part_indices(parts)
+    existing = part_indices(parts)
     done, last, why = 0, None, ""
     while done < n_chunks:
-        f = _part_path(parts, done)
+        f = part_path(parts, done)
         if not f.is_file():
             if any(i > done for i, _ in existing):
                 why = "it is missing"
             break
-        part, why = _check_part(f, done, plan)
+        part, why = check_part(f, done, plan)
         if part is None:
             break
         done, last = done + 1, part
@@ -296,8 +301,8 @@ def _verify_parts(parts: Path, plan: _Plan, n_chunks: int, note) -> tuple[int, d
     stale = [f for i, f in existing if i >= done]
     if why:
         later = len([i for i, _ in existing if i > done])
-        start = f"from {_part_path(parts, done - 1).name}" if done else "from the start"
-        note(f"checkpoint {_part_path(parts, done).name} in {parts} does not verify: {why}; it"
+        start = f"from {part_path(parts, done - 1).name}" if done else "from the start"
+        note(f"checkpoint {part_path(parts, done).name} in {parts} does not verify: {why}; it"
              + (f" and the {later} later part(s) are" if later else " is") + f" computed again {start}")
     _remove(stale, parts)
     return done, last, n_chunks

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..extras import require
 from ..files import OutputError, as_output_error
 from ..solution import SolverFailure
 
@@ -62,7 +63,9 @@ class StreamResult:
     healthy: bool = True
 
 
-def _failure(method: str, failed_step: int, t0: float, h: float, residual: float, path: Path) -> SolverFailure:
+def solver_failure(method: str, failed_step: int, t0: float, h: float, residual: float, path: Path) -> SolverFailure:
+    """The :class:`SolverFailure` of a streamed run whose step `failed_step` failed (`path` holds the run
+    up to the last good node)."""
     return SolverFailure(
         f"{method}: step {failed_step} (t = {t0 + h * failed_step:.6g} -> {t0 + h * (failed_step + 1):.6g}) "
         f"failed: the solve did not converge or gave a non-finite value (residual {residual:.3e}); "
@@ -71,11 +74,11 @@ def _failure(method: str, failed_step: int, t0: float, h: float, residual: float
     )
 
 
-def _finished_result(path: Path, spec: dict, method, system, h, t0, throw, overwrite, note) -> StreamResult | None:
+def finished_result(path: Path, spec: dict, method, system, h, t0, throw, overwrite, note) -> StreamResult | None:
     """The result of a run whose destination `path` is complete and holds `spec`; None when it
     holds another run (or is not a streamed result). A damaged one is an error, unless
     `overwrite` (then None: it is computed again)."""
-    import netCDF4
+    netCDF4 = require("netCDF4", extra="files")
 
     from ..io import verify_netcdf
 
@@ -131,11 +134,12 @@ def _finished_result(path: Path, spec: dict, method, system, h, t0, throw, overw
         final_q=final_q, final_v=final_v, warnings=warnings, healthy=healthy,
     )
     if result and throw:
-        raise _failure(method.name, failed, t0, h, residual, path)
+        raise solver_failure(method.name, failed, t0, h, residual, path)
     return out
 
 
-def _partial_result(path, parts, c, steps, n_chunks, resumed, notes=()):
+def partial_result(path, parts, c, steps, n_chunks, resumed, notes=()):
+    """The :class:`StreamResult` of a run stopped before its destination was written (`complete=False`)."""
     return StreamResult(
         path=path, complete=False, nodes=0, steps=0, chunks=n_chunks, chunks_resumed=resumed, result=0, failed_step=-1,
         energy_error=float("nan"), constraint_residual=float("nan"), iterations=(0, 0),

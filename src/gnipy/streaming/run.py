@@ -17,10 +17,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..extras import check
 from ..diagnostics import conserved_quantity, energy_is_invariant
 from .. import monitor
 from ..errors import InputError, QualitativeFailureWarning
-from ..inputs import finite_number, flag
+from ..inputs import finite_number, flag, positive_integer
 from ..files import (
     OutputError,
     atomic_write,
@@ -34,29 +35,36 @@ from ..files import (
 from ..integrators.base import Integrator, MethodError
 from ..registry import registered_invariants
 from ..saveat import SaveAt
-from ..simulate import MAX_STEPS, _init_one, default_initial_condition, resolve_steps, simulate
+from ..compilation import jit
+from ..run_arguments import MAX_STEPS, default_initial_condition, resolve_steps
+from ..simulate import simulate
 from ..solution import RESULT_SOLVER_FAILED
 from ..system import System
-from .interrupts import _DeferredInterrupt
-from .merge import _finish
+from .interrupts import DeferredInterrupt
+from .merge import merge_parts
 from .parts import (
-    _CHUNK_ATTR,
-    _OWN_FILES,
-    _SPEC_HASH_ATTR,
-    _Plan,
-    _own_temporaries,
-    _part_path,
-    _prepare_parts,
-    _storage,
-    _verify_parts,
-    _write_part,
+    CHUNK_ATTR,
+    OWN_FILES,
+    SPEC_HASH_ATTR,
+    ChunkPlan,
+    clean_own_temporaries,
+    part_path,
+    prepare_parts,
+    storable_array,
+    verify_parts,
+    write_part,
     parts_directory,
 )
-from .result import StreamResult, _finished_result, _partial_result
-from .size import DEFAULT_MAX_BYTES, _check_size
+from .result import StreamResult, finished_result, partial_result
+from .size import DEFAULT_MAX_BYTES, check_size
 
 #: Saved nodes per chunk when `chunk_steps` is not given.
 DEFAULT_CHUNK_NODES = 10_000
+
+
+@jit
+def _init_one(method, system, b0, v0, h):
+    return method.init(system, b0, v0, h)
 
 
 def simulate_to_file(
@@ -121,6 +129,7 @@ def simulate_to_file(
         SolverFailure: a step failed and `throw` is True.
         KeyboardInterrupt: SIGINT; the parts written so far stay for `resume=True`.
     """
+    check("netCDF4", "xarray", extra="files")  # before anything is computed or written
     from ..compilation import release_compiled_programs_if_needed
     from ..methods import get_method
     from ..reference import ContinuousReference
@@ -138,7 +147,7 @@ def simulate_to_file(
     if method is None:  # as simulate: the model's measured default
         from ..registry import default_method_for
 
-        method = default_method_for(system.name, system) if isinstance(system, System) else default_method_for("")
+        method = default_method_for(system.model, system) if isinstance(system, System) else default_method_for(None)
     if isinstance(method, str):
         method = get_method(method)
     if isinstance(method, ContinuousReference):
@@ -146,14 +155,10 @@ def simulate_to_file(
     if not isinstance(method, Integrator):
         raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
     h, steps = resolve_steps(h, steps, t_final)  # steps <= MAX_TOTAL_STEPS
-    if isinstance(save_every, bool) or int(save_every) != save_every or save_every < 1:
-        raise InputError(f"save_every: must be a positive integer, got {save_every!r}")
-    save_every = int(min(save_every, steps))
+    save_every = min(positive_integer("save_every", save_every), steps)
     if chunk_steps is None:
         chunk_steps = save_every * DEFAULT_CHUNK_NODES
-    if isinstance(chunk_steps, bool) or int(chunk_steps) != chunk_steps or chunk_steps < 1:
-        raise InputError(f"chunk_steps: must be a positive integer, got {chunk_steps!r}")
-    chunk_steps = int(chunk_steps)
+    chunk_steps = positive_integer("chunk_steps", chunk_steps)
     if chunk_steps > MAX_STEPS:
         raise InputError(f"chunk_steps: at most {MAX_STEPS} steps per chunk, got {chunk_steps}")
     if chunk_steps % save_every:
@@ -175,7 +180,7 @@ def simulate_to_file(
         attrs["save_every"] = save_every
     gni_family = type(method).hidden_momentum is not Integrator.hidden_momentum
     attrs["conserved"] = conserved_quantity(system, b0, gni_family=gni_family,
-                                            invariants=registered_invariants(system.name),
+                                            invariants=registered_invariants(system.model),
                                             conserves_energy=bool(getattr(method, "conserves_energy", False)))
 
     n_chunks = -(-steps // chunk_steps)
@@ -202,29 +207,29 @@ def simulate_to_file(
     finished = Path(os.fspath(given)).expanduser() if isinstance(given, (str, os.PathLike)) else None
     with output_lock(finished, argument="path") if finished is not None else contextlib.nullcontext():
         if resume and finished is not None and finished.is_file() and not finished.is_symlink():
-            done_already = _finished_result(finished, canonical, method, system, h, t0, throw, overwrite, note)
+            done_already = finished_result(finished, canonical, method, system, h, t0, throw, overwrite, note)
             if done_already is not None:
                 clean_stale_temporaries(done_already.path)
                 finished_parts = parts_directory(done_already.path)
                 if is_owned_dir(finished_parts):  # left by a process killed after the rename
-                    _own_temporaries(finished_parts)
-                    remove_owned_dir(finished_parts, _OWN_FILES)
+                    clean_own_temporaries(finished_parts)
+                    remove_owned_dir(finished_parts, OWN_FILES)
                 return _announce(done_already, method, system)
         path = check_destination(given, overwrite=overwrite, argument="path")
         parts = parts_directory(path)
 
         # --- how large the output gets ---------------------------------------------------------
         if max_bytes is not None:
-            _check_size(system, b0, steps, save_every, n_chunks, gni_family, path, parts, max_bytes)
+            check_size(system, b0, steps, save_every, n_chunks, gni_family, path, parts, max_bytes)
 
         clean_stale_temporaries(path)
-        resuming = _prepare_parts(parts, path, resume, note)
+        resuming = prepare_parts(parts, path, resume, note)
 
         hj = np.float64(h)  # as in simulate (the same compiled program)
         core = system.without_metadata()
         state = _init_one(method, core, b0, np.asarray(v0, dtype=np.float64), hj)
         leaves, treedef = jax.tree_util.tree_flatten(state)
-        plan = _Plan(steps=steps, save_every=save_every, chunk_steps=chunk_steps, t0=t0, h=h, spec_hash=spec_hash,
+        plan = ChunkPlan(steps=steps, save_every=save_every, chunk_steps=chunk_steps, t0=t0, h=h, spec_hash=spec_hash,
                      leaves=[np.asarray(x) for x in leaves], group=system.group is not None)
 
         done, last = 0, None
@@ -244,7 +249,7 @@ def simulate_to_file(
                         f"resume: the interrupted run in {parts} has a different {key} "
                         f"({stored.get(key)!r}, requested {value!r}); rerun with resume=False to start afresh"
                     )
-            done, last, n_chunks = _verify_parts(parts, plan, n_chunks, note)
+            done, last, n_chunks = verify_parts(parts, plan, n_chunks, note)
             if last is not None:
                 leaves = [jnp.asarray(a) for a in last["leaves"]]
             if done and progress is not None:
@@ -261,7 +266,7 @@ def simulate_to_file(
         computed = 0
         for c in range(done, n_chunks):
             if stop_after_chunks is not None and computed >= stop_after_chunks:
-                return _partial_result(path, parts, c, steps, n_chunks, resumed, notes)
+                return partial_result(path, parts, c, steps, n_chunks, resumed, notes)
             k_start, length, n_blocks, remainder, k_local, keep = plan.chunk(c)
             # the chunk is one call of the driver, continuing from the previous chunk's state
             with warnings.catch_warnings():  # one warning for the whole run, when it is merged
@@ -295,16 +300,16 @@ def simulate_to_file(
                     variables[name] = (("time",), np.asarray(a)[keep])
             variables["monitor"] = (("monitor_slot",), watch)
             for i, leaf in enumerate(jax.tree_util.tree_leaves(state)):
-                a = _storage(leaf)
+                a = storable_array(leaf)
                 variables[f"state_{i}"] = (tuple(f"state_{i}_d{j}" for j in range(a.ndim)), a)
             its = np.asarray(its)
             part_attrs = {
                 "result": RESULT_SOLVER_FAILED if fail_k >= 0 else 0, "failed_step": failed_step,
                 "residual": float(fail_res), "iterations_total": int(its[0]), "iterations_max": int(its[1]),
-                _CHUNK_ATTR: c, _SPEC_HASH_ATTR: spec_hash, "backend": sol.backend,
+                CHUNK_ATTR: c, SPEC_HASH_ATTR: spec_hash, "backend": sol.backend,
             }
-            with _DeferredInterrupt() as interrupt:
-                atomic_write(_part_path(parts, c), lambda tmp: _write_part(tmp, variables, part_attrs), checked=True)
+            with DeferredInterrupt() as interrupt:
+                atomic_write(part_path(parts, c), lambda tmp: write_part(tmp, variables, part_attrs), checked=True)
             if interrupt.pending:  # Ctrl-C while the part was written: it is committed, stop here
                 raise KeyboardInterrupt
             computed += 1
@@ -314,7 +319,7 @@ def simulate_to_file(
                 n_chunks = c + 1
                 break
 
-        result = _finish(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant,
+        result = merge_parts(path, parts, n_chunks, resumed, steps, method, system, h, t0, attrs, throw, energy_invariant,
                          overwrite=overwrite, plan=plan, spec=canonical, notes=notes)
         return _announce(result, method, system)
 

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from ..files import OutputError, format_bytes, free_bytes, is_owned_dir
-from .parts import _part_indices
+from .parts import part_indices
 
 #: The largest destination :func:`simulate_to_file` writes unless told otherwise (`max_bytes`):
 #: 64 GiB.
@@ -28,7 +28,9 @@ def _estimate(system, b0, steps: int, save_every: int, n_chunks: int, gni_family
     return nodes, per_node, nodes * per_node + _FILE_OVERHEAD
 
 
-def _check_size(system, b0, steps, save_every, n_chunks, gni_family, path: Path, parts: Path, max_bytes) -> None:
+def check_size(system, b0, steps, save_every, n_chunks, gni_family, path: Path, parts: Path, max_bytes) -> None:
+    """:class:`OutputError` when the destination `path` would exceed `max_bytes`, or the destination and
+    the parts (those in `parts` counted) would not fit on the disk."""
     nodes, per_node, size = _estimate(system, b0, steps, save_every, n_chunks, gni_family)
     allow = "pass max_bytes=None to write it anyway"
     if size > max_bytes:
@@ -40,7 +42,7 @@ def _check_size(system, b0, steps, save_every, n_chunks, gni_family, path: Path,
     parts_size = size - 8 * nodes + n_chunks * _FILE_OVERHEAD  # the parts: no node index, a header each
     existing = 0
     if is_owned_dir(parts):
-        for _, f in _part_indices(parts):
+        for _, f in part_indices(parts):
             try:
                 existing += f.stat().st_size
             except OSError:

@@ -8,6 +8,7 @@ import os
 import re
 from typing import Any
 
+from ..extras import require
 from .errors import SweepError, SweepFailure, why
 
 __all__ = ["DEFAULT_CONNECT_TIMEOUT", "Cluster", "scheduler_address"]
@@ -93,6 +94,7 @@ class Cluster:
         self.client = self.cluster = None
 
     def __enter__(self):
+        require("distributed", extra="sweeps")
         import dask
         from distributed import Client, LocalCluster
 

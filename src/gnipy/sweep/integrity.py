@@ -18,21 +18,13 @@ from typing import Any
 
 import numpy as np
 
-from .. import files, schema
 from .errors import SweepError, SweepWarning, damaged, why
 from .grid import ChunkLayout, GridAxis, describe_members
 from .plan import MEMBER_VARS, Plan
-from .store import MAX_ZARR_CHUNK_BYTES, array_names, check_arrays, check_coordinates, old_format, \
+from .store import MAX_ZARR_CHUNK_BYTES, array_names, check_arrays, check_coordinates, digest, old_format, \
     open_group, read_done
 
 __all__ = ["digest", "verify_chunks", "resume"]
-
-
-def digest(data: Mapping[str, np.ndarray]) -> bytes:
-    """The SHA-256 digest (32 bytes) of a chunk's data, each array in its stored dtype, with the
-    chunk's members along the first axis."""
-    typed = {name: np.asarray(a, dtype=schema.VARIABLES[name].dtype) for name, a in data.items()}
-    return bytes.fromhex(files.array_checksum(typed).partition(":")[2])
 
 
 def verify_chunks(arrays, names, layout: ChunkLayout, done: np.ndarray,

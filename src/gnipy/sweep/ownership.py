@@ -18,11 +18,12 @@ import stat
 from pathlib import Path
 from typing import Any
 
+from ..extras import require
 from .. import files
-from .errors import REMOVE_IT, SweepError, damaged
+from .errors import REMOVE_IT, START_AFRESH, SweepError, damaged, why
 from .plan import FORMAT, MEMBER_VARS, OLD_FORMATS
 
-__all__ = ["PURPOSE", "OWNER_ATTR", "check_out", "is_store"]
+__all__ = ["PURPOSE", "OWNER_ATTR", "check_out", "is_store", "open_group"]
 
 #: The purpose gnipy records in a sweep store (in its attribute :data:`OWNER_ATTR`).
 PURPOSE = "gnipy sweep store"
@@ -37,7 +38,7 @@ META_FILES = ("zarr.json", ".zgroup", ".zattrs", ".zmetadata")
 
 def read_attrs(path: Path) -> dict[str, Any] | None:
     """The attributes of the zarr group at `path`, or None if it is not a readable zarr group."""
-    import zarr
+    zarr = require("zarr", extra="sweeps")
 
     if not (path / "zarr.json").is_file() and not (path / ".zgroup").is_file():
         return None
@@ -147,12 +148,30 @@ def remove_store(path: Path) -> None:
         pass
 
 
+def open_group(path: Path, argument: str, mode: str = "r"):
+    """`(group, spec)` of the store at `path` (its own metadata, not the consolidated copy), or
+    a SweepError saying what is damaged."""
+    zarr = require("zarr", extra="sweeps")
+
+    hint = START_AFRESH if is_ours(path) else REMOVE_IT
+    if not (path / "zarr.json").is_file() and not (path / ".zgroup").is_file():
+        raise damaged(argument, path, "its metadata file zarr.json is missing", hint)
+    try:
+        group = zarr.open_group(str(path), mode=mode, use_consolidated=False)
+        attrs = dict(group.attrs)
+    except Exception as e:  # noqa: BLE001 - any failure to parse the metadata
+        raise damaged(argument, path, f"its metadata (zarr.json) cannot be read ({why(e)})", hint) from None
+    spec = parse_spec(attrs.get("sweep_spec"))
+    if spec is None:
+        raise damaged(argument, path, "its attribute sweep_spec (the sweep's specification) is missing or "
+                      "unreadable", hint)
+    return group, spec
+
+
 def check_out(out, overwrite: bool) -> tuple[Path, str]:
     """The store's path and what to do there: `"create"` (nothing there, or an empty
     directory), `"replace"` (a store gnipy wrote, with overwrite) or `"resume"`. Changes
     nothing; SweepError (`out: ...`) for a destination gnipy must not write."""
-    from .store import open_group
-
     if not isinstance(out, (str, os.PathLike)) or not os.fspath(out):
         raise SweepError(f"out: expected a path to a directory DIR.zarr, got {out!r}")
     path = Path(os.fspath(out)).expanduser()

@@ -14,6 +14,7 @@ import numpy as np
 
 from .. import schema
 from ..errors import InputError
+from ..inputs import positive_integer
 from ..files import format_bytes, free_bytes
 from .errors import SweepError
 from .grid import ChunkLayout, GridAxis, as_axes, grid_columns
@@ -88,10 +89,8 @@ class Plan:
 
 
 def positive_int(argument: str, value) -> int:
-    """`value` as an int, or a SweepError naming `argument`."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
-        raise SweepError(f"{argument}: must be a positive integer, got {value!r}")
-    return int(value)
+    """`value` as an int of at least 1, or a SweepError naming `argument` (:func:`gnipy.inputs.positive_integer`)."""
+    return positive_integer(argument, value, SweepError)
 
 
 def saved_steps(steps: int, save_every: int) -> np.ndarray:

@@ -6,6 +6,7 @@ import os
 import warnings
 from pathlib import Path
 
+from ..extras import require
 from .errors import SweepError, SweepWarning
 from .grid import axes_of, describe_members
 from .integrity import list_bad, verify_chunks
@@ -85,7 +86,7 @@ def open_sweep(path, *, allow_incomplete: bool = False, verify: bool = True):
             arrays, (with `verify`) a damaged chunk, or (without `allow_incomplete`) an
             incomplete sweep.
     """
-    import xarray as xr
+    xr = require("xarray", extra="sweeps")
 
     p = Path(os.fspath(path)).expanduser()
     spec, layout, arrays, names = _inspect(p, "path")

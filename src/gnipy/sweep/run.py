@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..extras import check, require
 from .. import files
 from ..errors import InputError, QualitativeFailureWarning
 from . import plan as _plan
@@ -94,6 +95,7 @@ class _Progress:
     `progress(chunks_done, chunks_total[, description])`."""
 
     def __init__(self, progress, total: int, done: int):
+        require("rich", extra="sweeps")
         from rich.console import Console
         from rich.progress import BarColumn, MofNCompleteColumn, Progress, SpinnerColumn, TextColumn
         from rich.progress import TimeElapsedColumn, TimeRemainingColumn
@@ -216,6 +218,7 @@ def run_sweep(
         SweepFailure: a chunk failed on the cluster (e.g. a worker died), or the local
             cluster did not start.
     """
+    check("dask", "distributed", "zarr", "xarray", "rich", extra="sweeps")  # before anything is written
     t_start = time.perf_counter()
     address = None
     for name, value in (("project_v0", project_v0), ("overwrite", overwrite)):
@@ -327,6 +330,7 @@ def _failures(arrays, plan, done: np.ndarray):
 def _compute(path, plan, todo, c, bar: _Progress) -> tuple[int, int]:
     """Submit the chunks `todo` to the client `c`, write each as it completes; returns
     `(chunks, members)` computed."""
+    require("distributed", extra="sweeps")
     from distributed import as_completed
 
     from ..integrators.base import MethodError

@@ -21,13 +21,14 @@ from typing import Any
 
 import numpy as np
 
+from ..extras import require
 from .. import files, schema
-from .errors import REMOVE_IT, START_AFRESH, SweepError, SweepFailure, damaged, why
+from .errors import SweepError, SweepFailure, damaged, why
 from .grid import axes_of
-from .ownership import CHUNK_VARS, COORDS, OWNER_ATTR, PURPOSE, is_ours, parse_spec
+from .ownership import CHUNK_VARS, COORDS, OWNER_ATTR, PURPOSE, open_group
 from .plan import FORMAT, MEMBER_VARS, Plan, layout_of, saved_steps
 
-__all__ = ["create_store", "write_chunk", "open_group", "check_arrays", "check_coordinates", "read_done"]
+__all__ = ["digest", "create_store", "write_chunk", "open_group", "check_arrays", "check_coordinates", "read_done"]
 
 # the largest zarr chunk of a per-member variable, and of a grid axis (values)
 MAX_ZARR_CHUNK_BYTES = 64 * 2**20
@@ -42,11 +43,12 @@ def array_names(member_vars, grid_names) -> tuple[str, ...]:
 def template(plan: Plan):
     """The full-size Dataset of the store: lazily defined (dask) per-member arrays, whose zarr
     chunks are the sweep's chunks along the grid axes."""
+    require("dask", extra="sweeps")
     import dask.array as da
-    import xarray as xr
+    xr = require("xarray", extra="sweeps")
 
     from ..version import __version__
-    from ..io import _jax_version, cf_attributes
+    from ..file_attributes import cf_attributes, jax_version
 
     grid = tuple(a.name for a in plan.axes)
     layout = plan.layout
@@ -109,7 +111,7 @@ def template(plan: Plan):
         "backend": "per member: the variable native (the native backend where the step lowers and a chunk "
                    "has enough trajectory-steps, else XLA)",
         "gnipy_version": __version__,
-        "jax_version": _jax_version(),
+        "jax_version": jax_version(),
         "created": created,
         "store_arrays": json.dumps(sorted(ds.variables)),
     })
@@ -152,11 +154,16 @@ def create_store(path: Path, plan: Plan, mode: str) -> None:
             remove_store(old)
 
 
+def digest(data: Mapping[str, np.ndarray]) -> bytes:
+    """The SHA-256 digest (32 bytes) of a chunk's data, each array in its stored dtype, with the
+    chunk's members along the first axis."""
+    typed = {name: np.asarray(a, dtype=schema.VARIABLES[name].dtype) for name, a in data.items()}
+    return bytes.fromhex(files.array_checksum(typed).partition(":")[2])
+
+
 def write_chunk(path: Path, plan: Plan, index: int, result: Mapping[str, np.ndarray]) -> None:
     """Write one chunk's data, then its checksum, then (last) its `chunk_done` flag."""
-    import zarr
-
-    from .integrity import digest
+    zarr = require("zarr", extra="sweeps")
 
     a, b = plan.member_range(index)
     data = {}
@@ -181,26 +188,6 @@ def write_chunk(path: Path, plan: Plan, index: int, result: Mapping[str, np.ndar
     group["chunk_done"][index] = True
 
 
-def open_group(path: Path, argument: str, mode: str = "r"):
-    """`(group, spec)` of the store at `path` (its own metadata, not the consolidated copy), or
-    a SweepError saying what is damaged."""
-    import zarr
-
-    hint = START_AFRESH if is_ours(path) else REMOVE_IT
-    if not (path / "zarr.json").is_file() and not (path / ".zgroup").is_file():
-        raise damaged(argument, path, "its metadata file zarr.json is missing", hint)
-    try:
-        group = zarr.open_group(str(path), mode=mode, use_consolidated=False)
-        attrs = dict(group.attrs)
-    except Exception as e:  # noqa: BLE001 - any failure to parse the metadata
-        raise damaged(argument, path, f"its metadata (zarr.json) cannot be read ({why(e)})", hint) from None
-    spec = parse_spec(attrs.get("sweep_spec"))
-    if spec is None:
-        raise damaged(argument, path, "its attribute sweep_spec (the sweep's specification) is missing or "
-                      "unreadable", hint)
-    return group, spec
-
-
 def stored_array_names(group) -> tuple[str, ...] | None:
     """The arrays the store was created with (None if its attribute store_arrays is unreadable)."""
     try:
@@ -213,7 +200,7 @@ def stored_array_names(group) -> tuple[str, ...] | None:
 def check_arrays(argument: str, path: Path, group, names, spec) -> dict[str, Any]:
     """Open every array `names` of the store, check its leading shape (the grid, the chunks or
     the saved nodes); return them (SweepError naming the first one damaged)."""
-    import zarr
+    zarr = require("zarr", extra="sweeps")
 
     axes = axes_of(spec)
     grid = tuple(a.count for a in axes)
