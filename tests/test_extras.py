@@ -69,7 +69,9 @@ def test_require_names_the_extra_and_its_pip_line(monkeypatch):
         require("xarray", extra="files")
     assert str(info.value) == "gnipy's file output needs xarray: pip install 'gnipy[files]'"
     assert (info.value.extra, info.value.name) == ("files", "xarray")
+    # rich and rich.progress absent (an earlier test of the session may have imported them)
     monkeypatch.setitem(sys.modules, "rich", None)
+    monkeypatch.setitem(sys.modules, "rich.progress", None)
     with pytest.raises(ImportError, match=r"^gnipy's progress bar needs rich: pip install 'gnipy\[cli\]'$"):
         require("rich.progress", extra="cli", what="progress bar")
     with pytest.raises(ValueError, match="unknown extra"):
