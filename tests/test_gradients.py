@@ -55,6 +55,7 @@ def _v0_gradient(method):
     return f, v0, np.asarray(jax.grad(f)(jnp.asarray(v0)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", FLAT)
 def test_gradient_wrt_the_initial_velocity_matches_central_differences(method):
     f, v0, g = _v0_gradient(method)
@@ -67,6 +68,7 @@ def test_gradient_wrt_the_initial_velocity_matches_central_differences(method):
         np.testing.assert_allclose(np.asarray(jax.jacfwd(f)(jnp.asarray(v0))), g, rtol=1e-10, atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["gni-trapezoid", "rat"])
 def test_gradient_on_a_group_matches_central_differences(method):
     """Rolling ball on R² × SO(3): Newton's steps (implicit solves) differentiated implicitly."""
@@ -77,6 +79,7 @@ def test_gradient_on_a_group_matches_central_differences(method):
     np.testing.assert_allclose(g, central(f, v0), rtol=1e-6, atol=1e-7)
 
 
+@pytest.mark.slow
 def test_gradient_wrt_a_parameter_and_h():
     """A model parameter (built inside the function: the System is a pytree of its parameters) and
     the step size; the number of steps is fixed."""
@@ -92,6 +95,7 @@ def test_gradient_wrt_a_parameter_and_h():
     np.testing.assert_allclose(float(dh), central(lambda h: f(1.3, float(h[0])), [H])[0], rtol=1e-6, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_jit_of_simulate_equals_the_untransformed_run():
     system = gnipy.make_system("rolling-ball")
     ref = gnipy.simulate(system, "gni-trapezoid", h=H, steps=STEPS, save_every=7)
@@ -124,6 +128,7 @@ def test_a_transformed_run_refuses_what_it_cannot_do():
                                           steps=3).q[-1, 0])(1.0)
 
 
+@pytest.mark.slow
 def test_checkpointed_blocks_give_the_same_gradient(monkeypatch):
     """Reverse mode with the blocks rematerialized (forced by a zero memory budget) equals reverse
     mode keeping every step's residuals (the default for a short run), and both equal central

@@ -230,6 +230,7 @@ def _steps_with_round_trips(method, system, state, h, n):
     return jax.lax.scan(body, state, None, length=n)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["curved-rotor-test", "rolling-ball"])
 def test_n_steps_back_with_minus_h_return_to_the_start(name):
     """σ = identity: Φ₋ₕ = Φₕ⁻¹. Each single round trip is at round-off (a few ulps of the state);

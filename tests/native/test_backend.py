@@ -150,6 +150,7 @@ def test_methods_on_a_group_model_equal_xla(method):
     _assert_agree_or_floor(s, method, a, b, **kw)
 
 
+@pytest.mark.slow
 def test_shortened_last_step_backward_run_states_and_continuation():
     s = gnipy.make_system("chaplygin-sphere")
     a, b = _pair(s, "gni-trapezoid", h=0.01, t_final=7.255, saveat=gnipy.SaveAt(every=100, states=True))
@@ -170,6 +171,7 @@ def test_shortened_last_step_backward_run_states_and_continuation():
     np.testing.assert_array_equal(np.asarray(rest.q[-1]), np.asarray(whole.q[-1]))
 
 
+@pytest.mark.slow
 def test_batch_of_initial_conditions_equals_xla_member_by_member():
     s = gnipy.make_system("rolling-ball")
     q0, v0 = (np.asarray(x, dtype=float) for x in s.defaults[:2])
@@ -186,6 +188,7 @@ def test_batch_of_initial_conditions_equals_xla_member_by_member():
         np.testing.assert_array_equal(np.asarray(b.R[j]), np.asarray(single.R))
 
 
+@pytest.mark.slow
 def test_parameter_batch_is_one_program_equal_to_xla_and_to_single_runs():
     """A batch of systems (parameter values) runs native with the values as inputs of one program:
     equal to the XLA batch to round-off, and member by member the bits of each system's own
@@ -266,6 +269,7 @@ def test_failed_step_is_the_same_on_both_backends():
     assert part.result == 1 and part.failed_step == errs[0].step and len(part.t) == part.failed_step + 1
 
 
+@pytest.mark.slow
 def test_auto_chooses_by_run_length_and_records_it():
     s = gnipy.make_system("vertical-disk")
     short = gnipy.simulate(s, "gni-midpoint", h=0.01, steps=100, save_every=100)
