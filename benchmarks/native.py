@@ -44,6 +44,7 @@ import jax
 import jax.numpy as jnp
 from benchmarks import numba_gni
 from gnipy.methods import get_method
+from gnipy import monitor
 from gnipy.native import backend as native_backend
 from gnipy.preparation import prepare
 spec = json.loads(sys.argv[1])
@@ -76,8 +77,12 @@ for name, method, nb_name in spec["cases"]:
     prep = prepare(system, get_method(method), qq, vv, None, False, None)
     st = prep.method.init(prep.core, prep.b0, jnp.asarray(prep.v0), h)
     loop = native_backend.native_loop(prep.method, prep.core, st)
+    # the carry as simulate gives it (gnipy.native.backend.run_native): the state, the counters and
+    # the monitor of a run of S steps, which checks every node (without it the loop would read and
+    # write past the end of the carry)
     carry0 = np.concatenate([np.ravel(np.asarray(x, np.float64)) for x in jax.tree_util.tree_leaves(st)]
-                            + [np.array([0.0, -1.0, 0.0, 0.0, 0.0])])
+                            + [np.array([0.0, -1.0, 0.0, 0.0, 0.0]),
+                               np.asarray(monitor.with_end(monitor.initial(h, S * h, 0.0), S), np.float64)])
     loop.run(carry0, h, [S])
     hand, loop_t, nat, nat1, xla, xla1 = [], [], [], [], [], []
     for _ in range(reps):  # interleaved

@@ -40,8 +40,9 @@ def final_value(system, method, **kw):
 
 
 # one of each family (the GNI with an explicit and an implicit l_d, the paper's schemes, the comparators);
-# the others share their step code
-FLAT = ["gni-euler-a", "gni-midpoint", "euler-ab", "shake", "rattle", "dla", "mp"]
+# the others share their step code (euler-a, euler-b and euler-ab are rattle's kicks and drift,
+# paper_schemes._kick_drift_kick, with other signs and step fractions)
+FLAT = ["gni-euler-a", "gni-midpoint", "shake", "rattle", "dla", "mp"]
 
 
 @functools.cache
@@ -54,15 +55,20 @@ def _v0_gradient(method):
     return f, v0, np.asarray(jax.grad(f)(jnp.asarray(v0)))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", FLAT)
 def test_gradient_wrt_the_initial_velocity_matches_central_differences(method):
     f, v0, g = _v0_gradient(method)
     expected = central(f, v0)
     np.testing.assert_allclose(g, expected, rtol=1e-6, atol=1e-7)
-    if method in ("gni-midpoint", "dla"):  # forward mode too, on two families (one compile each; the rest share the rules)
+    if method == "dla":
+        # forward mode too, once: every implicit solve's derivative is one custom JVP
+        # (gnipy.integrators.base.implicit_solve), which reverse mode linearizes and transposes, so
+        # the gradients above run the same rule (one compile, the cheapest of the implicit families)
         np.testing.assert_allclose(np.asarray(jax.jacfwd(f)(jnp.asarray(v0))), g, rtol=1e-10, atol=1e-12)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["gni-trapezoid", "rat"])
 def test_gradient_on_a_group_matches_central_differences(method):
     """Rolling ball on R² × SO(3): Newton's steps (implicit solves) differentiated implicitly."""
@@ -73,6 +79,7 @@ def test_gradient_on_a_group_matches_central_differences(method):
     np.testing.assert_allclose(g, central(f, v0), rtol=1e-6, atol=1e-7)
 
 
+@pytest.mark.slow
 def test_gradient_wrt_a_parameter_and_h():
     """A model parameter (built inside the function: the System is a pytree of its parameters) and
     the step size; the number of steps is fixed."""
@@ -88,6 +95,7 @@ def test_gradient_wrt_a_parameter_and_h():
     np.testing.assert_allclose(float(dh), central(lambda h: f(1.3, float(h[0])), [H])[0], rtol=1e-6, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_jit_of_simulate_equals_the_untransformed_run():
     system = gnipy.make_system("rolling-ball")
     ref = gnipy.simulate(system, "gni-trapezoid", h=H, steps=STEPS, save_every=7)
@@ -120,6 +128,7 @@ def test_a_transformed_run_refuses_what_it_cannot_do():
                                           steps=3).q[-1, 0])(1.0)
 
 
+@pytest.mark.slow
 def test_checkpointed_blocks_give_the_same_gradient(monkeypatch):
     """Reverse mode with the blocks rematerialized (forced by a zero memory budget) equals reverse
     mode keeping every step's residuals (the default for a short run), and both equal central

@@ -14,6 +14,9 @@ import gnipy
 import gnipy.analysis
 from gnipy.analysis import ConvergenceStudy, convergence_study, exact_errors, fitted_order, invariant_drifts
 
+#: numerics (errors, orders, drifts), not verdicts: simulate checks the saved nodes only (tests/conftest.py)
+CHECK_EVERY_NODE = False
+
 DISK = gnipy.get_model("vertical-disk")
 PARTICLE = gnipy.get_model("nonholonomic-particle")
 

@@ -17,6 +17,7 @@ import pytest
 import gnipy
 # equinox's filter_jit with gnipy's compiler options (simulate's own): about half the compile time
 from gnipy.compilation import jit
+from gnipy.experiments.identities import constrained_tilde_states
 from gnipy.integrators import paper_schemes as ps
 from gnipy.integrators.base import MethodError
 
@@ -148,30 +149,10 @@ def test_composition_is_the_composed_gni_and_not_rattle(run, case):
 # --------------------------------------------------------------------------------------------
 # Theorem 5.2: the nonholonomic Euler A and B methods are each other's adjoint
 # --------------------------------------------------------------------------------------------
-@jit
-def _project(system, q, p, h, sign):
-    """p̃ projected M⁻¹-orthogonally onto μM⁻¹(p̃ + sign (h/2) V_q − Π) = 0, for a batch (compiled once
-    per system: eagerly, the vmapped solves cost seconds of small compilations)."""
-
-    def project(q, p):
-        M, mu = system.metric(q), system.mu(q)
-        r = mu @ jnp.linalg.solve(M, p + sign * 0.5 * h * system.potential_gradient(q) - system.Pi(q))
-        C = mu @ jnp.linalg.solve(M, mu.T)
-        return p - mu.T @ jnp.linalg.solve(C, r)
-
-    return jax.vmap(project)(q, p)
-
-
 def _random_states(system, n_states, h, sign, seed):
-    """Random (q, p̃, λ̃) with μM⁻¹(p̃ + sign (h/2) V_q − Π) = 0 (p̃ projected M⁻¹-orthogonally)."""
-    rng = np.random.default_rng(seed)
-    n = system.n
-    m = system.num_constraints(np.zeros(n))
-    q = jnp.asarray(rng.normal(size=(n_states, n)))
-    p = jnp.asarray(rng.normal(size=(n_states, n)))
-    lam = jnp.asarray(rng.normal(size=(n_states, m)))
-    p = _project(system, q, p, jnp.asarray(h, dtype=jnp.float64), jnp.asarray(sign, dtype=jnp.float64))
-    return ps.TildeState(q, p, lam)
+    """Random (q, p̃, λ̃) (standard normal) with μM⁻¹(p̃ + sign (h/2) V_q − Π) = 0 (p̃ projected
+    M⁻¹-orthogonally, in one compiled program): the theorem table's sampler."""
+    return constrained_tilde_states(system, n_states, h, sign, seed)
 
 
 @jit

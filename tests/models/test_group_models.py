@@ -41,11 +41,12 @@ def _setup(name, **over):
 
 
 def invariant_series(spec, p, sol, name):
-    """The invariant `name` of `spec` at every saved node of `sol` (R-dependent models take R)."""
+    """The invariant `name` of `spec` at every saved node of `sol` (R-dependent models take R).
+    Compiled (one small program; evaluated eagerly the vmapped invariant costs more)."""
     f = spec.invariants[name]
     if spec.build(p).depends_on_orientation:
-        return _np(jax.vmap(lambda q, v, R: f(p, q, v, R))(sol.q, sol.v, sol.R))
-    return _np(jax.vmap(lambda q, v: f(p, q, v))(sol.q, sol.v))
+        return _np(jax.jit(jax.vmap(lambda q, v, R: f(p, q, v, R)))(sol.q, sol.v, sol.R))
+    return _np(jax.jit(jax.vmap(lambda q, v: f(p, q, v)))(sol.q, sol.v))
 
 
 def drift_and_amplitude(t, x):
@@ -150,7 +151,7 @@ def test_sphere_reference_conserves_energy_and_contact_momentum(sphere_reference
     R, W = _np(sol.R), _np(sol.v)[:, 2:]
     gam = R[:, 2, :]
     M = np.array([p["I1"], p["I2"], p["I3"]]) * W + p["m"] * p["r"] ** 2 * np.cross(gam, np.cross(W, gam))
-    Mb = _np(jax.vmap(lambda q, v, R_: chaplygin_sphere.contact_momentum_body(p, q, v, R_))(sol.q, sol.v, sol.R))
+    Mb = _np(jax.jit(jax.vmap(lambda q, v, R_: chaplygin_sphere.contact_momentum_body(p, q, v, R_)))(sol.q, sol.v, sol.R))
     np.testing.assert_allclose(Mb, M, atol=1e-13)
     assert np.ptp(np.sum(M * gam, axis=1)) <= 1e-10 and np.ptp(np.sum(M * M, axis=1)) <= 1e-10
     assert np.max(np.abs(_np(sol.constraint_residual))) <= 1e-10
@@ -163,7 +164,7 @@ def test_sphere_reference_on_a_turning_table(sphere_references):
     assert np.ptp(E) > 1e-2 * abs(E[0])  # the table does work on the ball
     J = invariant_series(spec, p, sol, "jacobi")
     assert np.max(np.abs(J - J[0])) <= 1e-10 * max(1.0, abs(J[0]))
-    K = _np(jax.vmap(lambda q, v, R: chaplygin_sphere.contact_momentum_space(p, q, v, R))(sol.q, sol.v, sol.R))
+    K = _np(jax.jit(jax.vmap(lambda q, v, R: chaplygin_sphere.contact_momentum_space(p, q, v, R)))(sol.q, sol.v, sol.R))
     assert np.max(np.abs(K - K[0])) <= 1e-10 * max(1.0, np.max(np.abs(K[0])))
 
 
@@ -208,6 +209,7 @@ def test_sphere_gni_keeps_contact_momentum_and_rolling(sphere_long_runs):
 # --------------------------------------------------------------------------------------------
 # Chaplygin top
 # --------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_top_reference_conserves_energy_and_jacobi():
     spec, p, sys_, _, _ = _setup("chaplygin-top")
     sol = gnipy.simulate(sys_, "reference", h=H_REF, t_final=T_REF)  # the documented tilted start
@@ -223,6 +225,7 @@ def test_top_reference_conserves_energy_and_jacobi():
     assert np.ptp(_np(sol.energy)) > 1e-2 and np.max(np.abs(J - J[0])) <= 1e-10 * max(1.0, abs(J[0]))
 
 
+@pytest.mark.slow
 def test_top_gni_energy_is_bounded():
     spec, p, sys_, q0, v0 = _setup("chaplygin-top")
     dev = {}
@@ -230,7 +233,7 @@ def test_top_gni_energy_is_bounded():
         sol = gnipy.simulate(sys_, "gni-trapezoid", h=h, steps=5000, save_every=10)
         E = _np(sol.energy)
         drift, amp, dev[h] = drift_and_amplitude(sol.t, E)
-        T0 = 0.5 * _np(v0) @ _np(sys_.metric(sys_.initial_point(q0, spec.R0))) @ _np(v0)
+        T0 = 0.5 * _np(v0) @ _np(jax.jit(sys_.metric)(sys_.initial_point(q0, spec.R0))) @ _np(v0)
         scale = T0 + p["m"] * p["g"] * p["a"]  # the kinetic energy and the range of the potential
         nu = max(max_step_rate(sol), np.sqrt(p["g"] / p["r"]))  # fastest rate: spin or rocking
         assert dev[h] <= scale * (h * nu) ** 2, (h, dev[h])

@@ -8,6 +8,7 @@ the system agree; h is traced, so e.g. (h = 0.1, 200 steps) and (h = 0.0125, 200
 
 from types import SimpleNamespace
 
+import jax
 import jax.numpy as jnp
 import jax.tree_util as jtu
 import numpy as np
@@ -175,9 +176,11 @@ def test_metric_constraints_and_initial_conditions(example):
     b0, _ = s.check(q0, v0)  # mechanical type, rank, constraints
     assert np.array_equal(_np(b0.R), np.eye(3))
     b = Point(jnp.asarray([0.3, -0.7]), jnp.asarray(SO3().exp(jnp.array([0.4, -0.2, 1.0]))))
-    np.testing.assert_allclose(_np(s.metric(b)), np.diag([m, m, p["I1"], p["I2"], p["I3"]]), atol=1e-15)
-    np.testing.assert_allclose(_np(s.mu(b)), [[1, 0, 0, -r, 0], [0, 1, r, 0, 0]], atol=0)
-    np.testing.assert_allclose(_np(s.Pi(b)), [m * W * 0.7, m * W * 0.3, 0, 0, 0], atol=1e-15)  # (−mΩy, mΩx)
+    # one compiled program (eagerly, the metric's jax.hessian costs ~1.4 s of small compilations)
+    G, mu, Pi = map(_np, jax.jit(lambda b: (s.metric(b), s.mu(b), s.Pi(b)))(b))
+    np.testing.assert_allclose(G, np.diag([m, m, p["I1"], p["I2"], p["I3"]]), atol=1e-15)
+    np.testing.assert_allclose(mu, [[1, 0, 0, -r, 0], [0, 1, r, 0, 0]], atol=0)
+    np.testing.assert_allclose(Pi, [m * W * 0.7, m * W * 0.3, 0, 0, 0], atol=1e-15)  # (−mΩy, mΩx)
     assert s.has_constant_metric(b0)
 
 
@@ -266,12 +269,18 @@ def test_the_four_discrete_lagrangian_families_coincide(ex2_runs):
     families = [gnipy.EulerA(), gnipy.EulerB(), gnipy.Trapezoid(), gnipy.Midpoint()]
     rng = np.random.default_rng(3)
     h = 0.1
+
+    @jax.jit  # one compiled program for the three points (eagerly: seconds of small compilations)
+    def values_and_transforms(x, w, z):
+        b0 = Point(x, SO3().exp(w))
+        return ([ld(s, b0, z, h) for ld in families],
+                [space.legendre_minus(lambda b, zz, ld=ld: ld(s, b, zz, h), b0, z) for ld in families],
+                [space.legendre_plus(lambda b, zz, ld=ld: ld(s, b, zz, h), b0, z) for ld in families])
+
     for _ in range(3):
-        b0 = Point(jnp.asarray(rng.standard_normal(2)), SO3().exp(jnp.asarray(rng.standard_normal(3))))
-        z = jnp.asarray(rng.standard_normal(5))
-        vals = [float(ld(s, b0, z, h)) for ld in families]
-        fm = [_np(space.legendre_minus(lambda b, zz, ld=ld: ld(s, b, zz, h), b0, z)) for ld in families]
-        fp = [_np(space.legendre_plus(lambda b, zz, ld=ld: ld(s, b, zz, h), b0, z)) for ld in families]
+        x, w, z = rng.standard_normal(2), rng.standard_normal(3), rng.standard_normal(5)
+        vals, fm, fp = values_and_transforms(x, w, z)
+        vals, fm, fp = [float(v) for v in vals], [_np(f) for f in fm], [_np(f) for f in fp]
         # equal up to round-off: 1e-14 relative to the largest component (the transforms reach ~10²
         # here, where one ulp is already 3e-14)
         tol_m, tol_p = 1e-14 * max(1.0, np.max(np.abs(fm[0]))), 1e-14 * max(1.0, np.max(np.abs(fp[0])))
@@ -395,6 +404,7 @@ def test_left_reconstruction_is_not_the_attitude_and_changes_only_R(ball_and_sph
     assert "body velocity" in left.orientation and "space velocity" in right.orientation
 
 
+@pytest.mark.slow
 def test_orientation_attribute_says_whether_R_is_physical():
     s, q0, v0 = rb.example_2()  # unequal moments: the paper's simplified model
     assert s.reconstruction == "right"

@@ -80,31 +80,50 @@ def _assert_agree(a, b, tol=1e-12):
 
 
 #: The structures the method tests below (the turning table: affine, R^n; Suslov: SO(3)) do not
-#: cover, one zoo model each: SE(2) (the sleigh, with its default, the discrete gradient),
-#: constraints that depend on the orientation R on SO(3) (Veselova, with its default, Suzuki's
-#: composition) and on R² × SO(3) with an affine part (the Chaplygin sphere, with gni-trapezoid:
-#: its default, Suzuki's composition of gni-trapezoid, has the same primitives, tests/native/
-#: test_primitives.py, and takes about 10 s of CPU to compile on XLA). Linear constraints on R^n:
-#: the wall of the failure tests below.
-ZOO_CASES = [("chaplygin-sleigh-se2", gnipy.get_model("chaplygin-sleigh-se2").default_method),
-             ("veselova", gnipy.get_model("veselova").default_method), ("chaplygin-sphere", "gni-trapezoid")]
-#: The methods on the turning table: all but the continuous reference, rat (on Suslov below), and
-#: Suzuki's composition of gni-trapezoid (on Veselova; here Yoshida's of the same base stands in
-#: for it, the two differing in their coefficients only).
-AFFINE_METHODS = [m for m in gnipy.method_names() if m not in ("reference", "rat", "suzuki4-gni-trapezoid")]
-GROUP_METHODS = ["gni-trapezoid", "gni-midpoint", "sgni-midpoint", "dla", "discrete-gradient", "yoshida4-gni-trapezoid",
-                 "rat"]
+#: cover, one zoo model each, with every default method: linear constraints on R^n (the Chaplygin
+#: sleigh, with its default, Kahan–Li's composition of mp: the default of seven models), SE(2)
+#: (the sleigh on SE(2), with its default, the discrete gradient), constraints that depend on the
+#: orientation R on SO(3) (Veselova, with its default, Suzuki's composition of gni-trapezoid).
+#: Constraints that depend on R on R² × SO(3), with an affine part: the Chaplygin sphere of
+#: test_shortened_last_step_backward_run_states_and_continuation, with gni-trapezoid (its default,
+#: Suzuki's composition of it, has the same primitives, tests/native/test_primitives.py, and takes
+#: about 10 s of CPU to compile on XLA).
+ZOO_CASES = [(model, gnipy.get_model(model).default_method)
+             for model in ("chaplygin-sleigh", "chaplygin-sleigh-se2", "veselova")]
+#: The methods on the turning table, one per step code: of methods whose steps are one code with
+#: other constants, one runs here: gni-euler-a for gni-euler-b (the GNI's step with the mirror
+#: discrete Lagrangian, explicit like it on this model), rattle for euler-a and euler-b
+#: (paper_schemes._kick_drift_kick with another sign), and Yoshida's 3-stage composition of
+#: gni-trapezoid for Suzuki's 5 stages (Composition.step with the same base and other
+#: coefficients; Suzuki's runs on Veselova, Kahan–Li's of mp on the sleigh, ZOO_CASES). Not here:
+#: the continuous reference (not run natively), and what runs on Suslov below (rat, sgni-midpoint).
+AFFINE_METHODS = ["gni-euler-a", "gni-trapezoid", "gni-midpoint", "sgni-trapezoid", "euler-ab", "shake", "rattle",
+                  "dla", "mp", "discrete-gradient", "yoshida4-gni-trapezoid"]
+#: The methods on Suslov (SO(3)): those with a group step of their own (gni-trapezoid on a group
+#: runs on the Chaplygin sphere, ZOO_CASES; the compositions' step does not depend on the space).
+GROUP_METHODS = ["gni-midpoint", "sgni-midpoint", "dla", "discrete-gradient", "rat"]
+#: the methods whose step is another's with other constants (AFFINE_METHODS)
+SAME_STEP_AS = {"gni-euler-b": "gni-euler-a", "euler-a": "rattle", "euler-b": "rattle"}
 
 
 def test_the_cases_cover_every_method_every_default_and_every_structure():
     zoo_methods = {method for _, method in ZOO_CASES}
-    assert set(gnipy.method_names()) - {"reference"} == set(AFFINE_METHODS) | set(GROUP_METHODS) | zoo_methods
-    assert {gnipy.get_model(m).default_method for m in gnipy.model_names()} <= set(AFFINE_METHODS) | zoo_methods
-    systems = [gnipy.make_system(m) for m in [m for m, _ in ZOO_CASES] + ["rotating-table-ball", "suslov"]]
+    run = set(AFFINE_METHODS) | set(GROUP_METHODS) | zoo_methods
+    assert set(gnipy.method_names()) - {"reference"} == run | set(SAME_STEP_AS)
+    assert set(SAME_STEP_AS.values()) <= run
+    from gnipy.integrators.paper_schemes import _TildeScheme
+
+    for method, stand_in in SAME_STEP_AS.items():  # one class (or two of the paper's tilde schemes), one base
+        a, b = gnipy.get_method(method), gnipy.get_method(stand_in)
+        assert type(a) is type(b) or isinstance(a, _TildeScheme) and isinstance(b, _TildeScheme), method
+        assert type(getattr(a, "base", None)) is type(getattr(b, "base", None)), method
+    assert {gnipy.get_model(m).default_method for m in gnipy.model_names()} <= run
+    systems = [gnipy.make_system(m)
+               for m in [m for m, _ in ZOO_CASES] + ["rotating-table-ball", "suslov", "chaplygin-sphere"]]
     kinds = {(type(s.group).__name__ if s.group is not None else "R^n", s.is_affine, s.depends_on_orientation)
              for s in systems}
-    assert {("R^n", True, False), ("SE2", False, False), ("SO3", False, False), ("SO3", True, True),
-            ("SO3", False, True)} <= kinds
+    assert {("R^n", False, False), ("R^n", True, False), ("SE2", False, False), ("SO3", False, False),
+            ("SO3", True, True), ("SO3", False, True)} <= kinds
 
 
 @pytest.mark.slow
@@ -131,6 +150,7 @@ def test_methods_on_a_group_model_equal_xla(method):
     _assert_agree_or_floor(s, method, a, b, **kw)
 
 
+@pytest.mark.slow
 def test_shortened_last_step_backward_run_states_and_continuation():
     s = gnipy.make_system("chaplygin-sphere")
     a, b = _pair(s, "gni-trapezoid", h=0.01, t_final=7.255, saveat=gnipy.SaveAt(every=100, states=True))
@@ -151,12 +171,13 @@ def test_shortened_last_step_backward_run_states_and_continuation():
     np.testing.assert_array_equal(np.asarray(rest.q[-1]), np.asarray(whole.q[-1]))
 
 
+@pytest.mark.slow
 def test_batch_of_initial_conditions_equals_xla_member_by_member():
     s = gnipy.make_system("rolling-ball")
-    one = gnipy.simulate(s, "gni-trapezoid", h=0.01, steps=1)
+    q0, v0 = (np.asarray(x, dtype=float) for x in s.defaults[:2])
     rng = np.random.default_rng(3)
-    q = np.asarray(one.q[0]) + 0.05 * rng.standard_normal((11, one.q.shape[1]))
-    v = np.broadcast_to(np.asarray(one.v[0]), (11, one.v.shape[1]))
+    q = q0 + 0.05 * rng.standard_normal((11, q0.size))
+    v = np.broadcast_to(v0, (11, v0.size))
     a, b = _pair(s, "gni-trapezoid", q0=q, v0=v, h=0.01, steps=3000, save_every=500, project_v0=True)
     _assert_agree(a, b)
     # each member gets the bits of its own single run (11 = 8 or 4 in vector lanes + the rest alone)
@@ -167,6 +188,7 @@ def test_batch_of_initial_conditions_equals_xla_member_by_member():
         np.testing.assert_array_equal(np.asarray(b.R[j]), np.asarray(single.R))
 
 
+@pytest.mark.slow
 def test_parameter_batch_is_one_program_equal_to_xla_and_to_single_runs():
     """A batch of systems (parameter values) runs native with the values as inputs of one program:
     equal to the XLA batch to round-off, and member by member the bits of each system's own
@@ -247,6 +269,7 @@ def test_failed_step_is_the_same_on_both_backends():
     assert part.result == 1 and part.failed_step == errs[0].step and len(part.t) == part.failed_step + 1
 
 
+@pytest.mark.slow
 def test_auto_chooses_by_run_length_and_records_it():
     s = gnipy.make_system("vertical-disk")
     short = gnipy.simulate(s, "gni-midpoint", h=0.01, steps=100, save_every=100)
@@ -283,10 +306,13 @@ def test_what_runs_on_xla_says_why():
     with pytest.warns(RuntimeWarning, match="forced"):
         sol = gnipy.simulate(forced, "gni-trapezoid", h=0.1, steps=10, controls=np.ones((10, 1)), backend="native")
     assert sol.backend == "xla"
+    # a run traced by a JAX transformation (jax.jit here: jax.grad's trace takes the same way, and
+    # costs five times the compilation)
+    v0 = jnp.asarray(gnipy.get_model("chaplygin-sleigh").v0)
     with pytest.warns(RuntimeWarning, match="transformation"):
-        g = jax.grad(lambda v0: gnipy.simulate(s, "gni-trapezoid", v0=v0, h=0.1, steps=5, backend="native").q[-1, 0])(
-            jnp.asarray(gnipy.get_model("chaplygin-sleigh").v0))
-    assert np.all(np.isfinite(np.asarray(g)))
+        q = jax.jit(lambda v0: gnipy.simulate(s, "gni-trapezoid", v0=v0, h=0.1, steps=5, backend="native").q)(v0)
+    plain = gnipy.simulate(s, "gni-trapezoid", v0=v0, h=0.1, steps=5, backend="xla")
+    np.testing.assert_allclose(np.asarray(q), np.asarray(plain.q), rtol=0, atol=1e-13)
     # a primitive the native lowering does not know: XLA runs, and the warning names it
     cum = gnipy.System(lambda q, v: 0.5 * v @ v - 0.5 * jnp.cumsum(q)[-1] ** 2, lambda q: jnp.array([[1.0, -1.0]]),
                        n=2, name="cumsum")

@@ -36,6 +36,16 @@ def test_blocks_save_the_state_after_each_block():
     assert carry[1] == 0.625 and carry[2] == 5 and carry[3] == -1 and carry[5] == 5
 
 
+def test_a_carry_of_another_width_is_refused():
+    """The compiled code reads and writes n_carry values per trajectory: a shorter carry (e.g. one
+    without the monitor that native_loop's programs carry) would have it run past the buffer."""
+    loop = build_loop(_toy_step, _carry([0.0, 0.0]), 0.25)
+    assert loop.n_carry == 7
+    for carry in (np.zeros(6), np.zeros(8), np.zeros((2, 6)), np.zeros((1, 2, 7))):
+        with pytest.raises(ValueError, match="n_carry = 7"):
+            loop.run(carry, 0.25, [1])
+
+
 def test_a_failed_step_is_recorded_and_the_state_kept():
     loop = build_loop(_toy_step, _carry([0.0, 0.0]), 0.5)
     carry, saved = loop.run(np.array([0.0, 0.0, 0, -1, 0, 0, 0]), 0.5, [3, 4, 2])

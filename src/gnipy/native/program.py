@@ -224,6 +224,11 @@ class NativeLoop:
     def run(self, carry: np.ndarray, h: float, blocks) -> tuple[np.ndarray, np.ndarray]:
         carry = np.array(carry, dtype=np.float64, order="C")
         lengths = np.ascontiguousarray(blocks, dtype=np.int32)
+        if carry.ndim not in (1, 2) or carry.shape[-1] != self.n_carry or lengths.ndim != 1:
+            # the compiled code reads and writes n_carry values per trajectory: anything else would
+            # run past the ends of the buffers
+            raise ValueError(f"NativeLoop.run: expected a carry (n_carry,) or (B, n_carry) with n_carry = "
+                             f"{self.n_carry} and blocks (nblocks,), got {carry.shape} and {lengths.shape}")
         nb = lengths.shape[0]
         if carry.ndim == 1:
             saved = np.empty((nb, self.n_state), dtype=np.float64)
