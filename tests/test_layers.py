@@ -41,14 +41,17 @@ LAYERS = [
     ["integrators"],
     ["methods"],
     # 5. the simulation driver: saving, diagnostics and verdicts, the Solution, the one stepping
-    # loop and its native backend, the run's arguments, batches, transformed runs, streamed runs
+    # loop and its native backend, the run's arguments, the one assembly of a Solution, batches,
+    # transformed runs, the Problem and the one integrate, streamed runs
     ["saveat", "diagnostics"],
     ["monitor", "run_arguments"],
     ["solution", "stepping"],
-    ["io", "reference"],
+    ["io", "reference", "assembly"],
     ["native"],
     ["preparation"],
     ["ensembles", "transformed"],
+    ["problem"],
+    ["integration"],
     ["simulate"],
     ["streaming"],
     # 6. models
@@ -183,6 +186,7 @@ def test_the_imports_are_read_from_every_statement():
     imports = {(t, name) for _, t, name in _imports("gnipy.simulate")}
     assert ("gnipy.solution", "Solution") in imports  # from .solution import Solution
     assert ("gnipy.monitor", None) in imports  # from . import monitor: the submodule
+    imports = {(t, name) for _, t, name in _imports("gnipy.integration")}
     assert ("gnipy.native.backend", "choose") in imports  # inside a function
 
 

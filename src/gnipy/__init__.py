@@ -48,6 +48,8 @@ from .retractions import Cayley, Exp, Retraction, get_retraction  # noqa: E402
 from .ensembles import model_systems, stack_systems  # noqa: E402
 from .sharding import member_devices  # noqa: E402
 from .simulate import simulate  # noqa: E402
+from .problem import Problem  # noqa: E402
+from .integration import integrate  # noqa: E402
 from .solution import RESULTS, Solution  # noqa: E402
 from .saveat import SaveAt  # noqa: E402
 from .errors import (InputError, MethodError, OutputBusy, OutputError, QualitativeFailure,  # noqa: E402
@@ -83,6 +85,8 @@ __all__ = [
     "Composition",
     "ContinuousReference",
     "simulate",
+    "Problem",
+    "integrate",
     "fit",
     "FitResult",
     "Observations",

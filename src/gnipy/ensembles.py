@@ -26,10 +26,10 @@ import numpy as np
 from .compilation import jit
 from .sharding import member_devices, pad_members, shard_map
 from .spaces import Point
-from .errors import InputError, SolverFailure
+from .errors import InputError
 from .inputs import refuse_text_or_bool
 from .run_arguments import member_initial_conditions
-from .solution import RESULTS, Solution
+from .solution import Solution
 from .stepping import run_nodes
 from .system import System, real_array
 
@@ -374,107 +374,90 @@ def is_batch(system: System, q0, v0, R0) -> bool:
     return False
 
 
-def simulate_batch(systems, method, q0, v0, R0, h, n, partial, plan, times, t0, project_v0, throw, meta, reporter,
-                   backend_asked: str = "auto", every_node: bool = True):
-    """The batched run of :func:`gnipy.simulate` (B members: initial conditions and/or systems),
-    one vmapped program; a failed member's nodes after its failure are NaN."""
-    from .diagnostics import DIAGNOSTIC_ARRAYS, diagnostic_fields
+def simulate_batch(problem, reporter, backend: str) -> Solution:
+    """The batched run of a :class:`gnipy.Problem` (B members: initial conditions and/or systems),
+    one vmapped program on `backend` ("xla" or "native"); a failed member's nodes after its failure
+    are NaN (:func:`gnipy.assembly.assemble`)."""
+    from .assembly import assemble, labels
+    from .diagnostics import diagnostic_fields
+    from .system import describe_orientations
 
-    system = systems[0]
+    systems = list(problem.systems or [problem.system])
+    system, h, n, partial, plan = systems[0], problem.h, problem.steps, problem.partial, problem.plan
     size = len(systems) if len(systems) > 1 else None
-    B, q0, v0, R0 = broadcast_initial_conditions(system, q0, v0, R0, size)
+    B, q0, v0, R0 = broadcast_initial_conditions(system, problem.q0, problem.v0, problem.R0, size)
     # the full checks (mechanical type, dimensions) once, on the first member; the value checks
     # (metric, rank, v0 on the constraints) for every member, vectorized
     system.check(q0[0], None, R0=None if R0 is None else R0[0])
     sys_batched = len(systems) > 1
     core = stack_systems(systems) if sys_batched else system.without_metadata()
-    b0, v0 = check_batch(core, sys_batched, q0, v0, R0, project_v0=project_v0)
+    b0, v0 = check_batch(core, sys_batched, q0, v0, R0, project_v0=problem.project_v0)
     first_b0 = jax.tree_util.tree_map(lambda a: a[0], b0)
+    method = problem.method
     method.check(system, first_b0)
     method = method.prepare(system, first_b0)
     hj = np.float64(h)
     state0 = _init_batch(method, core, sys_batched, b0, v0, hj)
+    conserves_energy = bool(getattr(method, "conserves_energy", False))
+    monitor0, conservation = _batch_monitor(problem, system, core, sys_batched, b0, method, state0, B)
+    out = None
+    if backend == "native":
+        out = _run_native_batch(problem, systems, core, sys_batched, method, state0, monitor0, reporter)
+        if out is None:
+            backend = "xla"
+    if out is None:
+        out = _run_batch(method, core, sys_batched, state0, hj, np.asarray(plan.lengths, np.int32),
+                         np.int32(plan.tail), np.float64(partial * h), bool(partial), plan.save_final, False,
+                         reporter.active, np.int32(reporter.stride), monitor0 if problem.check_every_node else None,
+                         member_devices() if B > 1 else ())
+    if reporter.active:
+        jax.block_until_ready(out)
+    fields = labels(problem, method, backend) | {"orientation": describe_orientations(systems)}
+    fields |= diagnostic_fields(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
+                                batched_system=sys_batched, batch=True, conserves_energy=conserves_energy,
+                                times=problem.times)
+    fields |= conservation
+    if sys_batched:
+        fields |= {"params": (), "member_params": member_params(systems)}
+    return assemble(problem, out, fields)
+
+
+def _batch_monitor(problem, system, core, sys_batched, b0, method, state0, B):
+    """The members' monitors at the start (:mod:`gnipy.monitor`), and each member's own sentence on
+    what its motion conserves (the fields `conserved`, `energy_invariant`, `member_conserved`)."""
     from .diagnostics import member_conservation
     from .monitor import initial
     from .registry import registered_invariants
 
+    hj = np.float64(problem.h)
     gni_family = jax.eval_shape(lambda: method.hidden_momentum(
         system.without_metadata(), jax.tree_util.tree_map(lambda a: a[0], state0), hj)) is not None
     conserved, invariant = member_conservation(system, core, sys_batched, b0, gni_family=gni_family,
                                                invariants=registered_invariants(system.model),
                                                conserves_energy=bool(getattr(method, "conserves_energy", False)))
-    monitor0 = initial(h, (n + partial) * h, t0, energy_applies=invariant, members=B)
-    out = None
-    if meta.get("backend") == "native":
-        from .native.backend import native_loop, run_native
-
-        # a batch of systems: their parameter values are inputs of one program (native_loop's params)
-        example = systems[0].without_metadata() if sys_batched else core
-        loop = native_loop(method, example, jax.tree_util.tree_map(lambda a: a[0], state0), batch=True,
-                           params=sys_batched)
-        if hasattr(loop, "run"):
-            out = run_native(loop, method, core, state0, hj, plan.lengths, plan.tail, partial * h, partial=bool(partial),
-                             save_final=plan.save_final, save_states=False, monitor0=monitor0, batched=True,
-                             system_batched=sys_batched,
-                             progress_stride=reporter.stride if reporter.active else None)
-        else:
-            meta = dict(meta, backend="xla")
-            if backend_asked == "native":
-                warnings.warn(f"backend='native': running on XLA, because the step does not lower: {loop}",
-                              RuntimeWarning, stacklevel=3)
-    if out is None:
-        out = _run_batch(method, core, sys_batched, state0, hj, np.asarray(plan.lengths, np.int32),
-                         np.int32(plan.tail), np.float64(partial * h), bool(partial), plan.save_final, False,
-                         reporter.active, np.int32(reporter.stride), monitor0 if every_node else None,
-                         member_devices() if B > 1 else ())
-    if reporter.active:
-        jax.block_until_ready(out)
-    batch_diag = diagnostic_fields(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
-                                  batched_system=sys_batched, batch=True,
-                                  conserves_energy=bool(getattr(method, "conserves_energy", False)), times=times)
-    # each member's own: what its motion conserves, and its verdicts (the monitor)
+    monitor0 = initial(problem.h, (problem.steps + problem.partial) * problem.h, problem.t0, energy_applies=invariant,
+                       members=B)
     same = all(c == conserved[0] for c in conserved)
-    batch_diag.update(conserved=conserved[0] if same else "differs by member: see Solution.member(i).conserved",
-                      energy_invariant=bool(np.any(invariant)), member_conserved=None if same else conserved,
-                      monitor=None if out["monitor"] is None else np.asarray(out["monitor"]))
-    space = system.space
-    q, R = space.coordinates(out["b"]), space.orientation(out["b"])
-    v, p, energy, residual = out["v"], out["p"], out["energy"], out["residual"]
-    fail_k = np.asarray(out["fail_k"])
-    failed = fail_k >= 0
-    fail_res = np.where(failed, np.asarray(out["fail_res"], dtype=np.float64), np.nan)
-    results = np.where(failed, int(RESULTS.solve_failed), int(RESULTS.successful)).astype(np.int32)
-    k_saved = np.asarray(plan.nodes)
-    if failed.any():  # a failed member is NaN after its failed step, never its last state repeated
-        valid = ~failed[:, None] | (k_saved[None, :] <= fail_k[:, None])
+    return monitor0, dict(conserved=conserved[0] if same else "differs by member: see Solution.member(i).conserved",
+                          energy_invariant=bool(np.any(invariant)), member_conserved=None if same else conserved)
 
-        def blank(a):
-            if a is None:
-                return None
-            a = np.array(a, dtype=np.float64)
-            a[~valid] = np.nan
-            return jnp.asarray(a)
 
-        q, v, p, energy, residual, R = (blank(a) for a in (q, v, p, energy, residual, R))
-        batch_diag |= {k: blank(batch_diag[k]) for k in DIAGNOSTIC_ARRAYS if batch_diag.get(k) is not None}
-    its = np.asarray(out["iterations"])
-    batch_meta = dict(meta, method_settings=tuple(method.settings().items()))
-    if sys_batched:
-        batch_meta["params"] = ()
-    sol = Solution(
-        jnp.asarray(times), q, v, p, energy, residual, jnp.asarray([its[:, 0].sum(), its[:, 1].max()]), R=R,
-        result=RESULTS.solve_failed if failed.any() else RESULTS.successful,
-        failed_step=int(fail_k[failed].min()) if failed.any() else -1,
-        results=jnp.asarray(results), failed_steps=jnp.asarray(fail_k), failed_residuals=jnp.asarray(fail_res),
-        member_iterations=jnp.asarray(its), member_params=member_params(systems) if sys_batched else None,
-        final_state=out["final_state"], **batch_meta, **batch_diag,
-    )
-    if failed.any() and throw:
-        i = int(np.argmax(failed))
-        k = int(fail_k[i])
-        msg = (
-            f"{method.name}: member {i} of {B}: step {k} (t = {t0 + h * k:.6g} -> {t0 + h * (k + 1):.6g}) failed: "
-            f"{RESULTS.solve_failed.message} (residual {float(fail_res[i]):.3e}); {int(failed.sum())} member(s) failed"
-        )
-        raise SolverFailure(msg, step=k, time=t0 + h * k, residual=float(fail_res[i]), solution=sol)
-    return sol
+def _run_native_batch(problem, systems, core, sys_batched, method, state0, monitor0, reporter):
+    """The batch on the native loop, or None (after a warning when native was asked for) where the
+    step does not lower."""
+    from .native.backend import native_loop, run_native
+
+    plan, h, partial = problem.plan, problem.h, problem.partial
+    # a batch of systems: their parameter values are inputs of one program (native_loop's params)
+    example = systems[0].without_metadata() if sys_batched else core
+    loop = native_loop(method, example, jax.tree_util.tree_map(lambda a: a[0], state0), batch=True,
+                       params=sys_batched)
+    if hasattr(loop, "run"):
+        return run_native(loop, method, core, state0, np.float64(h), plan.lengths, plan.tail, partial * h,
+                          partial=bool(partial), save_final=plan.save_final, save_states=False, monitor0=monitor0,
+                          batched=True, system_batched=sys_batched,
+                          progress_stride=reporter.stride if reporter.active else None)
+    if problem.backend == "native":
+        warnings.warn(f"backend='native': running on XLA, because the step does not lower: {loop}",
+                      RuntimeWarning, stacklevel=5)
+    return None

@@ -37,7 +37,8 @@ from ..registry import registered_invariants
 from ..saveat import SaveAt
 from ..compilation import jit
 from ..run_arguments import MAX_STEPS, default_initial_condition, resolve_steps
-from ..simulate import simulate
+from ..integration import solve
+from ..problem import Problem
 from ..solution import RESULT_SOLVER_FAILED
 from ..system import System
 from .interrupts import DeferredInterrupt
@@ -269,11 +270,10 @@ def simulate_to_file(
                 return partial_result(path, parts, c, steps, n_chunks, resumed, notes)
             k_start, length, n_blocks, remainder, k_local, keep = plan.chunk(c)
             # the chunk is one call of the driver, continuing from the previous chunk's state
-            with warnings.catch_warnings():  # one warning for the whole run, when it is merged
-                warnings.simplefilter("ignore", QualitativeFailureWarning)
-                sol = simulate(system, method, h=h, steps=length, saveat=SaveAt(every=save_every), state0=state,
-                               t0=plan.times(k_start, np.zeros(1))[0], throw=False, monitor0=watch,
-                               check_every_node=True)
+            # not announced: one warning for the whole run, when it is merged
+            sol = solve(Problem.of(system, method, h=h, steps=length, saveat=SaveAt(every=save_every), state0=state,
+                                   t0=plan.times(k_start, np.zeros(1))[0], throw=False, monitor0=watch,
+                                   check_every_node=True))
             state, watch = sol.final_state, np.asarray(sol.monitor)
             fail_k, fail_res, its = sol.failed_step, sol.failed_residual, sol.iterations
             keep = keep[: len(sol.t)]  # a failed chunk stops at its last good node
