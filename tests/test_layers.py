@@ -32,7 +32,7 @@ LAYERS = [
     ["retractions"],
     # 2. mechanics: the System and what derives from it; the model table
     ["spaces", "forcing", "projectors", "equations"],
-    ["system_checks"],
+    ["system_checks", "system_arguments"],
     ["system"],
     ["registry"],
     # 3. discretization

@@ -157,6 +157,43 @@ def _batch_size_of(name: str, a: np.ndarray, single_ndim: int) -> int | None:
     raise InputError(f"{name}: expected {single_ndim} or {single_ndim + 1} dimensions, got shape {a.shape}")
 
 
+def _orientations(system: System, R0):
+    """`(R, batch size or None)`: R0 as a (k, k) matrix or a (B, k, k) batch of them (None when
+    not given or on R^n)."""
+    if system.group is None:
+        if R0 is not None:
+            raise InputError("R0: this system has no group part")
+        return None, None
+    if R0 is None:
+        return None, None
+    R = real_array("R0", R0)
+    k = system.group.matrix_size
+    if R.shape in ((k, k), (k * k,)):
+        return R.reshape(k, k), None
+    if R.ndim == 3 and R.shape[1:] == (k, k):
+        return R, R.shape[0]
+    if R.ndim == 2 and R.shape[1] == k * k:
+        return R.reshape(-1, k, k), R.shape[0]
+    raise InputError(f"R0: expected a {k}x{k} matrix or a batch of them, got shape {R.shape}")
+
+
+def _check_orientations(system: System, R, B: int):
+    """R broadcast to (B, k, k) (the identity when not given), each a finite element of the group."""
+    k = system.group.matrix_size
+    if R is None:
+        R = np.asarray(system.group.identity(), dtype=np.float64)
+    if R.ndim == 2:
+        R = np.broadcast_to(R, (B, k, k))
+    bad = ~np.all(np.isfinite(R), axis=(1, 2))
+    if bad.any():
+        raise InputError(f"R0[{int(np.argmax(bad))}]: contains NaN or infinite values")
+    bad = ~system.group.is_element(R)  # e.g. rotation matrices on SO(3)
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise InputError(f"R0[{i}]: {system.group.why_not_element(R[i])}")
+    return R
+
+
 def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
     """Validate shapes and finiteness and broadcast to a batch.
 
@@ -179,23 +216,7 @@ def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
     q0 = as_array("q0", q0)
     v0 = as_array("v0", v0)
     sizes = {"system": size, "q0": _batch_size_of("q0", q0, 1), "v0": _batch_size_of("v0", v0, 1)}
-    if system.group is not None and R0 is not None:
-        R = as_array("R0", R0)
-        k = system.group.matrix_size
-        if R.shape in ((k, k), (k * k,)):
-            sizes["R0"] = None
-            R = R.reshape(k, k)
-        elif R.ndim == 3 and R.shape[1:] == (k, k):
-            sizes["R0"] = R.shape[0]
-        elif R.ndim == 2 and R.shape[1] == k * k:
-            sizes["R0"] = R.shape[0]
-            R = R.reshape(-1, k, k)
-        else:
-            raise InputError(f"R0: expected a {k}x{k} matrix or a batch of them, got shape {R.shape}")
-    elif R0 is not None:
-        raise InputError("R0: this system has no group part")
-    else:
-        R = None
+    R, sizes["R0"] = _orientations(system, R0)
     given = {k: s for k, s in sizes.items() if s is not None}
     if len(set(given.values())) > 1:
         desc = ", ".join(f"{k}: {s}" for k, s in given.items())
@@ -214,18 +235,7 @@ def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
         if bad.any():
             raise InputError(f"{name}[{int(np.argmax(bad))}]: contains NaN or infinite values")
     if system.group is not None:
-        k = system.group.matrix_size
-        if R is None:
-            R = np.asarray(system.group.identity(), dtype=np.float64)
-        if R.ndim == 2:
-            R = np.broadcast_to(R, (B, k, k))
-        bad = ~np.all(np.isfinite(R), axis=(1, 2))
-        if bad.any():
-            raise InputError(f"R0[{int(np.argmax(bad))}]: contains NaN or infinite values")
-        bad = ~system.group.is_element(R)  # e.g. rotation matrices on SO(3)
-        if bad.any():
-            i = int(np.argmax(bad))
-            raise InputError(f"R0[{i}]: {system.group.why_not_element(R[i])}")
+        R = _check_orientations(system, R, B)
     return B, q0, v0, R
 
 
@@ -383,7 +393,7 @@ def simulate_batch(problem, reporter, backend: str) -> Solution:
     from .system import describe_orientations
 
     systems = list(problem.systems or [problem.system])
-    system, h, n, partial, plan = systems[0], problem.h, problem.steps, problem.partial, problem.plan
+    system, h, partial, plan = systems[0], problem.h, problem.partial, problem.plan
     size = len(systems) if len(systems) > 1 else None
     B, q0, v0, R0 = broadcast_initial_conditions(system, problem.q0, problem.v0, problem.R0, size)
     # the full checks (mechanical type, dimensions) once, on the first member; the value checks

@@ -237,6 +237,15 @@ def _concrete(system, systems, method, q0, v0, R0, h, steps, t_final, t0, state0
     if state0 is None:
         q0, v0, R0 = default_initial_condition(systems if systems and len(systems) > 1 else system, q0, v0, R0)
     batched = systems is not None or (state0 is None and is_batch(system, q0, v0, R0))
+    _check_continuation(reference, batched, state0, saveat, common["monitor0"])
+    return Problem(system=system, systems=systems, method=method, q0=q0, v0=v0, R0=R0, state0=state0, h=h, steps=n,
+                   partial=partial, t0=t0, plan=plan, times=plan.times(t0, h), traced=False,
+                   batch_size=_batch_size(systems, system, q0, v0, R0) if batched else None, **common)
+
+
+def _check_continuation(reference: bool, batched: bool, state0, saveat: SaveAt, monitor0) -> None:
+    """A run continued from a state (`state0`, `monitor0`) is one trajectory of an integrator; the
+    continuous reference runs one trajectory and has no integrator state."""
     if reference:
         if batched:
             raise MethodError("method: the continuous reference runs one trajectory at a time; pass one system and one initial condition")
@@ -245,11 +254,8 @@ def _concrete(system, systems, method, q0, v0, R0, h, steps, t_final, t0, state0
     if batched:
         if state0 is not None:
             raise InputError("state0: continuing from a state is for single trajectories")
-        if common["monitor0"] is not None:
+        if monitor0 is not None:
             raise InputError("monitor0: continuing a run's verdicts is for single trajectories (with state0)")
-    return Problem(system=system, systems=systems, method=method, q0=q0, v0=v0, R0=R0, state0=state0, h=h, steps=n,
-                   partial=partial, t0=t0, plan=plan, times=plan.times(t0, h), traced=False,
-                   batch_size=_batch_size(systems, system, q0, v0, R0) if batched else None, **common)
 
 
 def _batch_size(systems, system, q0, v0, R0) -> int:

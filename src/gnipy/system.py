@@ -27,11 +27,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from .compilation import jit
-from .spaces import EuclideanSpace, GroupSpace, Point
+from .spaces import Point
 
 from .errors import InputError
-from .inputs import finite_vector, flag, format_scientific, provenance_number, real_array, require_float64
-from .system_checks import lagrangian_derivatives, metric_derivatives, validation_values
+from .inputs import finite_vector, flag, format_scientific, real_array, require_float64
+from .system_arguments import (check_functions, configuration_space, dimension, inputs_count, provenance,
+                               velocity_names)
+from .system_checks import (check_affine_field, check_constraint_forms, check_mechanical_type, check_metric,
+                            lagrangian_derivatives, metric_derivatives, validation_values)
 
 __all__ = ["System"]
 
@@ -116,87 +119,24 @@ class System(eqx.Module):
         force: Callable[..., Any] | None = None,
         inputs: int = 0,
     ):
-        if not callable(lagrangian):
-            raise InputError(f"lagrangian: expected a callable l(q, v), got {type(lagrangian).__name__}")
-        if not callable(constraints):
-            raise InputError(f"constraints: expected a callable mu(q), got {type(constraints).__name__}")
-        if affine is not None and not callable(affine):
-            raise InputError(f"affine: expected a callable Y(q) or None, got {type(affine).__name__}")
-        if n is None and coordinates is None:
-            if group is None:
-                raise InputError("n: give the dimension n of the configuration space (or coordinates=...)")
-            n = 0
-        if n is None:
-            n = len(tuple(coordinates))
-        if isinstance(n, bool) or int(n) != n or n < (1 if group is None else 0):
-            raise InputError(f"n: expected a {'positive' if group is None else 'non-negative'} integer, got {n!r}")
-        n = int(n)
-        if coordinates is None:
-            coordinates = tuple(f"q{i}" for i in range(n))
-        coordinates = tuple(str(c) for c in coordinates)
-        if len(coordinates) != n:
-            raise InputError(f"coordinates: expected {n} names, got {len(coordinates)}")
-        if reconstruction not in ("left", "right"):
-            raise InputError(f"reconstruction: expected 'left' or 'right', got {reconstruction!r}")
-        if group is None:
-            if depends_on_orientation:
-                raise InputError("depends_on_orientation: only meaningful with a group")
-            if reconstruction != "left":
-                raise InputError("reconstruction: only meaningful with a group")
-            space = EuclideanSpace(n)
-            group_names: tuple[str, ...] = ()
-        else:
-            from .lie_groups import MatrixLieGroup
-            from .retractions import Retraction, get_retraction
-
-            if not isinstance(group, MatrixLieGroup):
-                raise InputError(f"group: expected a gnipy.lie_groups group (e.g. SO3()), got {type(group).__name__}")
-            if isinstance(retraction, str):
-                try:
-                    retraction = get_retraction(retraction)
-                except ValueError as e:
-                    raise InputError(str(e)) from e
-            if not isinstance(retraction, Retraction):
-                raise InputError(f"retraction: expected 'cayley', 'exp' or a Retraction, got {retraction!r}")
-            if reconstruction == "right" and depends_on_orientation:
-                raise InputError(
-                    "reconstruction: 'right' (R from the space velocity, dR/dt = hat(xi) R) is for reduced "
-                    "systems only; a system that depends on the orientation (depends_on_orientation=True) "
-                    "needs the left-trivialized equations, reconstruction='left'"
-                )
-            space = GroupSpace(n, group, retraction, reconstruction)
-            group_names = tuple(getattr(group, "velocity_names", None) or (f"xi{i}" for i in range(group.dim)))
-        if velocities is None:
-            velocities = tuple(f"d{c}" for c in coordinates) + tuple(group_names)
-        velocities = tuple(str(c) for c in velocities)
-        if len(velocities) != space.dim:
-            raise InputError(f"velocities: expected {space.dim} names, got {len(velocities)}")
+        check_functions(lagrangian, constraints, affine, force)
+        n, coordinates = dimension(n, coordinates, group)
+        space, group_names = configuration_space(n, group, retraction, depends_on_orientation, reconstruction)
         self.lagrangian = lagrangian
         self.constraints = constraints
         self.affine = affine
         self.space = space
         self.depends_on_orientation = bool(depends_on_orientation)
         self.coordinates = coordinates
-        self.velocities = velocities
+        self.velocities = velocity_names(velocities, coordinates, group_names, space.dim)
         self.name = str(name)
         self.model = None
-        self.params = tuple((str(k), provenance_number(v)) for k, v in (params or {}).items())
-        if defaults is not None:
-            defaults = tuple(None if d is None else tuple(provenance_number(x) for x in jnp.ravel(jnp.asarray(d)))
-                             if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(d))
-                             else tuple(float(x) for x in np.ravel(d)) for d in defaults)
-        self.defaults = defaults
+        self.params, self.defaults = provenance(params, defaults)
         self.orientation_note = "" if orientation_note is None else str(orientation_note)
-        if force is not None and not callable(force):
-            raise InputError(f"force: expected a callable F(q, v, u, t) or None, got {type(force).__name__}")
-        if isinstance(inputs, bool) or int(inputs) != inputs or inputs < 0:
-            raise InputError(f"inputs: expected a non-negative integer, got {inputs!r}")
-        if inputs and force is None:
-            raise InputError(f"inputs: {int(inputs)} inputs but no force=; the inputs act through F(q, v, u, t)")
+        self.inputs = inputs_count(force, inputs)
         from .forcing import Drive
 
         self.force = force
-        self.inputs = int(inputs)
         self.drive = None if force is None else Drive.make(inputs=self.inputs)
 
     # ----------------------------------------------------------------------------------------
@@ -455,42 +395,10 @@ class System(eqx.Module):
             v0 = finite_vector("v0", v0, self.dim)
         vals = self._validation_values(b0)
         self._check_mechanical_values(vals, tol=1e-9)
-        G = vals["G"]
-        if not np.all(np.isfinite(G)):
-            raise InputError("lagrangian: the metric d²l/dv² is not finite at q0")
-        if np.max(np.abs(G - G.T)) > tol * max(1.0, np.max(np.abs(G))):
-            raise InputError("lagrangian: the metric d²l/dv² is not symmetric at q0")
-        eig = np.linalg.eigvalsh(G)
-        if eig[0] <= tol * max(1.0, eig[-1]):
-            raise InputError(
-                "lagrangian: the metric d²l/dv² is not positive definite at q0 "
-                f"(smallest eigenvalue {format_scientific(eig[0])})"
-            )
-        mu = vals["mu"]
+        check_metric(vals["G"], tol)
         N = self.dim
-        if mu.ndim != 2 or mu.shape[1] != N:
-            raise InputError(f"constraints: mu(q) must have shape (m, {N}), got {mu.shape}")
-        if not np.all(np.isfinite(mu)):
-            raise InputError("constraints: mu(q0) is not finite")
-        m = mu.shape[0]
-        if m == 0:
-            raise InputError(
-                f"constraints: mu(q0) has no rows (shape {mu.shape}); gnipy integrates constrained systems, give "
-                "at least one constraint"
-            )
-        if m >= N:
-            raise InputError(f"constraints: {m} constraints on a {N}-dimensional velocity space leave no motion")
-        sv = np.linalg.svd(mu, compute_uv=False)
-        if sv[-1] <= 1e-10 * max(1.0, sv[0]):
-            raise InputError(
-                f"constraints: mu(q0) is rank deficient (rank {int(np.sum(sv > 1e-10 * max(1.0, sv[0])))} "
-                f"< {m} constraints; smallest singular value {format_scientific(sv[-1])})"
-            )
-        Y = vals["Y"]
-        if Y.shape != (N,):
-            raise InputError(f"affine: Y(q) must have shape ({N},), got {Y.shape}")
-        if not np.all(np.isfinite(Y)):
-            raise InputError("affine: Y(q0) is not finite")
+        mu = check_constraint_forms(vals["mu"], N)
+        Y = check_affine_field(vals["Y"], N)
         if self.force is not None:
             self._check_force(b0, np.zeros(N) if v0 is None else v0)
         if v0 is None:
@@ -540,18 +448,7 @@ class System(eqx.Module):
         return out
 
     def _check_mechanical_values(self, vals, *, tol: float):
-        for i in range(self._SAMPLES):
-            lv, G, V, lin, v = vals["lv"][i], vals["Gs"][i], vals["Vs"][i], vals["lin"][i], vals["vs"][i]
-            if not np.isfinite(lv):
-                raise InputError("lagrangian: l(q, v) is not finite near q0")
-            quad = 0.5 * v @ G @ v - V
-            scale = max(1.0, abs(lv), abs(quad))
-            if np.max(np.abs(lin)) > tol * scale or abs(lv - quad) > tol * scale:
-                raise InputError(
-                    "lagrangian: not of mechanical type ½ vᵀG(q)v − V(q) "
-                    f"(linear term {format_scientific(np.max(np.abs(lin)))}, "
-                    f"mismatch with the quadratic part {format_scientific(abs(lv - quad))})"
-                )
+        check_mechanical_type(vals, self._SAMPLES, tol=tol)
 
     def check_mechanical(self, b0, *, tol: float = 1e-9, samples: int = 3):
         """Raise :class:`InputError` unless `l(b, v) = ½vᵀG(b)v − V(b)` at and near `b0`

@@ -147,6 +147,64 @@ def _safe_quotient(num, den):
     return jnp.where(ok, num / jnp.where(ok, den, 1.0), jnp.zeros_like(num))
 
 
+def _inv_metric(G, *ps):
+    """$\\mathbb{G}^{-1}p$ for each p, by one solve."""
+    out = solve_spd(G, jnp.stack(ps, axis=1))
+    return [out[:, i] for i in range(len(ps))]
+
+
+def _first_guess(system, b0, p0, k00, G0, V0, h):
+    """The first guess of a step, and the magnitudes of the terms of its residual (Newton's
+    round-off floor): `(guess, scale)`, with $k_{00} = \\mathbb{G}(b_0)^{-1}p_0$."""
+    group, n, N = system.group, system.n, system.dim
+    x0 = system.space.coordinates(b0)
+    m = system.mu(b0).shape[0]
+
+    def at(x):  # the base point with coordinates x (R is not used by a reduced system)
+        return x if group is None else Point(x, b0.R)
+
+    # a Taylor step of the continuous motion, with the multiplier from the derivative of the
+    # constraint along it, d/dt μ(Kp − Y) = 0: Cλ = −D_v(μ(Kp₀ − Y)) − μK f₀, C = μKμᵀ
+    f0 = jax.grad(lambda y: system.L(at(y), k00))(x0)  # −∂H/∂x = ∂l/∂x at v = Kp
+    if group is not None:
+        f0 = jnp.concatenate([f0, group.ad_star(k00[n:], p0[n:])])
+    if system.force is not None:
+        f0 = f0 + system.external_force(b0, k00, system.drive.t + 0.5 * h)
+
+    def along(x):
+        (kp,) = _inv_metric(system.metric(at(x)), p0)
+        return kp, system.mu(at(x)) @ (kp - system.Y(at(x)))
+
+    Jk, Jc = jax.jacfwd(along)(x0)
+    dk, dc = Jk @ k00[:n], Jc @ k00[:n]
+    mu0 = system.mu(b0)
+    k_mu = solve_spd(G0, mu0.T)
+    lam_c = solve_spd(mu0 @ k_mu, -dc - k_mu.T @ f0)
+    p_dot = f0 + mu0.T @ lam_c
+    x_ddot = dk[:n] + solve_spd(G0, p_dot)[:n]
+    guess = jnp.concatenate([h * k00[:n] + 0.5 * h * h * x_ddot, h * p_dot, h * lam_c])
+    # the magnitudes of the terms of F (for Newton's round-off floor): the position increment,
+    # the momentum with the force and the quotient of the discrete gradient (whose numerator has
+    # terms of the size of the energy), and the constraint's μ(Kp − Y) with its change over one
+    # rounding of the new node's coordinates: x₁ = x₀ + Δx moves in steps of ulp(x₀), so where
+    # |x₀| is large (a heading after thousands of turns) the constraint at x₁ cannot be met more
+    # closely than eps·|∂(μ(Kp − Y))/∂x|·|x₀| (measured: a false failure at residual 1.6e-12 with
+    # heading 8917, vertical disk, step 891,692)
+    dx_g, dp_g = guess[:n], guess[n:n + N]
+    D_g = dx_g @ G0[:n, :n] @ dx_g + KAPPA**2 * (dp_g @ solve_spd(G0, dp_g))
+    energy_size = 0.5 * jnp.abs(p0 @ k00) + jnp.abs(V0)
+    D_g = D_g + (THETA * h) ** 2 * energy_size  # the fade bounds the quotient
+    quotient = jnp.abs(h) * energy_size * _safe_quotient(jnp.max(jnp.abs(G0[:n, :n] @ dx_g), initial=0.0), D_g)
+    Y0 = system.Y(b0)
+    scale = jnp.concatenate([
+        jnp.full(n, jnp.abs(h) * jnp.max(jnp.abs(k00))),
+        jnp.full(N, jnp.max(jnp.abs(p0)) + jnp.abs(h) * jnp.max(jnp.abs(f0)) + quotient),
+        jnp.full(m, jnp.max(jnp.abs(mu0)) * (jnp.max(jnp.abs(k00)) + jnp.max(jnp.abs(Y0)))
+                 + jnp.max(jnp.abs(Jc) @ jnp.abs(x0), initial=0.0)),
+    ])
+    return guess, scale
+
+
 class DiscreteGradient(Integrator):
     """Energy-conserving discrete-gradient method with the constraints exact at the nodes.
 
@@ -194,21 +252,13 @@ class DiscreteGradient(Integrator):
         group = system.group
         n, N = system.n, system.dim
         x0 = space.coordinates(b0)
-        m = system.mu(b0).shape[0]
 
         def at(x):  # the base point with coordinates x (R is not used by a reduced system)
             return x if group is None else Point(x, b0.R)
 
-        def inv_metric(G, *ps):
-            out = solve_spd(G, jnp.stack(ps, axis=1))
-            return [out[:, i] for i in range(len(ps))]
-
-        def dL_dx(x, w):  # ∂l/∂x at fixed velocity w
-            return jax.grad(lambda y: system.L(at(y), w))(x)
-
         G0 = system.metric(b0)
         V0 = system.potential(b0)
-        (k00,) = inv_metric(G0, p0)
+        (k00,) = _inv_metric(G0, p0)
         forced = system.force is not None
 
         def _increment(dx, u):  # the step's unknowns z of the space (Δx, and σ = h u_ξ on the group)
@@ -223,8 +273,8 @@ class DiscreteGradient(Integrator):
             xm, pm = x0 + 0.5 * dx, p0 + 0.5 * dp
             b1, bm = at(x1), at(xm)
             G1 = system.metric(b1)
-            k01, k0d = inv_metric(G0, p1, dp)
-            k10, k11, k1d = inv_metric(G1, p0, p1, dp)
+            k01, k0d = _inv_metric(G0, p1, dp)
+            k10, k11, k1d = _inv_metric(G1, p0, p1, dp)
             w0, w1 = 0.5 * (k00 + k10), 0.5 * (k01 + k11)  # K̄p₀, K̄p₁ with K̄ = ½(K(x₀) + K(x₁))
             Kdp = 0.5 * (k0d + k1d)  # K̄Δp
             # g(x) = ¼(p₀ᵀK(x)p₀ + p₁ᵀK(x)p₁) + V(x) at the nodes, so that H₁ − H₀ = g₁ − g₀ + (K̄p_{1/2})·Δp
@@ -263,45 +313,7 @@ class DiscreteGradient(Integrator):
         def residual(w):
             return parts(w)[0]
 
-        # first guess: a Taylor step of the continuous motion, with the multiplier from the derivative
-        # of the constraint along it, d/dt μ(Kp − Y) = 0: Cλ = −D_v(μ(Kp₀ − Y)) − μK f₀, C = μKμᵀ
-        f0 = dL_dx(x0, k00)  # −∂H/∂x = ∂l/∂x at v = Kp
-        if group is not None:
-            f0 = jnp.concatenate([f0, group.ad_star(k00[n:], p0[n:])])
-        if forced:
-            f0 = f0 + system.external_force(b0, k00, system.drive.t + 0.5 * h)
-
-        def along(x):
-            (kp,) = inv_metric(system.metric(at(x)), p0)
-            return kp, system.mu(at(x)) @ (kp - system.Y(at(x)))
-
-        Jk, Jc = jax.jacfwd(along)(x0)
-        dk, dc = Jk @ k00[:n], Jc @ k00[:n]
-        mu0 = system.mu(b0)
-        k_mu = solve_spd(G0, mu0.T)
-        lam_c = solve_spd(mu0 @ k_mu, -dc - k_mu.T @ f0)
-        p_dot = f0 + mu0.T @ lam_c
-        x_ddot = dk[:n] + solve_spd(G0, p_dot)[:n]
-        guess = jnp.concatenate([h * k00[:n] + 0.5 * h * h * x_ddot, h * p_dot, h * lam_c])
-        # the magnitudes of the terms of F (for Newton's round-off floor): the position increment,
-        # the momentum with the force and the quotient of the discrete gradient (whose numerator has
-        # terms of the size of the energy), and the constraint's μ(Kp − Y) with its change over one
-        # rounding of the new node's coordinates: x₁ = x₀ + Δx moves in steps of ulp(x₀), so where
-        # |x₀| is large (a heading after thousands of turns) the constraint at x₁ cannot be met more
-        # closely than eps·|∂(μ(Kp − Y))/∂x|·|x₀| (measured: a false failure at residual 1.6e-12 with
-        # heading 8917, vertical disk, step 891,692)
-        dx_g, dp_g = guess[:n], guess[n:n + N]
-        D_g = dx_g @ G0[:n, :n] @ dx_g + KAPPA**2 * (dp_g @ solve_spd(G0, dp_g))
-        energy_size = 0.5 * jnp.abs(p0 @ k00) + jnp.abs(V0)
-        D_g = D_g + (THETA * h) ** 2 * energy_size  # the fade bounds the quotient
-        quotient = jnp.abs(h) * energy_size * _safe_quotient(jnp.max(jnp.abs(G0[:n, :n] @ dx_g), initial=0.0), D_g)
-        Y0 = system.Y(b0)
-        scale = jnp.concatenate([
-            jnp.full(n, jnp.abs(h) * jnp.max(jnp.abs(k00))),
-            jnp.full(N, jnp.max(jnp.abs(p0)) + jnp.abs(h) * jnp.max(jnp.abs(f0)) + quotient),
-            jnp.full(m, jnp.max(jnp.abs(mu0)) * (jnp.max(jnp.abs(k00)) + jnp.max(jnp.abs(Y0)))
-                     + jnp.max(jnp.abs(Jc) @ jnp.abs(x0), initial=0.0)),
-        ])
+        guess, scale = _first_guess(system, b0, p0, k00, G0, V0, h)
         w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
                              floor_scale=scale)
         dx, dp = w[:n], w[n:n + N]

@@ -86,10 +86,13 @@ def _why_not(system, *, traced: bool = False) -> str | None:
     return None
 
 
-def choose(backend: str, system, method, *, trajectory_steps: int, traced: bool = False) -> tuple[str, str]:
+def choose(backend: str, system, method, *, trajectory_steps: int, traced: bool = False,
+           stacklevel: int = 4) -> tuple[str, str]:
     """`(backend, why)`: `"native"` or `"xla"` for this run, and a sentence when XLA runs although
-    native was possible or asked for. The choice depends on the run's arguments only (not on what
-    ran before in the process), so that a run gives the same bits in any process."""
+    native was possible or asked for (also warned when native was asked for, `stacklevel` frames up:
+    by default the caller of :func:`gnipy.simulate` or :func:`gnipy.integrate`). The choice depends
+    on the run's arguments only (not on what ran before in the process), so that a run gives the
+    same bits in any process."""
     from ..reference import ContinuousReference
 
     if backend == "xla" or isinstance(method, ContinuousReference):
@@ -102,7 +105,7 @@ def choose(backend: str, system, method, *, trajectory_steps: int, traced: bool 
             return "xla", f"a short run ({trajectory_steps} < {NATIVE_MIN_STEPS} trajectory-steps)"
     if reason is not None:
         if backend == "native":
-            warnings.warn(f"backend='native': running on XLA, because {reason}", RuntimeWarning, stacklevel=3)
+            warnings.warn(f"backend='native': running on XLA, because {reason}", RuntimeWarning, stacklevel=stacklevel)
         return "xla", reason
     return "native", ""
 

@@ -1,0 +1,115 @@
+"""The arguments of :class:`gnipy.System`, checked: the user's functions, the dimension and names
+of the coordinates and velocities, the configuration space (:mod:`gnipy.spaces`: $\\mathbb{R}^n$,
+or $\\mathbb{R}^n \\times G$ with its retraction and reconstruction), the provenance (parameters,
+default initial condition) and the inputs of a force. Each error names its argument.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .errors import InputError
+from .inputs import provenance_number
+from .spaces import EuclideanSpace, GroupSpace
+
+__all__ = ["check_functions", "dimension", "configuration_space", "velocity_names", "provenance", "inputs_count"]
+
+
+def check_functions(lagrangian, constraints, affine, force) -> None:
+    """The user's functions are callables (`affine` and `force` may be None)."""
+    if not callable(lagrangian):
+        raise InputError(f"lagrangian: expected a callable l(q, v), got {type(lagrangian).__name__}")
+    if not callable(constraints):
+        raise InputError(f"constraints: expected a callable mu(q), got {type(constraints).__name__}")
+    if affine is not None and not callable(affine):
+        raise InputError(f"affine: expected a callable Y(q) or None, got {type(affine).__name__}")
+
+
+def dimension(n, coordinates: Sequence[str] | None, group) -> tuple[int, tuple[str, ...]]:
+    """`(n, coordinates)`: the dimension of the Euclidean factor (from `coordinates` when `n` is
+    None; 0 by default with a group) and the coordinates' names (default `q0, q1, ...`)."""
+    if n is None and coordinates is None:
+        if group is None:
+            raise InputError("n: give the dimension n of the configuration space (or coordinates=...)")
+        n = 0
+    if n is None:
+        n = len(tuple(coordinates))
+    if isinstance(n, bool) or int(n) != n or n < (1 if group is None else 0):
+        raise InputError(f"n: expected a {'positive' if group is None else 'non-negative'} integer, got {n!r}")
+    n = int(n)
+    if coordinates is None:
+        coordinates = tuple(f"q{i}" for i in range(n))
+    coordinates = tuple(str(c) for c in coordinates)
+    if len(coordinates) != n:
+        raise InputError(f"coordinates: expected {n} names, got {len(coordinates)}")
+    return n, coordinates
+
+
+def configuration_space(n: int, group, retraction, depends_on_orientation, reconstruction):
+    """`(space, group_velocity_names)`: $\\mathbb{R}^n$ (:class:`~gnipy.spaces.EuclideanSpace`), or
+    $\\mathbb{R}^n \\times G$ (:class:`~gnipy.spaces.GroupSpace`) with the retraction (a name or a
+    :class:`~gnipy.retractions.Retraction`) and the reconstruction ("left" or "right")."""
+    if reconstruction not in ("left", "right"):
+        raise InputError(f"reconstruction: expected 'left' or 'right', got {reconstruction!r}")
+    if group is None:
+        if depends_on_orientation:
+            raise InputError("depends_on_orientation: only meaningful with a group")
+        if reconstruction != "left":
+            raise InputError("reconstruction: only meaningful with a group")
+        return EuclideanSpace(n), ()
+    from .lie_groups import MatrixLieGroup
+    from .retractions import Retraction, get_retraction
+
+    if not isinstance(group, MatrixLieGroup):
+        raise InputError(f"group: expected a gnipy.lie_groups group (e.g. SO3()), got {type(group).__name__}")
+    if isinstance(retraction, str):
+        try:
+            retraction = get_retraction(retraction)
+        except ValueError as e:
+            raise InputError(str(e)) from e
+    if not isinstance(retraction, Retraction):
+        raise InputError(f"retraction: expected 'cayley', 'exp' or a Retraction, got {retraction!r}")
+    if reconstruction == "right" and depends_on_orientation:
+        raise InputError(
+            "reconstruction: 'right' (R from the space velocity, dR/dt = hat(xi) R) is for reduced "
+            "systems only; a system that depends on the orientation (depends_on_orientation=True) "
+            "needs the left-trivialized equations, reconstruction='left'"
+        )
+    names = tuple(getattr(group, "velocity_names", None) or (f"xi{i}" for i in range(group.dim)))
+    return GroupSpace(n, group, retraction, reconstruction), names
+
+
+def velocity_names(velocities, coordinates: tuple[str, ...], group_names: tuple[str, ...], dim: int):
+    """The names of the N velocity components (default `d<coordinate>` then the group's)."""
+    if velocities is None:
+        velocities = tuple(f"d{c}" for c in coordinates) + tuple(group_names)
+    velocities = tuple(str(c) for c in velocities)
+    if len(velocities) != dim:
+        raise InputError(f"velocities: expected {dim} names, got {len(velocities)}")
+    return velocities
+
+
+def provenance(params, defaults) -> tuple[tuple, tuple | None]:
+    """`(params, defaults)` as stored: the parameters as `(name, number)` pairs, the default initial
+    condition as tuples of floats (of traced numbers where the parameters are traced)."""
+    params = tuple((str(k), provenance_number(v)) for k, v in (params or {}).items())
+    if defaults is not None:
+        defaults = tuple(None if d is None else tuple(provenance_number(x) for x in jnp.ravel(jnp.asarray(d)))
+                         if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(d))
+                         else tuple(float(x) for x in np.ravel(d)) for d in defaults)
+    return params, defaults
+
+
+def inputs_count(force, inputs) -> int:
+    """The number of inputs of `force` (a callable F(q, v, u, t) or None), checked."""
+    if force is not None and not callable(force):
+        raise InputError(f"force: expected a callable F(q, v, u, t) or None, got {type(force).__name__}")
+    if isinstance(inputs, bool) or int(inputs) != inputs or inputs < 0:
+        raise InputError(f"inputs: expected a non-negative integer, got {inputs!r}")
+    if inputs and force is None:
+        raise InputError(f"inputs: {int(inputs)} inputs but no force=; the inputs act through F(q, v, u, t)")
+    return int(inputs)
