@@ -10,6 +10,10 @@ to steer them.
 - :mod:`gnipy.control.optimal_control`: :func:`solve_optimal_control` chooses per-step inputs that
   steer a system to a terminal target at least cost, with the GNI's steps as the dynamics (direct
   single or multiple shooting; :class:`ControlResult`);
+- the steps of both: :mod:`gnipy.control.fit_arguments` and :mod:`gnipy.control.fit_result` (the
+  fit's checked arguments, its result and statistics), :mod:`gnipy.control.control_arguments`,
+  :mod:`gnipy.control.control_result` and :mod:`gnipy.control.sqp` (the solve's checked arguments
+  and target, its result, and the staged SQP);
 - :mod:`gnipy.control.problems`: optimal-control problems as TOML files (`gni control`), the
   worked problems (:data:`WORKED_PROBLEMS`) and the result file; :mod:`gnipy.control.fit_problems`
   the same for identification (`gni fit`); :mod:`gnipy.control.problem_files` reads both kinds of

@@ -117,9 +117,7 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
             (`observations.sigma: ...`); an observation file that cannot be read or holds no
             usable observations (`observations.file: ...`).
     """
-    from ..simulate import MIN_STEP_SIZE
-    from .observations import SIGMA_RANGE
-    from .memory import check_fit_memory, memory_limit
+    from .memory import memory_limit
 
     data, text, base, name = read_problem(source, name)
     unknown = set(data) - _FIT_SECTIONS
@@ -129,6 +127,23 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
     description = entry_text("description", data.get("description", "")).strip()
     spec, fixed_all = entry_model(data)
     fixed = entry_params(spec, data["system"].get("params"), "system.params")
+    params, initial = _estimate_section(data, spec, fixed)
+    # the system at the initial guess: the names and sizes below are checked against it
+    system = build_model_system(spec, {**fixed_all, **params}, "system.params/estimate.params")
+    obs_path, variables, sigma = _observations_section(data, base, spec, system)
+    q0, v0, R0 = _start_section(data, system)
+    method, h, t0 = _integration_section(data)
+    observations, file_h = _read_observations(obs_path, variables, sigma, memory_limit(max_bytes))
+    h = _step_size(h, file_h)
+    _check_memory(system, observations, params, initial, t0, h, max_bytes)
+    return FitProblem(name=title, description=description, model=spec.name, fixed=fixed, params=params,
+                      initial=tuple(initial), observations=observations, q0=q0, v0=v0, R0=R0, method=method, h=h,
+                      t0=t0, source=text)
+
+
+def _estimate_section(data, spec, fixed) -> tuple[dict, list]:
+    """`(params, initial)` of `[estimate]`: the estimated parameters' guesses (none also fixed) and
+    the estimated parts of the initial condition; something to estimate."""
     estimate = entry_table(data, "estimate")
     refuse_unknown_keys(estimate, "estimate", {"params", "initial"})
     params = entry_params(spec, estimate.get("params"), "estimate.params")
@@ -144,8 +159,13 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
         raise InputError(f"estimate.initial: expected a list of 'q0' and/or 'v0' (each once), got {describe_entry(initial)}")
     if not params and not initial:
         raise InputError("estimate: nothing to estimate: give params = {...} and/or initial = [...]")
-    # the system at the initial guess: the names and sizes below are checked against it
-    system = build_model_system(spec, {**fixed_all, **params}, "system.params/estimate.params")
+    return params, initial
+
+
+def _observations_section(data, base: Path, spec, system) -> tuple[Path, Any, Any]:
+    """`(path, variables, sigma)` of `[observations]`: the observation file (relative to `base`),
+    the observed variables (names of the system's, or None) and sigma (or None)."""
+    from .observations import SIGMA_RANGE
 
     obs_sec = entry_table(data, "observations")
     refuse_unknown_keys(obs_sec, "observations", {"file", "variables", "sigma"})
@@ -157,28 +177,42 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
     obs_path = Path(file) if Path(file).is_absolute() else base / file
     variables = obs_sec.get("variables")
     if variables is not None:
-        known = (*system.coordinates, *system.velocities)
-        if not isinstance(variables, list) or not variables or not all(isinstance(v, str) for v in variables):
-            raise InputError(f"observations.variables: expected a list of names, got {describe_entry(variables)}")
-        if len(set(variables)) != len(variables):
-            raise InputError(f"observations.variables: a name is repeated in {variables!r}")
-        unknown = [v for v in variables if v not in known]
-        if unknown:
-            raise InputError(f"observations.variables: unknown variable {unknown[0]!r} of model {spec.name!r} "
-                             f"(coordinates: {', '.join(system.coordinates)}; velocities: "
-                             f"{', '.join(system.velocities)})")
+        _check_variables(variables, spec, system)
     sigma = obs_sec.get("sigma")
     if sigma is not None:
         sigma = entry_number("observations.sigma", sigma, positive=True)
         if not SIGMA_RANGE[0] <= sigma <= SIGMA_RANGE[1]:
             raise InputError(f"observations.sigma: {sigma!r} is outside {SIGMA_RANGE[0]:g} .. {SIGMA_RANGE[1]:g}: the "
                              "weights 1/sigma or the squared weighted residuals would not be finite in float64")
+    return obs_path, variables, sigma
 
+
+def _check_variables(variables, spec, system) -> None:
+    """`observations.variables`: a list of distinct names of the system's coordinates and velocities."""
+    known = (*system.coordinates, *system.velocities)
+    if not isinstance(variables, list) or not variables or not all(isinstance(v, str) for v in variables):
+        raise InputError(f"observations.variables: expected a list of names, got {describe_entry(variables)}")
+    if len(set(variables)) != len(variables):
+        raise InputError(f"observations.variables: a name is repeated in {variables!r}")
+    unknown = [v for v in variables if v not in known]
+    if unknown:
+        raise InputError(f"observations.variables: unknown variable {unknown[0]!r} of model {spec.name!r} "
+                         f"(coordinates: {', '.join(system.coordinates)}; velocities: "
+                         f"{', '.join(system.velocities)})")
+
+
+def _start_section(data, system) -> tuple[Any, Any, Any]:
+    """`(q0, v0, R0)` of the optional `[start]` (None where not given)."""
     start = entry_table(data, "start", required=False)
     refuse_unknown_keys(start, "start", {"q0", "v0", "R0"})
     q0 = tuple(entry_numbers("start.q0", start["q0"], system.coordinates)) if "q0" in start else None
     v0 = tuple(entry_numbers("start.v0", start["v0"], system.velocities)) if "v0" in start else None
     R0 = entry_rotation("start.R0", start["R0"], system) if "R0" in start else None
+    return q0, v0, R0
+
+
+def _integration_section(data) -> tuple[Any, float | None, float]:
+    """`(method, h, t0)` of the optional `[integration]` (method and h None where not given)."""
     integ = entry_table(data, "integration", required=False)
     refuse_unknown_keys(integ, "integration", {"method", "h", "t0"})
     method = integ.get("method")
@@ -188,8 +222,14 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
     if h is not None:
         h = entry_number("integration.h", h, positive=True)
     t0 = entry_number("integration.t0", integ.get("t0", 0.0))
+    return method, h, t0
 
-    observations, file_h = _read_observations(obs_path, variables, sigma, memory_limit(max_bytes))
+
+def _step_size(h, file_h) -> float:
+    """The step: `[integration] h`, else the observation file's attribute h; not below
+    `MIN_STEP_SIZE`."""
+    from ..simulate import MIN_STEP_SIZE
+
     if h is None:
         if file_h is None:
             raise InputError("integration.h: missing, and the observation file does not record its h; give "
@@ -200,16 +240,19 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
         h = float(file_h)
     if h < MIN_STEP_SIZE:
         raise InputError(f"integration.h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision")
-    # the fit's memory, before anything is compiled (gnipy.fit checks it again, with the step grid)
+    return h
+
+
+def _check_memory(system, observations, params, initial, t0: float, h: float, max_bytes) -> None:
+    """The fit's memory, before anything is compiled (gnipy.fit checks it again, with the step grid)."""
+    from .memory import check_fit_memory
+
     t_last = float(observations.times[-1])
     span = (t_last - t0) / h
     if math.isfinite(span) and span >= 0:
         estimated = len(params) + ("q0" in initial) * system.n + ("v0" in initial) * system.dim
         check_fit_memory(system, round(span), observations.values.size, estimated, t0=t0, t_last=t_last, h=h,
                          max_bytes=max_bytes, key="observations.file/integration.h")
-    return FitProblem(name=title, description=description, model=spec.name, fixed=fixed, params=params,
-                      initial=tuple(initial), observations=observations, q0=q0, v0=v0, R0=R0, method=method, h=h,
-                      t0=t0, source=text)
 
 
 def _read_observations(path: Path, variables, sigma, bound: int | None):
@@ -218,11 +261,29 @@ def _read_observations(path: Path, variables, sigma, bound: int | None):
     Every failure is an InputError naming `observations.file`."""
     xr = require("xarray", extra="files")
 
-    from ..files import format_bytes
     from ..io import upgrade_layout
-    from .identification import Observations
 
     where = f"observations.file: {str(path)!r}"
+    _check_file(path, where)
+    try:
+        ds = xr.open_dataset(path)  # lazily: the header now, the observed variables below
+    except MemoryError:
+        raise
+    except Exception as e:  # a damaged file fails in many ways (OSError, ValueError, HDF errors, ...)
+        raise _unreadable(where, e) from None
+    with ds:
+        try:
+            ds = upgrade_layout(ds)
+        except Exception as e:
+            raise _unreadable(where, e) from None
+        _check_size(ds, where, bound)
+        file_h = _file_step(ds)
+        observations = _dataset_observations(ds, variables, sigma, where)
+    return observations, file_h
+
+
+def _check_file(path: Path, where: str) -> None:
+    """The observation file exists, is a regular file and is not empty."""
     try:
         st = path.stat()
     except OSError as e:
@@ -232,42 +293,49 @@ def _read_observations(path: Path, variables, sigma, bound: int | None):
     if st.st_size == 0:
         raise InputError(f"{where}: the file is empty (not a gnipy result file)")
 
-    def unreadable(e) -> InputError:
-        why = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-        if isinstance(e, ValueError) and "backend" in why:
-            why = "not a netCDF file that xarray can open"
-        return InputError(f"{where}: cannot read it as a gnipy result file ({why})")
+
+def _unreadable(where: str, e) -> InputError:
+    """The error of a file that cannot be read as a gnipy result file, saying why (`e`)."""
+    why = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+    if isinstance(e, ValueError) and "backend" in why:
+        why = "not a netCDF file that xarray can open"
+    return InputError(f"{where}: cannot read it as a gnipy result file ({why})")
+
+
+def _check_size(ds, where: str, bound: int | None) -> None:
+    """The observed variables of the opened dataset `ds` within the memory bound, before they are read."""
+    from ..files import format_bytes
+
+    loaded = sum(int(ds[v].nbytes) for v in ("q", "v", "t", "time") if v in ds.variables)
+    if bound is not None and loaded > bound:
+        raise InputError(f"{where}: its observed variables are {format_bytes(loaded)}, more than the memory bound "
+                         f"of {format_bytes(bound)}; observe fewer times, or pass max_bytes=None to read it anyway")
+
+
+def _file_step(ds):
+    """The dataset's attribute h as a Python number (a one-element numeric array or a NumPy
+    scalar unwrapped), as it is otherwise, or None."""
+    file_h = ds.attrs.get("h")
+    if isinstance(file_h, np.ndarray) and file_h.size == 1 and file_h.dtype.kind in "iuf":
+        file_h = file_h.reshape(-1)[0]
+    if isinstance(file_h, (np.integer, np.floating)):
+        file_h = file_h.item()
+    return file_h
+
+
+def _dataset_observations(ds, variables, sigma, where: str):
+    """The observations of the dataset; its errors named by `where` (the file)."""
+    from .identification import Observations
 
     try:
-        ds = xr.open_dataset(path)  # lazily: the header now, the observed variables below
+        return Observations.from_dataset(ds, variables, sigma=sigma)
+    except InputError as e:
+        head, sep, rest = str(e).partition(": ")
+        raise InputError(f"{where}: {rest if sep and head == 'observations' else e}") from None
     except MemoryError:
         raise
-    except Exception as e:  # a damaged file fails in many ways (OSError, ValueError, HDF errors, ...)
-        raise unreadable(e) from None
-    with ds:
-        try:
-            ds = upgrade_layout(ds)
-        except Exception as e:
-            raise unreadable(e) from None
-        loaded = sum(int(ds[v].nbytes) for v in ("q", "v", "t", "time") if v in ds.variables)
-        if bound is not None and loaded > bound:
-            raise InputError(f"{where}: its observed variables are {format_bytes(loaded)}, more than the memory bound "
-                             f"of {format_bytes(bound)}; observe fewer times, or pass max_bytes=None to read it anyway")
-        file_h = ds.attrs.get("h")
-        if isinstance(file_h, np.ndarray) and file_h.size == 1 and file_h.dtype.kind in "iuf":
-            file_h = file_h.reshape(-1)[0]
-        if isinstance(file_h, (np.integer, np.floating)):
-            file_h = file_h.item()
-        try:
-            observations = Observations.from_dataset(ds, variables, sigma=sigma)
-        except InputError as e:
-            head, sep, rest = str(e).partition(": ")
-            raise InputError(f"{where}: {rest if sep and head == 'observations' else e}") from None
-        except MemoryError:
-            raise
-        except Exception as e:  # the data of a damaged file fail when read
-            raise unreadable(e) from None
-    return observations, file_h
+    except Exception as e:  # the data of a damaged file fail when read
+        raise _unreadable(where, e) from None
 
 
 def write_fit_result(result, problem: FitProblem | None, path, *, overwrite: bool = False) -> None:

@@ -34,8 +34,6 @@ of $J$: its standard error is infinite and the result says so.
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -45,51 +43,38 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..extras import require
 from ..errors import InputError, SolverFailure
-from ..inputs import finite_number, real_array, real_number, require_float64, whole_number
-from ..registry import get_model
-from ..saveat import GRID_RTOL, SaveAt
-from ..simulate import MIN_STEP_SIZE, simulate
-from ..solution import Solution
+from ..inputs import finite_number, real_number, require_float64, whole_number
+from ..saveat import SaveAt
+from ..simulate import simulate
 from ..system import System, project_velocity
-from .memory import check_fit_memory, memory_limit
-from .observations import Observations, UnnamedObservations, as_observations, sigma_array
-from .optimal_control import MAX_ITERATIONS
+from .control_arguments import MAX_ITERATIONS
+from .fit_arguments import (
+    FitData,
+    FitModel,
+    FitStart,
+    ModelBuild,
+    check_fit_method,
+    fit_data,
+    fit_model,
+    fit_start,
+    parameter_tables,
+    progress_reporter,
+    step_grid,
+)
+from .fit_result import IDENTIFIABLE_TOL, RCOND, FitResult, fit_notes, observed_residuals, uncertainties  # noqa: F401
+from .memory import memory_limit
+from .observations import Observations
 
 __all__ = ["fit", "FitResult", "Observations", "RCOND", "MAX_STEPS"]
 
-#: Singular values of the scaled Jacobian below this fraction of the largest count as zero: the
-#: directions the projection of `v0` removes (about 1e-16 of the largest), and quantities the
-#: data cannot tell apart.
-RCOND = 1e-10
-
 #: The default of :func:`fit`'s `max_steps`: the most iterations of the solver.
 MAX_STEPS = 200
-
-#: A reported quantity is identifiable when its derivative lies in the row space of the Jacobian
-#: to this relative tolerance.
-IDENTIFIABLE_TOL = 1e-6
 
 
 # ----------------------------------------------------------------------------------------------
 # The least-squares problem
 # ----------------------------------------------------------------------------------------------
-@dataclasses.dataclass(frozen=True)
-class _ModelBuild:
-    """Build a zoo model from its estimated and fixed parameters (hashable: compiled fits are
-    shared between calls of one model)."""
-
-    name: str
-
-    def __call__(self, params):
-        spec = get_model(self.name)
-        return spec.build(spec.resolve_params(params))
-
-    def initial(self, params):
-        return get_model(self.name).default_ic(dict(get_model(self.name).resolve_params(params)))
-
-
 def _point(system: System, q0, R0):
     from ..spaces import Point
 
@@ -222,255 +207,6 @@ def _verbose(**kw):
     jax.debug.callback(_report, kw["num_steps"][1], kw["loss_this_step"][1])
 
 
-def _progress_reporter(progress):
-    """The `(iteration, chi2)` callable of `progress=`, or None."""
-    if progress is None or progress is False:
-        return None
-    if progress is True:
-        require("rich", extra="cli", what="progress display")
-        from rich.console import Console
-
-        console = Console(stderr=True)
-
-        def report(k, chi2):
-            console.print(f"fit: iteration {k}, chi2 = {chi2:.6g}")
-
-        return report
-    if callable(progress):
-        return progress
-    raise InputError(f"progress: expected True, False or a callable(iteration, chi2), got {progress!r}")
-
-
-# ----------------------------------------------------------------------------------------------
-# The result
-# ----------------------------------------------------------------------------------------------
-@dataclasses.dataclass(frozen=True, repr=False, eq=False)
-class FitResult:
-    """The outcome of :func:`fit`.
-
-    Attributes:
-        names: the estimated quantities: the parameters by name, then `q0.<coordinate>` and
-            `v0.<velocity>` for estimated initial-condition components.
-        values: their estimates, (P,) in the order of `names` (`v0` components projected onto
-            the constraints).
-        stderr: their standard errors, (P,) (`inf` for a quantity the data cannot determine,
-            NaN when no degree of freedom is left to estimate the error scale).
-        covariance: their covariance matrix, (P, P).
-        correlation: their correlation matrix, (P, P) (NaN where a standard error is 0 or inf).
-        identifiable: whether each quantity is determined by the data, (P,) bool.
-        params: the estimated model parameters, name -> value.
-        q0: the full initial coordinates of the fitted run, (n,).
-        v0: the full initial velocity of the fitted run, projected onto the constraints, (N,).
-        solution: the fitted :class:`~gnipy.Solution` (every node from `t0` to the last
-            observation time, at the estimate).
-        observations: the :class:`Observations` fitted.
-        residuals: model minus observation, (T, k) (NaN where a value is missing).
-        raw: the solver's final point: the estimated quantities with the `v0` components before
-            their projection onto the constraints, (P,) (equal to `values` where no `v0`
-            component is estimated).
-        jacobian: the Jacobian of the weighted residuals (flattened row by row, zero rows for
-            missing values) with respect to the estimated quantities at `raw`, (T·k, P).
-        chi2: the sum of the squared weighted residuals.
-        n_obs: the number of observed values used.
-        rank: the number of independent directions in the Jacobian (the effective number of
-            estimated quantities; the projection of `v0` removes one per constraint when all of
-            `v0` is estimated).
-        dof: the degrees of freedom, `n_obs - rank`.
-        reduced_chi2: `chi2 / dof` (about 1 for a good fit when `sigma` is known).
-        sigma_known: whether the measurement errors were given (`sigma`): the covariance is then
-            $(J^TJ)^{-1}$; otherwise it is scaled by `reduced_chi2`.
-        success: whether the least-squares solver converged.
-        message: how the fit ended, in words (with warnings about undetermined quantities).
-        iterations: the solver's iterations (steps of Levenberg–Marquardt, rejected ones included).
-        initial_guess: the starting values, (P,).
-        method: the integrator's name; `h`, `t0`: the step grid.
-        wall_time: seconds spent in :func:`fit` (compilation included).
-    """
-
-    names: tuple[str, ...]
-    values: np.ndarray
-    stderr: np.ndarray
-    covariance: np.ndarray
-    correlation: np.ndarray
-    identifiable: np.ndarray
-    params: dict[str, float]
-    q0: np.ndarray
-    v0: np.ndarray
-    solution: Solution
-    observations: Observations
-    residuals: np.ndarray
-    raw: np.ndarray
-    jacobian: np.ndarray
-    chi2: float
-    n_obs: int
-    rank: int
-    dof: int
-    reduced_chi2: float
-    sigma_known: bool
-    success: bool
-    message: str
-    iterations: int
-    initial_guess: np.ndarray
-    method: str
-    h: float
-    t0: float
-    wall_time: float
-    _problem: Any = dataclasses.field(default=None, compare=False)
-    _data: Any = dataclasses.field(default=None, compare=False)
-
-    @property
-    def estimates(self) -> dict[str, float]:
-        """The estimates by name."""
-        return dict(zip(self.names, (float(x) for x in self.values)))
-
-    @property
-    def standard_errors(self) -> dict[str, float]:
-        """The standard errors by name."""
-        return dict(zip(self.names, (float(x) for x in self.stderr)))
-
-    def weighted_residuals(self, raw=None) -> np.ndarray:
-        """The weighted residuals (flattened, zero at missing values) of the fitted problem at
-        `raw` (the estimated quantities in the order of :attr:`names`, `v0` components before
-        their projection; default :attr:`raw`, the solver's final point), computed by an ordinary
-        (untransformed) simulation: the function whose derivative is :attr:`jacobian`."""
-        y = self.raw if raw is None else np.asarray(raw, dtype=np.float64).reshape(-1)
-        if y.shape != self.raw.shape:
-            raise InputError(f"raw: expected {self.raw.size} numbers (one per name), got shape {y.shape}")
-        return np.asarray(self._problem.residuals(jnp.asarray(y), self._data))
-
-    def summary(self) -> str:
-        """A readable table of the estimates and their standard errors, and how the fit ended."""
-        obs = self.observations
-        head = [
-            f"gnipy.fit: {self.solution.system} with {self.method}, h = {self.h:g}; {self.n_obs} observed values "
-            f"of {', '.join(obs.variables)} at {len(obs.times)} times",
-            f"{'converged' if self.success else 'NOT converged'} after {self.iterations} iterations: {self.message}",
-            f"chi2 = {self.chi2:.6g}, dof = {self.dof}, reduced chi2 = {self.reduced_chi2:.4g} "
-            f"({'sigma given' if self.sigma_known else 'sigma estimated from the residuals'})",
-        ]
-        width = max([9] + [len(n) for n in self.names])
-        rows = [f"{'quantity':<{width}}  {'estimate':>16}  {'std error':>10}  {'relative':>9}"]
-        for name, x, s in zip(self.names, self.values, self.stderr):
-            # relative error only where the estimate is known to differ from zero
-            rel = f"{abs(s / x):9.2e}" if abs(x) > s and math.isfinite(s) else f"{'':>9}"
-            rows.append(f"{name:<{width}}  {x:16.9g}  {s:10.3g}  {rel}")
-        return "\n".join(head + rows)
-
-    def __repr__(self) -> str:
-        parts = ", ".join(f"{n}={x:.6g}±{s:.2g}" for n, x, s in zip(self.names, self.values, self.stderr))
-        return f"FitResult({parts}; success={self.success}, iterations={self.iterations})"
-
-
-# ----------------------------------------------------------------------------------------------
-# fit
-# ----------------------------------------------------------------------------------------------
-def _vector(name, x, n):
-    a = real_array(name, x, f"{n} real numbers").reshape(-1)
-    if a.shape != (n,):
-        raise InputError(f"{name}: expected {n} numbers, got {a.size}")
-    if not np.all(np.isfinite(a)):
-        raise InputError(f"{name}: contains NaN or infinite values")
-    return a
-
-
-def _components(name: str, which, names: tuple[str, ...]) -> tuple[int, ...]:
-    """The indices of the components `which` (names or indices, or all for True/"all") of `names`."""
-    if which is True or (isinstance(which, str) and which == "all"):
-        return tuple(range(len(names)))
-    if isinstance(which, (str, int, np.integer)):
-        which = (which,)
-    idx = []
-    for w in which:
-        if isinstance(w, str):
-            if w not in names:
-                raise InputError(f"initial: unknown component {w!r} of {name} (known: {', '.join(names)})")
-            idx.append(names.index(w))
-        elif isinstance(w, (int, np.integer)) and not isinstance(w, bool) and -len(names) <= w < len(names):
-            idx.append(int(w) % len(names))
-        else:
-            raise InputError(f"initial: {w!r} is not a component of {name} ({len(names)} components: "
-                             f"{', '.join(names)})")
-    if len(set(idx)) != len(idx):
-        raise InputError(f"initial: a component of {name} is named twice")
-    return tuple(sorted(idx))
-
-
-def _initial_selection(initial, coordinates, velocities):
-    if initial is None:
-        initial = ()
-    if isinstance(initial, str):
-        initial = (initial,)
-    if isinstance(initial, Mapping):
-        items = dict(initial)
-    else:
-        try:
-            items = {k: True for k in initial}
-        except TypeError:
-            raise InputError(f"initial: expected a subset of ('q0', 'v0') or a mapping, got {initial!r}") from None
-    bad = [k for k in items if k not in ("q0", "v0")]
-    if bad:
-        raise InputError(f"initial: unknown entries {bad} (estimate 'q0' and/or 'v0', or e.g. {{'q0': ['x', 'y']}})")
-    q_idx = _components("q0", items["q0"], coordinates) if "q0" in items else ()
-    v_idx = _components("v0", items["v0"], velocities) if "v0" in items else ()
-    return q_idx, v_idx
-
-
-def _columns(variables, coordinates, velocities):
-    cols = []
-    for name in variables:
-        if name in coordinates:
-            cols.append(("q", coordinates.index(name)))
-        elif name in velocities:
-            cols.append(("v", velocities.index(name)))
-        else:
-            raise InputError(f"observations: unknown variable {name!r} (coordinates: {', '.join(coordinates)}; "
-                             f"velocities: {', '.join(velocities)})")
-    return tuple(cols)
-
-
-def _grid(times, t0: float, h: float) -> tuple[int, ...]:
-    """The step index of each observation time; InputError naming `observations` and the time
-    for a time off the grid, before t0, or out of order."""
-    ks = []
-    for t in times:
-        k = (float(t) - t0) / h
-        kr = round(k)
-        if abs(k - kr) > GRID_RTOL * max(1.0, abs(k)):
-            raise InputError(
-                f"observations: time {float(t)!r} is not a node t0 + k h of the step grid (t0 = {t0!r}, h = {h!r}: "
-                f"it lies between k = {math.floor(k)} and {math.floor(k) + 1}); gnipy compares nodes and does not "
-                "interpolate: choose h dividing the observation times"
-            )
-        if kr < 0:
-            raise InputError(f"observations: time {float(t)!r} lies before t0 = {t0!r}")
-        ks.append(int(kr))
-    if any(b <= a for a, b in zip(ks, ks[1:])):
-        i = next(i for i, (a, b) in enumerate(zip(ks, ks[1:])) if b <= a)
-        raise InputError(f"observations: the times must be strictly increasing along the run; time "
-                         f"{float(times[i + 1])!r} follows {float(times[i])!r}")
-    if ks[-1] < 1:
-        raise InputError("observations: every observation is at t0; observe at least one later node")
-    return tuple(ks)
-
-
-def _check_method(method) -> None:
-    """A method's name (known), an integrator or None; `MethodError` otherwise, before the method
-    is put in the compiled problem (where another object fails obscurely)."""
-    from ..errors import MethodError
-    from ..integrators.base import Integrator
-    from ..methods import get_method
-    from ..reference import ContinuousReference
-
-    if method is None or isinstance(method, Integrator):
-        return
-    if isinstance(method, str):
-        method = get_method(method)
-    if isinstance(method, ContinuousReference):
-        raise MethodError("method: the continuous reference cannot be differentiated or traced; use an integrator")
-    if not isinstance(method, Integrator):
-        raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
-
-
 _TRACE_ERRORS = (jax.errors.ConcretizationTypeError, jax.errors.TracerArrayConversionError,
                  jax.errors.TracerBoolConversionError, jax.errors.TracerIntegerConversionError)
 
@@ -566,136 +302,93 @@ def fit(
             trial values of the estimated quantities; `step`, `time` and `residual` are then
             unknown: -1 and NaN). Better initial guesses or a smaller `h` help.
     """
-    import optimistix as optx
-
     start = time.perf_counter()
     require_float64()
-    h = finite_number("h", h)
-    if h == 0:
-        raise InputError("h: must be nonzero")
-    if abs(h) < MIN_STEP_SIZE:
-        raise InputError(f"h: {h!r} is below {MIN_STEP_SIZE:g}, where float64 loses its precision")
-    t0 = finite_number("t0", t0)
-    if params is None:
-        params = {}
-    if not isinstance(params, Mapping):
-        raise InputError(f"params: expected a dict name -> initial guess, got {type(params).__name__}")
-    if fixed is not None and not isinstance(fixed, Mapping):
-        raise InputError(f"fixed: expected a dict name -> value, got {type(fixed).__name__}")
-    fixed = dict(fixed or {})
-    for arg, table in (("params", params), ("fixed", fixed)):
-        bad = [k for k in table if not isinstance(k, str)]
-        if bad:
-            raise InputError(f"{arg}: parameter names must be strings, got {bad[0]!r}")
-    param_names = tuple(params)
-    guesses = [finite_number(f"params: {k!r}", v) for k, v in params.items()]
-    for k, v in fixed.items():  # before a model reads them (its own check would take "1" or True)
-        if not isinstance(v, jax.core.Tracer):
-            finite_number(f"fixed: {k!r}", v)
-    both = sorted(set(param_names) & set(fixed))
-    if both:
-        raise InputError(f"fixed: {both} also in params (a parameter is either estimated or fixed)")
+    h, t0 = step_grid(h, t0)
+    param_names, guesses, fixed = parameter_tables(params, fixed)
     max_steps = whole_number("max_steps", max_steps, 1, MAX_ITERATIONS)
     rtol, atol = real_number("rtol", rtol, lower=0.0), real_number("atol", atol, lower=0.0)
     bound = memory_limit(max_bytes)
-    reporter = _progress_reporter(progress)
-    _check_method(method)
+    reporter = progress_reporter(progress)
+    check_fit_method(method)
+    model = fit_model(system, param_names, guesses, fixed, q0, v0)
+    begin = fit_start(model, q0, v0, R0, initial, param_names, guesses)
+    data = fit_data(observations, model.system, t0, h, sigma, len(begin.names), bound)
 
-    # the system, and how it is built from the parameters
-    follow_ic = False
-    given_system = None
-    if isinstance(system, str):
-        spec = get_model(system)
-        build = _ModelBuild(spec.name)
-        spec.resolve_params({**fixed, **dict(zip(param_names, guesses))})  # unknown names, bad values
-        concrete = build({**fixed, **dict(zip(param_names, guesses))})
-        if spec.default_ic is not None and (q0 is None or v0 is None) and param_names:
-            try:
-                jax.eval_shape(build.initial, {**fixed, **{k: jnp.float64(g) for k, g in zip(param_names, guesses)}})
-                follow_ic = True
-            except Exception:  # e.g. float() of a traced value: the default at the initial guess
-                follow_ic = False
-    elif isinstance(system, System):
-        if param_names or fixed:
-            raise InputError("params: a System's parameters cannot be estimated here; pass a model name or a "
-                             "build(params) function")
-        build, concrete, given_system = None, system, system
-    elif callable(system):
-        build = system
-        try:
-            concrete = build({**{k: jnp.float64(v) for k, v in fixed.items()},
-                              **{k: jnp.float64(g) for k, g in zip(param_names, guesses)}})
-        except InputError:
-            raise
-        except Exception as e:
-            raise InputError(f"system: build(params) failed at the initial guess: {type(e).__name__}: {e}") from e
-        if not isinstance(concrete, System):
-            raise InputError(f"system: build(params) must return a gnipy.System, got {type(concrete).__name__}")
-    else:
-        raise InputError(f"system: expected a model name, a build(params) function or a gnipy.System, "
-                         f"got {type(system).__name__}")
-    coords, vels = concrete.coordinates, concrete.velocities
+    # the least-squares problem in the scaled quantities, solved
+    scale = np.where(begin.y0 != 0, np.abs(begin.y0), 1.0)
+    problem = _problem(model, begin, data, fixed, param_names, scale, controls, method, h, t0)
+    solver = _least_squares_solver(solver, rtol, atol, reporter)
+    out, z = _solve(problem, solver, begin.y0 / scale, data.arrays, max_steps, reporter, begin.names)
+    y = z * scale
+    iterations, success, solver_message = _solver_outcome(out)
 
-    # the initial condition: given, or the defaults
-    defaults = concrete.defaults
-    if (q0 is None or v0 is None) and defaults is None:
-        raise InputError(f"q0/v0: the system {concrete.name!r} has no default initial condition; give q0 and v0")
-    q0v = _vector("q0", defaults[0] if q0 is None else q0, concrete.n)
-    v0v = _vector("v0", defaults[1] if v0 is None else v0, concrete.dim)
-    if R0 is None and defaults is not None and len(defaults) > 2 and defaults[2] is not None:
-        R0 = defaults[2]
-    b0 = concrete.initial_point(q0v, R0)
-    R0a = None if concrete.group is None else np.asarray(b0.R)
-    if follow_ic and (q0 is not None or v0 is not None):
-        follow_ic = False
-    q_idx, v_idx = _initial_selection(initial, coords, vels)
-    names = (param_names + tuple(f"q0.{coords[i]}" for i in q_idx) + tuple(f"v0.{vels[i]}" for i in v_idx))
-    if not names:
-        raise InputError("params/initial: nothing to estimate; name parameters (params=) and/or parts of the "
-                         "initial condition (initial=)")
-    y0 = np.concatenate([np.asarray(guesses, dtype=np.float64), q0v[list(q_idx)], v0v[list(v_idx)]])
+    # the linearization at the estimate: residuals, Jacobian, the reported quantities
+    r, J = _linearization_at_estimate(out, problem, y, data.arrays)
+    outputs, phi, v0p = (np.asarray(a) for a in _reported(problem, jnp.asarray(y)))
+    chi2 = float(np.sum(r**2))
+    stats = uncertainties(J, phi, scale, chi2, data.n_obs, data.sigma_known)
+    success, notes = fit_notes(success, solver_message, stats, begin.names)
 
-    # the observations, on the grid
-    obs = as_observations(observations)
-    if isinstance(obs, UnnamedObservations):
-        obs = obs.named(coords)
-    columns = _columns(obs.variables, coords, vels)
-    ks = _grid(obs.times, t0, h)
-    # before anything is compiled: the fitted run holds every node of the span
-    check_fit_memory(concrete, ks[-1], obs.values.size, len(names), t0=t0, t_last=float(obs.times[-1]), h=h,
-                     max_bytes=bound)
-    if sigma is not None and obs.sigma is not None:
-        raise InputError("sigma: given both here and in the observations; give one")
-    sig = obs.sigma if sigma is None else sigma_array(sigma, obs.values.shape, "sigma")
-    sigma_known = sig is not None
-    mask = np.isfinite(obs.values)
-    n_obs = int(mask.sum())
-    if n_obs < len(names):
-        raise InputError(f"observations: {n_obs} observed values cannot determine {len(names)} estimated quantities")
-    weights = np.where(mask, 1.0 if sig is None else 1.0 / np.where(mask, sig, 1.0), 0.0)
-    data = (jnp.asarray(np.where(mask, obs.values, 0.0)), jnp.asarray(weights))
+    # the fitted run: every node, at the estimate
+    q0_fit, solution = _fitted_run(problem, model, begin, y, fixed, v0p, outputs)
+    residuals = observed_residuals(solution, data.columns, data.steps, data.observations, data.mask)
+    if not solution.success:
+        notes.append(f"the fitted run failed: {solution.message}")
 
-    scale = np.where(y0 != 0, np.abs(y0), 1.0)
-    problem = _Problem(
-        system=None if given_system is None else given_system.without_metadata(),
-        fixed={k: jnp.asarray(finite_number(f"fixed: {k!r}", v), jnp.float64) for k, v in fixed.items()},
-        q0=jnp.asarray(q0v), v0=jnp.asarray(v0v), R0=None if R0a is None else jnp.asarray(R0a),
-        scale=jnp.asarray(scale), controls=controls, build=build, method=method, param_names=param_names,
-        q_idx=q_idx, v_idx=v_idx, follow_ic=follow_ic, h=h, steps=ks[-1], t0=t0,
-        ts=tuple(float(t0 + k * h) for k in ks), columns=columns,
+    return FitResult(
+        names=begin.names, values=outputs, stderr=stats.stderr, covariance=stats.covariance,
+        correlation=stats.correlation, identifiable=stats.identifiable,
+        params={k: float(v) for k, v in zip(param_names, outputs)}, q0=q0_fit, v0=v0p, solution=solution,
+        observations=data.observations, residuals=residuals, raw=y, jacobian=J, chi2=chi2, n_obs=data.n_obs,
+        rank=stats.rank, dof=stats.dof, reduced_chi2=stats.reduced_chi2, sigma_known=data.sigma_known,
+        success=bool(success), message="; ".join(notes), iterations=iterations, initial_guess=begin.y0,
+        method=solution.method, h=h, t0=t0, wall_time=time.perf_counter() - start, _problem=problem,
+        _data=data.arrays,
     )
+
+
+# ----------------------------------------------------------------------------------------------
+# The steps of fit
+# ----------------------------------------------------------------------------------------------
+def _problem(model: FitModel, begin: FitStart, data: FitData, fixed, param_names, scale, controls, method, h,
+             t0) -> _Problem:
+    """The least-squares problem of a fit (in the quantities scaled by `scale`)."""
+    ks = data.steps
+    return _Problem(
+        system=None if model.given is None else model.given.without_metadata(),
+        fixed={k: jnp.asarray(finite_number(f"fixed: {k!r}", v), jnp.float64) for k, v in fixed.items()},
+        q0=jnp.asarray(begin.q0), v0=jnp.asarray(begin.v0), R0=None if begin.R0 is None else jnp.asarray(begin.R0),
+        scale=jnp.asarray(scale), controls=controls, build=model.build, method=method, param_names=param_names,
+        q_idx=begin.q_idx, v_idx=begin.v_idx, follow_ic=begin.follow_ic, h=h, steps=ks[-1], t0=t0,
+        ts=tuple(float(t0 + k * h) for k in ks), columns=data.columns,
+    )
+
+
+def _least_squares_solver(solver, rtol, atol, reporter):
+    """The solver: `solver`, with the progress hook when progress is reported, or the default
+    Levenberg–Marquardt."""
+    import optimistix as optx
+
     if solver is None:
-        solver = optx.LevenbergMarquardt(rtol=rtol, atol=atol, verbose=_verbose)
-    elif reporter is not None:
+        return optx.LevenbergMarquardt(rtol=rtol, atol=atol, verbose=_verbose)
+    if reporter is not None:
         if not hasattr(solver, "verbose"):
             raise InputError("progress: this solver has no `verbose` hook to report progress through")
-        solver = eqx.tree_at(lambda s: s.verbose, solver, _verbose)
+        return eqx.tree_at(lambda s: s.verbose, solver, _verbose)
+    return solver
+
+
+def _solve(problem: _Problem, solver, z0, data, max_steps, reporter, names):
+    """`(optimistix's solution, its final point)` from the scaled guess `z0`, progress reported
+    through `reporter`; InputError for a model that cannot be traced, SolverFailure for a
+    simulation that failed at some trial values."""
+    import optimistix as optx
 
     _REPORT[0] = reporter
     try:
-        out = optx.least_squares(problem, solver, jnp.asarray(y0 / scale), data, max_steps=int(max_steps),
-                                 throw=False)
-        z = np.asarray(out.value)
+        out = optx.least_squares(problem, solver, jnp.asarray(z0), data, max_steps=int(max_steps), throw=False)
+        return out, np.asarray(out.value)
     except InputError:
         raise
     except _TRACE_ERRORS as e:
@@ -713,89 +406,44 @@ def fit(
             "initial guesses or use a smaller h", step=-1, time=float("nan"), residual=float("nan")) from e
     finally:
         _REPORT[0] = None
-    y = z * scale
-    iterations = int(out.stats["num_steps"])
+
+
+def _solver_outcome(out) -> tuple[int, bool, str]:
+    """`(iterations, success, message)` of optimistix's solution."""
+    import optimistix as optx
+
     success = bool(out.result == optx.RESULTS.successful)
     solver_message = "the solver converged" if success else str(optx.RESULTS[out.result])
+    return int(out.stats["num_steps"]), success, solver_message
 
-    # the linearization at the estimate: residuals, Jacobian, the reported quantities
+
+def _linearization_at_estimate(out, problem: _Problem, y, data):
+    """:func:`_final_linearization`, a failed step a SolverFailure."""
     try:
-        r, J = _final_linearization(out, problem, y, data)
+        return _final_linearization(out, problem, y, data)
     except Exception as e:
         if "step failed" not in str(e):
             raise
         raise SolverFailure("fit: the simulation at the estimate failed", step=-1, time=float("nan"),
                             residual=float("nan")) from e
-    outputs, phi, v0p = (np.asarray(a) for a in _reported(problem, jnp.asarray(y)))
-    chi2 = float(np.sum(r**2))
-    Js = J * scale[None, :]
-    finite = bool(np.all(np.isfinite(Js)))
-    if not finite:  # a run that blew up at the estimate, or weights that overflow: no SVD to take
-        Js = np.zeros_like(Js)
-    _, S, Vt = np.linalg.svd(Js, full_matrices=False)
-    rank = int(np.sum(S > RCOND * S[0])) if S.size and S[0] > 0 else 0
-    V = Vt[:rank].T
-    pinv = (V / S[:rank] ** 2) @ V.T
-    phis = phi * scale[None, :]  # the reported quantities' derivatives with respect to z
-    inrow = phis @ V @ V.T
-    norms = np.linalg.norm(phis, axis=1)
-    identifiable = np.linalg.norm(phis - inrow, axis=1) <= IDENTIFIABLE_TOL * np.maximum(norms, 1e-300)
-    dof = n_obs - rank
-    reduced = chi2 / dof if dof > 0 else float("nan")
-    s2 = 1.0 if sigma_known else reduced
-    cov = s2 * phis @ pinv @ phis.T
-    stderr = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    stderr[~identifiable] = np.inf
-    cov[~identifiable, :] = np.nan
-    cov[:, ~identifiable] = np.nan
-    for i in np.flatnonzero(~identifiable):
-        cov[i, i] = np.inf
-    with np.errstate(divide="ignore", invalid="ignore"):
-        corr = cov / np.outer(stderr, stderr)
-    corr[~np.isfinite(corr)] = np.nan
-    np.fill_diagonal(corr, np.where((stderr > 0) & np.isfinite(stderr), 1.0, np.nan))
 
-    if not finite:
-        success = False
-        solver_message += "; the Jacobian at the estimate is not finite (no uncertainties)"
-    notes = [solver_message if success else f"the solver did not converge: {solver_message}"]
-    if not identifiable.all():
-        bad = [n for n, ok in zip(names, identifiable) if not ok]
-        notes.append(f"the data do not determine {', '.join(bad)} (a null direction of the Jacobian: infinite "
-                     "standard error)")
-    if dof <= 0:
-        notes.append("no degrees of freedom are left: the standard errors cannot be estimated (give sigma or more "
-                     "observations)")
 
-    # the fitted run: every node, at the estimate
+def _fitted_run(problem: _Problem, model: FitModel, begin: FitStart, y, fixed, v0p, outputs):
+    """`(q0, Solution)` of the fitted run: every node from t0 to the last observation, at the
+    estimate `y` (the system rebuilt from the estimated parameters as plain numbers, the projected
+    `v0p`); InputError when the system is not valid there."""
     system_fit, q0_fit, _ = problem.unpack(jnp.asarray(y))
-    if given_system is None:
-        npar = len(param_names)
-        estimated = {k: float(v) for k, v in zip(param_names, y[:npar])}
-        system_fit = build({**fixed, **estimated}) if isinstance(build, _ModelBuild) else build(
+    if model.given is None:
+        param_names, build = problem.param_names, model.build
+        estimated = {k: float(v) for k, v in zip(param_names, y[:len(param_names)])}
+        system_fit = build({**fixed, **estimated}) if isinstance(build, ModelBuild) else build(
             {**{k: jnp.float64(v) for k, v in fixed.items()}, **{k: jnp.float64(v) for k, v in estimated.items()}})
     q0_fit = np.asarray(q0_fit)
-    kw = {} if controls is None else {"controls": controls}
+    kw = {} if problem.controls is None else {"controls": problem.controls}
     try:
-        solution = simulate(system_fit, method, q0_fit, v0p, R0=R0a, h=h, steps=ks[-1], t0=t0, project_v0=True,
-                            throw=False, **kw)
+        solution = simulate(system_fit, problem.method, q0_fit, v0p, R0=begin.R0, h=problem.h, steps=problem.steps,
+                            t0=problem.t0, project_v0=True, throw=False, **kw)
     except InputError as e:
-        at = ", ".join(f"{n} = {x:.6g}" for n, x in zip(names, outputs))
+        at = ", ".join(f"{n} = {x:.6g}" for n, x in zip(begin.names, outputs))
         raise InputError(f"params: the fitted system is not valid at the estimate ({at}): {e}") from e
-    model = np.full(obs.values.shape, np.nan)
-    got = np.asarray(solution.q), np.asarray(solution.v)
-    for j, (kind, i) in enumerate(columns):
-        rows = [k for k in ks if k < got[0].shape[0]]
-        model[: len(rows), j] = got[0 if kind == "q" else 1][rows, i]
-    residuals = np.where(mask, model - obs.values, np.nan)
-    if not solution.success:
-        notes.append(f"the fitted run failed: {solution.message}")
-
-    return FitResult(
-        names=names, values=outputs, stderr=stderr, covariance=cov, correlation=corr, identifiable=identifiable,
-        params={k: float(v) for k, v in zip(param_names, outputs)}, q0=q0_fit, v0=v0p, solution=solution,
-        observations=obs, residuals=residuals, raw=y, jacobian=J, chi2=chi2, n_obs=n_obs, rank=rank, dof=dof,
-        reduced_chi2=reduced, sigma_known=sigma_known, success=bool(success), message="; ".join(notes),
-        iterations=iterations, initial_guess=y0, method=solution.method, h=h, t0=t0,
-        wall_time=time.perf_counter() - start, _problem=problem, _data=data,
-    )
+    return q0_fit, solution

@@ -121,46 +121,13 @@ class Observations:
             variables: the coordinate and/or velocity names to take (default: every coordinate).
             sigma: as in :class:`Observations`.
         """
-        xr = require("xarray", extra="files")
+        from ..io import result_times
 
-        from ..io import read_netcdf, result_times
-
-        if isinstance(dataset, (str, os.PathLike)):
-            try:
-                dataset = read_netcdf(dataset)
-            except MemoryError:
-                raise
-            except Exception as e:  # OSError, or what a damaged file raises (HDF errors, ...)
-                why = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
-                raise InputError(f"observations: {why}") from None
-        if not isinstance(dataset, xr.Dataset):
-            raise InputError(f"observations: expected an xarray.Dataset or a path, got {type(dataset).__name__}")
-        if "member" in dataset.dims:
-            raise InputError("observations: the dataset holds a batch (dimension 'member'); select one member")
-        if "q" not in dataset.variables and "v" not in dataset.variables:
-            raise InputError("observations: the dataset has neither q(time, coordinate) nor v(time, velocity)")
-        for var, dim in (("q", "coordinate"), ("v", "velocity")):
-            if var in dataset.variables:
-                dims = tuple(dataset[var].dims)
-                if sorted(dims) != sorted(("time", dim)):
-                    raise InputError(f"observations: {var} has dimensions {dims}, expected (time, {dim})")
-                if dataset[var].dtype.kind not in "iuf":  # strings, booleans, dates are not observations
-                    raise InputError(f"observations: {var} holds {dataset[var].dtype} values, not numbers")
-        time_var = dataset["t"] if "t" in dataset.variables and dataset["t"].dims == ("time",) else (
-            dataset["time"] if "time" in dataset.variables else None)
-        if time_var is not None and time_var.dtype.kind not in "iuf":
-            raise InputError(f"observations: the times hold {time_var.dtype} values, not numbers")
+        dataset = _as_dataset(dataset)
+        _check_dataset(dataset)
         empty = np.zeros((dataset.sizes.get("time", 0), 0))
-
-        def part(var, dim):
-            if var not in dataset.variables:
-                return empty, ()
-            names = tuple(str(c) for c in dataset[dim].values) if dim in dataset.coords else ()
-            a = dataset[var].transpose("time", dim).values
-            return np.asarray(a, dtype=np.float64), names or tuple(f"{var}{i}" for i in range(a.shape[1]))
-
-        q, coords = part("q", "coordinate")
-        v, vels = part("v", "velocity")
+        q, coords = _dataset_part(dataset, "q", "coordinate", empty)
+        v, vels = _dataset_part(dataset, "v", "velocity", empty)
         if variables is None and not coords:
             raise InputError("observations: the dataset has no q(time, coordinate); name the variables to take")
         return cls._select(result_times(dataset), q, v, coords, vels, variables, sigma)
@@ -184,6 +151,53 @@ class Observations:
                                  f"{', '.join(coords) or 'none'}; velocities: {', '.join(vels) or 'none'})")
         values = np.stack(cols, axis=1) if cols else np.zeros((len(t), 0))
         return cls(np.asarray(t, dtype=np.float64), values, tuple(variables), sigma)
+
+
+def _as_dataset(dataset):
+    """`dataset` as an `xarray.Dataset`: read from a path (:func:`gnipy.io.read_netcdf`), or as it is."""
+    xr = require("xarray", extra="files")
+
+    from ..io import read_netcdf
+
+    if isinstance(dataset, (str, os.PathLike)):
+        try:
+            dataset = read_netcdf(dataset)
+        except MemoryError:
+            raise
+        except Exception as e:  # OSError, or what a damaged file raises (HDF errors, ...)
+            why = str(e).strip().splitlines()[0] if str(e).strip() else type(e).__name__
+            raise InputError(f"observations: {why}") from None
+    if not isinstance(dataset, xr.Dataset):
+        raise InputError(f"observations: expected an xarray.Dataset or a path, got {type(dataset).__name__}")
+    return dataset
+
+
+def _check_dataset(dataset) -> None:
+    """One trajectory with `q(time, coordinate)` and/or `v(time, velocity)` of numbers, and numeric times."""
+    if "member" in dataset.dims:
+        raise InputError("observations: the dataset holds a batch (dimension 'member'); select one member")
+    if "q" not in dataset.variables and "v" not in dataset.variables:
+        raise InputError("observations: the dataset has neither q(time, coordinate) nor v(time, velocity)")
+    for var, dim in (("q", "coordinate"), ("v", "velocity")):
+        if var in dataset.variables:
+            dims = tuple(dataset[var].dims)
+            if sorted(dims) != sorted(("time", dim)):
+                raise InputError(f"observations: {var} has dimensions {dims}, expected (time, {dim})")
+            if dataset[var].dtype.kind not in "iuf":  # strings, booleans, dates are not observations
+                raise InputError(f"observations: {var} holds {dataset[var].dtype} values, not numbers")
+    time_var = dataset["t"] if "t" in dataset.variables and dataset["t"].dims == ("time",) else (
+        dataset["time"] if "time" in dataset.variables else None)
+    if time_var is not None and time_var.dtype.kind not in "iuf":
+        raise InputError(f"observations: the times hold {time_var.dtype} values, not numbers")
+
+
+def _dataset_part(dataset, var, dim, empty):
+    """`(values (time, dim), names)` of the dataset's `var` (`empty` and no names without it)."""
+    if var not in dataset.variables:
+        return empty, ()
+    names = tuple(str(c) for c in dataset[dim].values) if dim in dataset.coords else ()
+    a = dataset[var].transpose("time", dim).values
+    return np.asarray(a, dtype=np.float64), names or tuple(f"{var}{i}" for i in range(a.shape[1]))
 
 
 def sigma_array(sigma, shape, name: str) -> np.ndarray:
