@@ -243,7 +243,7 @@ def test_a_failure_at_the_start_of_a_chunk_raises_the_solver_failure(tmp_path, m
         assert np.all(np.isfinite(nc["q"][:])) and np.all(np.isfinite(nc["R"][:]))
     assert verify_netcdf(path)[0] and not parts_directory(path).exists()
     # resumed, the finished failed run is read, not recomputed
-    monkeypatch.setattr(streaming.run, "simulate", None)  # (simulate_to_file looks it up in gnipy.streaming.run)
+    monkeypatch.setattr(streaming.run, "solve", None)  # (simulate_to_file looks it up in gnipy.streaming.run)
     result = simulate_to_file(spec.system(), "gni-midpoint", q0, v0, resume=True, throw=False, **kw)
     assert (result.complete, result.result, result.failed_step, result.nodes, result.steps) == (True, 1, 5, 6, 5)
 
@@ -328,7 +328,7 @@ def test_resuming_a_finished_run_reads_it(knife, reference, tmp_path, monkeypatc
     shutil.copyfile(reference[0], path)
     before = path.stat().st_mtime_ns
     with monkeypatch.context() as m:
-        m.setattr(streaming.run, "simulate", None)  # nothing may be computed (looked up in gnipy.streaming.run)
+        m.setattr(streaming.run, "solve", None)  # nothing may be computed (looked up in gnipy.streaming.run)
         result = _run(knife, path, resume=True)
     ref = reference[1]
     assert result.complete and result.chunks == result.chunks_resumed == ref.chunks == 10

@@ -49,7 +49,10 @@ def simulate_traced(problem) -> Solution:
         c_sys, c_q0, c_v0, c_R0, c_state0 = concrete
         prep = prepare(c_sys, method, c_q0, c_v0, c_R0, problem.project_v0, c_state0)
         prepared = prep.method
-        fields = _sentences(c_sys, prep, method)
+        if _concrete(problem.h) is not None and _concrete(problem.t0) is not None:
+            # every value known (jax.grad outside jit): not inside a jit trace, whose nested
+            # compiled programs the sentences' checks could not call
+            fields = _sentences(c_sys, prep, method)
     else:  # inside jit: shapes only; the implicit path (the explicit one is an optimization)
         import dataclasses
 
