@@ -163,9 +163,46 @@ def convergence_study(
         InputError: bad arguments or initial condition (the message names the argument).
         MethodError: a method that cannot integrate this system (checked before anything runs).
     """
-    from ..errors import InputError, MethodError
+    from ..errors import MethodError
+
+    counts, T = _check_arguments(system, measure=measure, saves=saves, steps=steps, t_final=t_final)
+    b0, v0_used = system.check(q0, v0, R0=R0, project_v0=project_v0)
+    v0_used = np.asarray(v0_used, dtype=float)
+    resolved = _resolve(methods, system, b0, MethodError)
+
+    times = np.linspace(0.0, T, saves + 1)
+    truth = exact(q0, v0_used, times) if exact is not None else None
+    runs = _Runs(progress, len(resolved) * len(counts) + (truth is None))
+    t_start = time.perf_counter()
+    q_true, v_true, yardstick, description, floor_rel = _yardstick(system, truth, q0, v0_used, R0, T, saves, counts,
+                                                                    runs)
+    if floor is None:
+        scale = max(1.0, float(np.max(np.abs(np.concatenate([q_true.ravel(), v_true.ravel()])), initial=0.0)))
+        floor = floor_rel * scale
+
+    errors, errors_q, errors_v, failures = {}, {}, {}, []
+    for name, method in resolved.items():
+        errors_q[name], errors_v[name] = _method_errors(system, name, method, q0, v0_used, R0, T, saves, counts,
+                                                        (q_true, v_true), runs, failures)
+        errors[name] = {"q": errors_q[name], "v": errors_v[name],
+                        "state": np.maximum(errors_q[name], errors_v[name])}[measure]
+    runs.report("")
+    hs = T / np.asarray(counts, dtype=float)
+    return ConvergenceStudy(
+        methods=tuple(resolved), steps=tuple(counts), t_final=T, saves=saves, measure=measure,
+        yardstick=yardstick, yardstick_description=description, floor=float(floor), errors=errors,
+        errors_q=errors_q, errors_v=errors_v,
+        orders={name: fitted_order(hs, errors[name], floor) for name in resolved},
+        expected={name: _order(m) for name, m in resolved.items()},
+        failures=tuple(failures), seconds=time.perf_counter() - t_start,
+    )
+
+
+def _check_arguments(system, *, measure, saves, steps, t_final) -> tuple[list[int], float]:
+    """`(counts, T)`: the distinct step counts, ascending, and the final time, with `measure` and
+    `saves` checked (InputError naming the argument)."""
+    from ..errors import InputError
     from ..inputs import refuse_text_or_bool
-    from ..simulate import simulate
 
     if measure not in MEASURES:
         raise InputError(f"measure: expected one of {', '.join(MEASURES)}, got {measure!r}")
@@ -191,68 +228,61 @@ def convergence_study(
         raise InputError(f"t_final: expected a positive finite number, got {t_final!r}") from None
     if not (math.isfinite(T) and T > 0):
         raise InputError(f"t_final: expected a positive finite number, got {t_final!r}")
+    return counts, T
 
-    b0, v0_used = system.check(q0, v0, R0=R0, project_v0=project_v0)
-    v0_used = np.asarray(v0_used, dtype=float)
-    resolved = _resolve(methods, system, b0, MethodError)
 
-    times = np.linspace(0.0, T, saves + 1)
-    truth = exact(q0, v0_used, times) if exact is not None else None
-    runs = len(resolved) * len(counts) + (truth is None)
-    done = 0
+class _Runs:
+    """The runs of a study as they go: `progress(runs_done, runs_total, what)`, when given."""
 
-    def report(what: str) -> None:
-        if progress is not None:
-            progress(done, runs, what)
+    def __init__(self, progress: Callable[[int, int, str], None] | None, total: int):
+        self.progress, self.total, self.done = progress, total, 0
 
-    t_start = time.perf_counter()
+    def report(self, what: str) -> None:
+        if self.progress is not None:
+            self.progress(self.done, self.total, what)
+
+
+def _yardstick(system, truth, q0, v0_used, R0, T: float, saves: int, counts: list[int], runs: _Runs) -> tuple:
+    """`(q_true, v_true, yardstick, description, floor_rel)`: the yardstick at the saved nodes (the
+    exact solution `truth`, or the continuous reference, run here), its names and its relative
+    round-off level."""
+    from ..simulate import simulate
+
     if truth is not None:
         q_true, v_true = np.asarray(truth[0], dtype=float), np.asarray(truth[1], dtype=float)
-        yardstick, description = "exact", "exact solution"
-        floor_rel = 2.0 * math.sqrt(max(counts)) * float(np.finfo(np.float64).eps)
-    else:
-        report(_REFERENCE)
-        ref = simulate(system, "reference", q0, v0_used, R0=R0, h=T / saves, steps=saves)
-        q_true, v_true = np.asarray(ref.q), np.asarray(ref.v)
-        yardstick, description, floor_rel = "reference", _REFERENCE, REFERENCE_FLOOR
-        done += 1
-    if floor is None:
-        scale = max(1.0, float(np.max(np.abs(np.concatenate([q_true.ravel(), v_true.ravel()])), initial=0.0)))
-        floor = floor_rel * scale
+        return q_true, v_true, "exact", "exact solution", 2.0 * math.sqrt(max(counts)) * float(np.finfo(np.float64).eps)
+    runs.report(_REFERENCE)
+    ref = simulate(system, "reference", q0, v0_used, R0=R0, h=T / saves, steps=saves)
+    runs.done += 1
+    return np.asarray(ref.q), np.asarray(ref.v), "reference", _REFERENCE, REFERENCE_FLOOR
 
-    errors, errors_q, errors_v, failures = {}, {}, {}, []
-    for name, method in resolved.items():
-        eq, ev = [], []
-        for i, n in enumerate(counts):
-            h = T / n
-            report(f"{name}, h = {h:.4g}" + (" (compiling)" if i == 0 else ""))
-            with verdicts_reported_by_caller():  # the largest steps may fail: the study reports its points
-                sol = simulate(system, method, q0, v0_used, R0=R0, h=h, steps=n, save_every=n // saves,
-                               throw=False)
+
+def _method_errors(system, name: str, method, q0, v0_used, R0, T: float, saves: int, counts: list[int], true,
+                   runs: _Runs, failures: list) -> tuple[np.ndarray, np.ndarray]:
+    """The errors of q and of v of `method` at each step count against the yardstick `true`
+    (`(q, v)` at the saved nodes); a failed run's are NaN, and `(name, h)` is added to `failures`."""
+    from ..simulate import simulate
+
+    q_true, v_true = true
+    eq, ev = [], []
+    for i, n in enumerate(counts):
+        h = T / n
+        runs.report(f"{name}, h = {h:.4g}" + (" (compiling)" if i == 0 else ""))
+        with verdicts_reported_by_caller():  # the largest steps may fail: the study reports its points
+            sol = simulate(system, method, q0, v0_used, R0=R0, h=h, steps=n, save_every=n // saves,
+                           throw=False)
+        e_q = e_v = float("nan")
+        if sol.result == 0:
+            q, v = np.asarray(sol.q), np.asarray(sol.v)
+            e_q = float(np.max(np.abs(q - q_true), initial=0.0))
+            e_v = float(np.max(np.abs(v - v_true), initial=0.0))
+        if not (math.isfinite(e_q) and math.isfinite(e_v)):
+            failures.append((name, h))
             e_q = e_v = float("nan")
-            if sol.result == 0:
-                q, v = np.asarray(sol.q), np.asarray(sol.v)
-                e_q = float(np.max(np.abs(q - q_true), initial=0.0))
-                e_v = float(np.max(np.abs(v - v_true), initial=0.0))
-            if not (math.isfinite(e_q) and math.isfinite(e_v)):
-                failures.append((name, h))
-                e_q = e_v = float("nan")
-            eq.append(e_q)
-            ev.append(e_v)
-            done += 1
-        errors_q[name], errors_v[name] = np.array(eq), np.array(ev)
-        errors[name] = {"q": errors_q[name], "v": errors_v[name],
-                        "state": np.maximum(errors_q[name], errors_v[name])}[measure]
-    report("")
-    hs = T / np.asarray(counts, dtype=float)
-    return ConvergenceStudy(
-        methods=tuple(resolved), steps=tuple(counts), t_final=T, saves=saves, measure=measure,
-        yardstick=yardstick, yardstick_description=description, floor=float(floor), errors=errors,
-        errors_q=errors_q, errors_v=errors_v,
-        orders={name: fitted_order(hs, errors[name], floor) for name in resolved},
-        expected={name: _order(m) for name, m in resolved.items()},
-        failures=tuple(failures), seconds=time.perf_counter() - t_start,
-    )
+        eq.append(e_q)
+        ev.append(e_v)
+        runs.done += 1
+    return np.array(eq), np.array(ev)
 
 
 def _resolve(methods, system, b0, MethodError) -> dict:

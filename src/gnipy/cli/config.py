@@ -71,38 +71,54 @@ def config_value(where: str, key: str, kind: str, value, base: Path):
             raise bad()
         return value
     if kind == "path":
-        if not isinstance(value, str) or not value:
-            raise bad()
-        try:
-            path = Path(value).expanduser()
-        except RuntimeError as e:  # "~user" of no such user
-            raise UsageError("--config", f"{where}: key {key!r}: cannot use {value!r}: {e}") from None
-        return path if path.is_absolute() else base / path
+        return _config_path(where, key, value, base, bad)
     if kind == "vector":
-        if isinstance(value, str):
-            return value
-        if isinstance(value, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
-            return ",".join(repr(float(x)) for x in value)
-        raise bad()
+        return _config_vector(value, bad)
     if kind == "set":
-        if isinstance(value, str):
-            return [value]
-        if isinstance(value, list) and all(isinstance(x, str) for x in value):
-            return list(value)
-        if isinstance(value, dict):
-            items = []
-            for name, x in value.items():
-                if not _PARAM_NAME.fullmatch(name):  # e.g. { "m=2,g" = 1 } must not set m and g
-                    raise UsageError(
-                        "--config", f"{where}: key {key!r}: {name!r} is not a parameter name (in the table form "
-                        "each key is one name, e.g. set = { m = 2 }; or write set = [\"m=2\", ...])"
-                    )
-                if isinstance(x, bool) or not isinstance(x, (int, float)):
-                    raise UsageError("--config", f"{where}: key 'set.{name}' must be a number, got {x!r}")
-                items.append(f"{name}={float(x)!r}")
-            return items
-        raise bad()
+        return _config_set(where, key, value, bad)
     raise AssertionError(kind)  # pragma: no cover
+
+
+def _config_path(where: str, key: str, value, base: Path, bad) -> Path:
+    """A config value of kind "path": relative to the config file's directory `base`."""
+    if not isinstance(value, str) or not value:
+        raise bad()
+    try:
+        path = Path(value).expanduser()
+    except RuntimeError as e:  # "~user" of no such user
+        raise UsageError("--config", f"{where}: key {key!r}: cannot use {value!r}: {e}") from None
+    return path if path.is_absolute() else base / path
+
+
+def _config_vector(value, bad) -> str:
+    """A config value of kind "vector" as the option's text "a,b,...": a string, or a list of numbers."""
+    if isinstance(value, str):
+        return value
+    if isinstance(value, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in value):
+        return ",".join(repr(float(x)) for x in value)
+    raise bad()
+
+
+def _config_set(where: str, key: str, value, bad) -> list[str]:
+    """A config value of kind "set" as the NAME=VALUE items of --set: a string, a list of
+    strings, or a table of numbers by parameter name."""
+    if isinstance(value, str):
+        return [value]
+    if isinstance(value, list) and all(isinstance(x, str) for x in value):
+        return list(value)
+    if not isinstance(value, dict):
+        raise bad()
+    items = []
+    for name, x in value.items():
+        if not _PARAM_NAME.fullmatch(name):  # e.g. { "m=2,g" = 1 } must not set m and g
+            raise UsageError(
+                "--config", f"{where}: key {key!r}: {name!r} is not a parameter name (in the table form "
+                "each key is one name, e.g. set = { m = 2 }; or write set = [\"m=2\", ...])"
+            )
+        if isinstance(x, bool) or not isinstance(x, (int, float)):
+            raise UsageError("--config", f"{where}: key 'set.{name}' must be a number, got {x!r}")
+        items.append(f"{name}={float(x)!r}")
+    return items
 
 
 def load_config(path: Path) -> dict[str, Any]:

@@ -100,21 +100,9 @@ def control(
     A problem whose memory (or result file) is estimated beyond gnipy's bounds is refused before
     anything is computed, naming horizon.steps; --yes solves it anyway.
     """
-    from gnipy.control.problems import WORKED_PROBLEMS
 
     def go():
-        from gnipy.control.problems import load_problem, write_control_result
-
-        if (problem is None) == (example is None):
-            raise UsageError("PROBLEM", "give a problem file or --example NAME (one of them)")
-        if example is not None:
-            if example not in WORKED_PROBLEMS:
-                raise UsageError("--example", f"unknown worked problem {example!r}; expected one of "
-                                 f"{', '.join(WORKED_PROBLEMS)}")
-            source = WORKED_PROBLEMS[example]
-        else:
-            check_readable(problem, "PROBLEM")
-            source = problem
+        source = _problem_source(problem, example)
         if print_problem:
             from gnipy.control.problem_files import problem_text
 
@@ -122,32 +110,56 @@ def control(
             text = source if isinstance(source, str) else problem_text(source)
             typer.echo(text, nl=not text.endswith("\n"))
             return
-        check_out_and_plot(out, plot, overwrite)
-        hold("--out", out)  # one writer per output: a second solve into it is refused now, not at the end
-        hold("--plot", plot)
-        # the memory bound is checked as the problem is read (before its warm start is built)
-        bound = None if yes else memory_bound()
-        prob = load_problem(source, name=example or "problem", max_bytes=bound)
-        if not yes:
-            check_result_file(prob.system, prob.steps + 1, out, "horizon.steps")
-        start = time.perf_counter()
-        with Progress("control", prob.max_iterations, "iterations",
-                      description=f"{prob.name}: compiling and iterating") as progress:
-            # the total grows when SLSQP fails and the fallback (trust-constr, then SLSQP) starts
-            def report(i, cost, miss, total):
-                progress.update(i, total=total, description=f"{prob.name}: cost {cost:.6g}, target miss {miss:.1e}")
-
-            result = prob.solve(progress=report, max_bytes=bound)
-        seconds = time.perf_counter() - start
-        with writing("--out", out):
-            write_control_result(result, prob, out, overwrite=overwrite)
-        written = str(out)
-        if plot is not None:
-            from gnipy.plots import plot_control
-
-            write_plot(result, plot, overwrite, plot_control, title=plot_title(f"{prob.name}: {result.method}"))
-            written += f", {plot}"
-        report_result("gni control", prob.name, result, written, seconds)
+        _solve(source, example, out=out, plot=plot, overwrite=overwrite, yes=yes)
 
     guarded(go, method_option="solver.method", options=CONTROL_OPTIONS, keywords=CONTROL_KEYWORDS,
             out_of_memory="out of memory: use fewer steps (horizon.steps) or inputs")
+
+
+def _problem_source(problem: Path | None, example: str | None):
+    """The problem to solve: the text of the worked problem `example`, or the file `problem`
+    (checked readable); UsageError unless exactly one of them is given."""
+    from gnipy.control.problems import WORKED_PROBLEMS
+
+    if (problem is None) == (example is None):
+        raise UsageError("PROBLEM", "give a problem file or --example NAME (one of them)")
+    if example is not None:
+        if example not in WORKED_PROBLEMS:
+            raise UsageError("--example", f"unknown worked problem {example!r}; expected one of "
+                             f"{', '.join(WORKED_PROBLEMS)}")
+        return WORKED_PROBLEMS[example]
+    check_readable(problem, "PROBLEM")
+    return problem
+
+
+def _solve(source, example: str | None, *, out: Path | None, plot: Path | None, overwrite: bool, yes: bool) -> None:
+    """Solve the problem `source` (the text of `example`, or a file) and write --out (and --plot),
+    within gnipy's bounds on memory and file size unless `yes`; then report."""
+    from gnipy.control.problems import load_problem, write_control_result
+
+    check_out_and_plot(out, plot, overwrite)
+    hold("--out", out)  # one writer per output: a second solve into it is refused now, not at the end
+    hold("--plot", plot)
+    # the memory bound is checked as the problem is read (before its warm start is built)
+    bound = None if yes else memory_bound()
+    prob = load_problem(source, name=example or "problem", max_bytes=bound)
+    if not yes:
+        check_result_file(prob.system, prob.steps + 1, out, "horizon.steps")
+    start = time.perf_counter()
+    with Progress("control", prob.max_iterations, "iterations",
+                  description=f"{prob.name}: compiling and iterating") as progress:
+        # the total grows when SLSQP fails and the fallback (trust-constr, then SLSQP) starts
+        def report(i, cost, miss, total):
+            progress.update(i, total=total, description=f"{prob.name}: cost {cost:.6g}, target miss {miss:.1e}")
+
+        result = prob.solve(progress=report, max_bytes=bound)
+    seconds = time.perf_counter() - start
+    with writing("--out", out):
+        write_control_result(result, prob, out, overwrite=overwrite)
+    written = str(out)
+    if plot is not None:
+        from gnipy.plots import plot_control
+
+        write_plot(result, plot, overwrite, plot_control, title=plot_title(f"{prob.name}: {result.method}"))
+        written += f", {plot}"
+    report_result("gni control", prob.name, result, written, seconds)

@@ -117,28 +117,22 @@ def guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--m
     import gnipy
     from gnipy.io import OutputError
 
-    def usage(message: str):
-        head, sep, rest = message.partition(":")
-        if sep and origins:
-            for option in head.split("/"):
-                if option in origins:
-                    message = f"{head} (from {origins[option]}):{rest}"
-                    break
-        fail(message, EXIT_USAGE)
-
     from .held import holding
 
+    def usage(message: str):
+        fail(_with_origin(message, origins), EXIT_USAGE)
+
+    vocabulary = ARGUMENT_OPTIONS if options is None else options
     try:
         with holding():  # the outputs the command locks (held.hold), released however it ends
             return fn()
     except UsageError as e:
         usage(str(e))
     except gnipy.MethodError as e:
-        message = option_message(e, {**(ARGUMENT_OPTIONS if options is None else options), "method": method_option,
-                                     "methods": method_option}, keywords)
+        message = option_message(e, {**vocabulary, "method": method_option, "methods": method_option}, keywords)
         usage(message if message.startswith(method_option) else f"{method_option}: {message}")
     except gnipy.InputError as e:
-        usage(option_message(e, ARGUMENT_OPTIONS if options is None else options, keywords))
+        usage(option_message(e, vocabulary, keywords))
     except gnipy.OutputBusy as e:  # another process writes this output (held.hold): refused, as bad input is
         usage(str(e))
     except gnipy.SolverFailure as e:
@@ -162,3 +156,16 @@ def guarded(fn, origins: dict[str, str] | None = None, method_option: str = "--m
     except MemoryError:
         fail(out_of_memory or "out of memory: save fewer nodes (--save-every) or stream the run (--checkpoint-every K)",
              EXIT_FAILURE)
+
+
+def _with_origin(message: str, origins: dict[str, str] | None) -> str:
+    """A message about an option (`--h: ...`) saying where the option's value came from, when
+    `origins` (option -> where, e.g. `"key 'h' in run.toml"`) has it: `--h (from key 'h' in
+    run.toml): ...`. A message about several options (`--steps/--t-final: ...`) names the first
+    one found."""
+    head, sep, rest = message.partition(":")
+    if sep and origins:
+        for option in head.split("/"):
+            if option in origins:
+                return f"{head} (from {origins[option]}):{rest}"
+    return message

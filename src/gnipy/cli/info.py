@@ -79,14 +79,23 @@ def checksum_text(path: Path) -> str:
 
 def info_table(file, ds, checksum: str | None = None) -> None:
     """Print the summary table of `gni info` (raises on attributes of unexpected types)."""
-    import json
-
-    import numpy as np
-
     a = dict(ds.attrs)
     rows = table(title=f"gni info: {file}", show_header=False, title_justify="left", box=None)
     rows.add_column(style="bold")
     rows.add_column(overflow="fold")
+    _run_rows(rows, a, ds)
+    _data_rows(rows, ds)
+    _attribute_rows(rows, a)
+    if checksum is not None:
+        rows.add_row("checksum", checksum)
+    console().print(rows)
+
+
+def _file_params(a: dict) -> dict:
+    """The parameters of a result file with attributes `a`: its attribute `params` (JSON), else
+    its attributes `param_NAME`."""
+    import json
+
     params = {}
     if "params" in a:
         try:
@@ -97,9 +106,16 @@ def info_table(file, ds, checksum: str | None = None) -> None:
             params = {}
     if not params:
         params = {k[len("param_"):]: a[k] for k in a if k.startswith("param_")}
+    return params
+
+
+def _run_rows(rows, a: dict, ds) -> None:
+    """The rows of `gni info` on what ran: the model and its parameters, the method, the times."""
+    import numpy as np
+
     model_ = a.get("model", "(unknown)")
     ptxt = ", ".join(f"{k}={float(v):g}" if isinstance(v, (int, float, np.number)) else f"{k}={v}"
-                     for k, v in params.items())
+                     for k, v in _file_params(a).items())
     rows.add_row("model", f"{model_} ({ptxt})" if ptxt else str(model_))
     if "method" in a:
         parts = [str(a["method"])]
@@ -115,6 +131,13 @@ def info_table(file, ds, checksum: str | None = None) -> None:
         units = ds["time"].attrs.get("units", "")
         more = f", saved every {int(a['save_every'])} steps" if "save_every" in a else ""
         rows.add_row("times", f"t = {t[0]:g} .. {t[-1]:g} {units}".rstrip() + f", {t.size} saved nodes{more}")
+
+
+def _data_rows(rows, ds) -> None:
+    """The rows of `gni info` on the data: the variables, the component names, the energy and the
+    constraint residual."""
+    import numpy as np
+
     for name, var in ds.data_vars.items():
         dims = ", ".join(f"{d}={ds.sizes[d]}" for d in var.dims)
         long = var.attrs.get("long_name", "")
@@ -129,6 +152,11 @@ def info_table(file, ds, checksum: str | None = None) -> None:
     if "constraint_residual" in ds.variables:
         r = np.asarray(ds["constraint_residual"].values, dtype=float)
         rows.add_row("constraint residual", f"max |mu(q)(v - Y)| = {np.max(np.abs(r), initial=0.0):.3e}")
+
+
+def _attribute_rows(rows, a: dict) -> None:
+    """The rows of `gni info` on the file's other attributes: the invariants' drifts, the error
+    against an exact solution, the provenance, and every attribute not shown in a row of its own."""
     for k in sorted(a):
         if k.startswith("invariant_drift_"):
             rows.add_row(f"invariant {k[len('invariant_drift_'):]}", f"max drift {float(a[k]):.3e}")
@@ -144,9 +172,6 @@ def info_table(file, ds, checksum: str | None = None) -> None:
         if k in SHOWN_ATTRS or k.startswith(("param_", "invariant_drift_", "max_error_")):
             continue
         rows.add_row(k, format_attr(a[k]))
-    if checksum is not None:
-        rows.add_row("checksum", checksum)
-    console().print(rows)
 
 
 def is_parts_dir(path: Path) -> bool:

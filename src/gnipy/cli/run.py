@@ -8,6 +8,7 @@ Long runs are streamed (`--checkpoint-every K`, or more than
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -123,118 +124,183 @@ def run(
     the nodes go to the file in chunks, memory holds one chunk, and the file appears (atomically)
     when the run is complete; --resume continues an interrupted run.
     """
-    origins: dict[str, str] = {}
+    origins: dict[str, str] = {}  # option -> where its value came from (--config), for the messages
 
     def go():
-        from gnipy.analysis import exact_errors, invariant_drifts
-        from gnipy.io import write_netcdf
-
-        cfg: dict[str, Any] = {}
-        if config is not None:
-            cfg = load_config(config)
-            for key in cfg:
-                origins[CONFIG_KEYS[key][0]] = f"key {key.replace('_', '-')!r} in {str(config)}"
-
-        def pick(key: str, given, default=None):
-            if given is not None:
-                origins.pop(CONFIG_KEYS[key][0], None)
-                return given
-            return cfg.get(key, default)
-
-        model_ = pick("model", model)
-        if model_ is None:
-            raise UsageError("MODEL", "missing: give MODEL (or `model` in --config)")
-        method_ = pick("method", method)
-        if method_ is None:  # the model's measured default (gni models shows it and why)
-            from gnipy.registry import default_method_for
-
-            method_ = default_method_for(str(model_))
-        h_ = pick("h", h)
-        if h_ is None:
-            raise UsageError("--h", "missing: give --h (or `h` in --config)")
-        if steps is not None or t_final is not None:  # the command line decides the length
-            steps_, t_final_ = steps, t_final
-            origins.pop("--steps", None)
-            origins.pop("--t-final", None)
-        else:
-            steps_, t_final_ = cfg.get("steps"), cfg.get("t_final")
-        set_items = list(cfg.get("set", [])) + list(set_ or [])  # the command line wins per name
-        if set_:
-            origins.pop("--set", None)
-        x0_, v0_text, R0_text = pick("x0", x0), pick("v0", v0), pick("R0", R0)
-        project = bool(pick("project_v0", project_v0, False))
-        save_every_ = pick("save_every", save_every, 1)
-        out_ = pick("out", out)
-        plot_ = pick("plot", plot)
-        if out_ is None:
-            raise UsageError("--out", "missing: give --out FILE.nc (or `out` in --config)")
-
-        spec, params, q0, v0_ = prepare(model_, method_, h_, steps_, t_final_, set_items, x0_, v0_text, save_every_)
-        R0_ = parse_R0(spec, params, R0_text)
-        # --resume may find the run finished: its file is then read back, not replaced
-        check_output(out_, "--out", overwrite or resume)
-        if plot_ is not None:
-            check_plot(plot_, overwrite)
-            if same_file(out_, plot_):
-                raise UsageError("--plot", f"{str(plot_)!r} is also --out: choose another path for the figure")
-        hold("--out", out_)  # one writer per output: a second `gni run` on it is refused now, not at the end
-        hold("--plot", plot_)
-        chunk = pick("checkpoint_every", checkpoint_every)
-        if chunk is not None and (isinstance(chunk, bool) or chunk < 1):
-            raise UsageError("--checkpoint-every", f"must be a positive integer, got {chunk!r}")
-        if resume and chunk is None:
-            raise UsageError("--resume", "only streamed runs resume: give --checkpoint-every K as in the interrupted run")
-        from gnipy.simulate import MAX_STEPS, resolve_steps
-
-        n_steps = resolve_steps(h_, steps_, t_final_)[1]
-        stride = min(int(save_every_), n_steps)  # the stride the run has (the last node is always saved)
-        streamed = chunk is not None or n_steps // stride > resources.STREAM_NODES or n_steps > MAX_STEPS
-        if streamed:
-            if method_ == "reference":
-                raise UsageError("--checkpoint-every", "the continuous reference is not streamed")
-            if plot_ is not None:
-                raise UsageError("--plot", "not available for streamed runs: plot from the file (gnipy.plots)")
-            if stride > MAX_STEPS:
-                raise UsageError("--save-every", f"at most {MAX_STEPS} steps between saved nodes in a streamed run "
-                                 f"(a chunk holds at most {MAX_STEPS} steps), got {stride}")
-            if chunk is None:  # chunks of the default number of nodes, within the steps one chunk may hold
-                from gnipy.streaming import DEFAULT_CHUNK_NODES
-
-                chunk = stride * max(1, min(DEFAULT_CHUNK_NODES, MAX_STEPS // stride))
-        length = "--steps" if steps_ is not None else "--t-final"
-        if not yes:  # estimated before anything is compiled or allocated
-            resources.check_resources(spec.build(params), n_steps, stride, streamed, chunk, out_, length,
-                                      chunk_given=pick("checkpoint_every", checkpoint_every) is not None)
-        if streamed:
-            extra = {"save_every": stride, "project_v0": int(project), "command": "gni run",
-                     "q0": list(q0), "coordinates": ",".join(spec.coordinates)}
-            if config is not None:
-                extra["config_file"] = str(config)
-            if R0_ is not None:
-                extra["R0"] = list(R0_)
-            return run_streamed(spec, params, method_, q0, v0_, R0_, h_, steps_, t_final_, project, stride, chunk,
-                                resume, out_, extra, overwrite=overwrite, yes=yes)
-        sol, v0_used, seconds = simulate_model(
-            spec, params, method_, q0, v0_, h_, steps_, t_final_, project, stride, R0=R0_
-        )
-        exact = exact_errors(spec, params, sol, q0, v0_used)
-        drifts = invariant_drifts(spec, params, sol.q, sol.v, sol.R)
-        extra = {"save_every": stride, "project_v0": int(project), "command": "gni run"}
-        if config is not None:
-            extra["config_file"] = str(config)
-        if R0_ is not None:
-            extra["R0"] = list(R0_)
-        attrs = attrs_for(spec, params, sol, q0, v0_used, exact, drifts, extra)
-        with writing("--out", out_):
-            write_netcdf(sol, out_, attrs=attrs, overwrite=overwrite)
-        written = str(out_)
-        if plot_ is not None:
-            write_plot(sol, plot_, overwrite)
-            written += f", {plot_}"
-        run_report("gni run", spec, params, sol, exact, drifts, seconds, written)
-        return sol.healthy
+        inputs = _run_inputs(config, origins, model=model, method=method, h=h, steps=steps, t_final=t_final,
+                             set_=set_, x0=x0, v0=v0, R0=R0, project_v0=project_v0, save_every=save_every, out=out,
+                             plot=plot, checkpoint_every=checkpoint_every)
+        return _run(inputs, config, resume=resume, overwrite=overwrite, yes=yes)
 
     exit_for_health(guarded(go, origins), accept_out_of_band)
+
+
+@dataclass
+class _RunInputs:
+    """The options of a `gni run`: each from the command line, else from --config, else its
+    default (the method: the model's; the length, --steps or --t-final: both from one place)."""
+
+    model: str
+    method: str
+    h: float
+    steps: int | None
+    t_final: float | None
+    set_items: list[str]  # NAME=VALUE, the config file's first (the command line wins per name)
+    x0: str | None
+    v0: str | None
+    R0: str | None
+    project_v0: bool
+    save_every: int
+    out: Path
+    plot: Path | None
+    checkpoint_every: int | None
+
+
+def _run_inputs(config: Path | None, origins: dict[str, str], *, model, method, h, steps, t_final, set_, x0, v0, R0,
+                project_v0, save_every, out, plot, checkpoint_every) -> _RunInputs:
+    """The options of `gni run` from those of the command line (the keyword arguments, None where
+    not given) and the file `config`; `origins` records the options read
+    from the file (option -> `"key 'h' in FILE"`). Raises UsageError for a missing model, --h or
+    --out."""
+    cfg: dict[str, Any] = {}
+    if config is not None:
+        cfg = load_config(config)
+        for key in cfg:
+            origins[CONFIG_KEYS[key][0]] = f"key {key.replace('_', '-')!r} in {str(config)}"
+
+    def pick(key: str, given, default=None):
+        if given is not None:
+            origins.pop(CONFIG_KEYS[key][0], None)
+            return given
+        return cfg.get(key, default)
+
+    model_ = pick("model", model)
+    if model_ is None:
+        raise UsageError("MODEL", "missing: give MODEL (or `model` in --config)")
+    method_ = pick("method", method)
+    if method_ is None:  # the model's measured default (gni models shows it and why)
+        from gnipy.registry import default_method_for
+
+        method_ = default_method_for(str(model_))
+    h_ = pick("h", h)
+    if h_ is None:
+        raise UsageError("--h", "missing: give --h (or `h` in --config)")
+    if steps is not None or t_final is not None:  # the command line decides the length
+        steps_, t_final_ = steps, t_final
+        origins.pop("--steps", None)
+        origins.pop("--t-final", None)
+    else:
+        steps_, t_final_ = cfg.get("steps"), cfg.get("t_final")
+    set_items = list(cfg.get("set", [])) + list(set_ or [])  # the command line wins per name
+    if set_:
+        origins.pop("--set", None)
+    inputs = _RunInputs(
+        model=model_, method=method_, h=h_, steps=steps_, t_final=t_final_, set_items=set_items,
+        x0=pick("x0", x0), v0=pick("v0", v0), R0=pick("R0", R0), project_v0=bool(pick("project_v0", project_v0, False)),
+        save_every=pick("save_every", save_every, 1), out=pick("out", out), plot=pick("plot", plot),
+        checkpoint_every=pick("checkpoint_every", checkpoint_every),
+    )
+    if inputs.out is None:
+        raise UsageError("--out", "missing: give --out FILE.nc (or `out` in --config)")
+    return inputs
+
+
+def _run(inputs: _RunInputs, config: Path | None, *, resume: bool, overwrite: bool, yes: bool) -> bool:
+    """`gni run` with its options read: checks them and the outputs, runs in memory or streamed,
+    writes and reports; returns whether the run is healthy (or failed)."""
+    spec, params, q0, v0 = prepare(inputs.model, inputs.method, inputs.h, inputs.steps, inputs.t_final,
+                                   inputs.set_items, inputs.x0, inputs.v0, inputs.save_every)
+    R0 = parse_R0(spec, params, inputs.R0)
+    _check_outputs(inputs.out, inputs.plot, overwrite, resume)
+    chunk = inputs.checkpoint_every
+    if chunk is not None and (isinstance(chunk, bool) or chunk < 1):
+        raise UsageError("--checkpoint-every", f"must be a positive integer, got {chunk!r}")
+    if resume and chunk is None:
+        raise UsageError("--resume", "only streamed runs resume: give --checkpoint-every K as in the interrupted run")
+    from gnipy.simulate import MAX_STEPS, resolve_steps
+
+    n_steps = resolve_steps(inputs.h, inputs.steps, inputs.t_final)[1]
+    stride = min(int(inputs.save_every), n_steps)  # the stride the run has (the last node is always saved)
+    streamed = chunk is not None or n_steps // stride > resources.STREAM_NODES or n_steps > MAX_STEPS
+    if streamed:
+        chunk = _streamed_chunk(inputs, stride, chunk)
+    length = "--steps" if inputs.steps is not None else "--t-final"
+    if not yes:  # estimated before anything is compiled or allocated
+        resources.check_resources(spec.build(params), n_steps, stride, streamed, chunk, inputs.out, length,
+                                  chunk_given=inputs.checkpoint_every is not None)
+    if streamed:
+        extra = _run_attrs(stride, inputs.project_v0, config, R0, q0=list(q0),
+                           coordinates=",".join(spec.coordinates))
+        return run_streamed(spec, params, inputs.method, q0, v0, R0, inputs.h, inputs.steps, inputs.t_final,
+                            inputs.project_v0, stride, chunk, resume, inputs.out, extra, overwrite=overwrite, yes=yes)
+    return _run_in_memory(spec, params, inputs, q0, v0, R0, stride, _run_attrs(stride, inputs.project_v0, config, R0),
+                          overwrite=overwrite)
+
+
+def _check_outputs(out: Path, plot: Path | None, overwrite: bool, resume: bool) -> None:
+    """Check --out and --plot (each writable, not the other) and hold them: one writer per output,
+    a second `gni run` on it is refused now, not at the end."""
+    # --resume may find the run finished: its file is then read back, not replaced
+    check_output(out, "--out", overwrite or resume)
+    if plot is not None:
+        check_plot(plot, overwrite)
+        if same_file(out, plot):
+            raise UsageError("--plot", f"{str(plot)!r} is also --out: choose another path for the figure")
+    hold("--out", out)
+    hold("--plot", plot)
+
+
+def _streamed_chunk(inputs: _RunInputs, stride: int, chunk: int | None) -> int:
+    """The steps per chunk of a streamed run (`chunk`, or by default chunks of
+    :data:`~gnipy.streaming.DEFAULT_CHUNK_NODES` nodes); UsageError for what is not streamed."""
+    from gnipy.simulate import MAX_STEPS
+
+    if inputs.method == "reference":
+        raise UsageError("--checkpoint-every", "the continuous reference is not streamed")
+    if inputs.plot is not None:
+        raise UsageError("--plot", "not available for streamed runs: plot from the file (gnipy.plots)")
+    if stride > MAX_STEPS:
+        raise UsageError("--save-every", f"at most {MAX_STEPS} steps between saved nodes in a streamed run "
+                         f"(a chunk holds at most {MAX_STEPS} steps), got {stride}")
+    if chunk is None:  # chunks of the default number of nodes, within the steps one chunk may hold
+        from gnipy.streaming import DEFAULT_CHUNK_NODES
+
+        chunk = stride * max(1, min(DEFAULT_CHUNK_NODES, MAX_STEPS // stride))
+    return chunk
+
+
+def _run_attrs(stride: int, project_v0: bool, config: Path | None, R0, **more) -> dict[str, Any]:
+    """The attributes `gni run` adds to its file: the stride, --project-v0, the command, `more`,
+    the config file and R0."""
+    extra = {"save_every": stride, "project_v0": int(project_v0), "command": "gni run", **more}
+    if config is not None:
+        extra["config_file"] = str(config)
+    if R0 is not None:
+        extra["R0"] = list(R0)
+    return extra
+
+
+def _run_in_memory(spec, params, inputs: _RunInputs, q0, v0, R0, stride: int, extra: dict, *,
+                   overwrite: bool) -> bool:
+    """`gni run` in memory: simulate, write --out (and --plot) and report; returns whether the run
+    is healthy."""
+    from gnipy.analysis import exact_errors, invariant_drifts
+    from gnipy.io import write_netcdf
+
+    sol, v0_used, seconds = simulate_model(
+        spec, params, inputs.method, q0, v0, inputs.h, inputs.steps, inputs.t_final, inputs.project_v0, stride, R0=R0
+    )
+    exact = exact_errors(spec, params, sol, q0, v0_used)
+    drifts = invariant_drifts(spec, params, sol.q, sol.v, sol.R)
+    attrs = attrs_for(spec, params, sol, q0, v0_used, exact, drifts, extra)
+    with writing("--out", inputs.out):
+        write_netcdf(sol, inputs.out, attrs=attrs, overwrite=overwrite)
+    written = str(inputs.out)
+    if inputs.plot is not None:
+        write_plot(sol, inputs.plot, overwrite)
+        written += f", {inputs.plot}"
+    run_report("gni run", spec, params, sol, exact, drifts, seconds, written)
+    return sol.healthy
 
 
 def simulate_model(spec, params, method, q0, v0, h, steps, t_final, project_v0, save_every, R0=None):

@@ -168,59 +168,81 @@ def sweep(
     """
 
     def go():
-        import warnings
-
-        import gnipy.sweep as sweep_module
-        from gnipy.sweep import SweepError, SweepFailure, SweepWarning, run_sweep
-
-        if not grid:
-            raise UsageError("--grid", "missing: give at least one --grid NAME=START:STOP:COUNT")
-        check_positive("--h", h)
-        if h is None:
-            raise UsageError("--h", "missing: give --h")
-        if (steps is None) == (t_final is None):
-            raise UsageError("--steps/--t-final", "give exactly one of --steps and --t-final")
-        check_positive("--steps", steps, "integer")
-        check_positive("--t-final", t_final)
-        set_params = parse_set(set_)
-        hold("--out", out)  # one writer per store: a second sweep into it is refused now
-
-        original = warnings.showwarning
-
-        def show(message, category, *args, **kwargs):  # a damaged chunk computed again: one line
-            if not issubclass(category, SweepWarning):
-                return original(message, category, *args, **kwargs)
-            typer.echo("warning: " + safe(" ".join(sweep_message(str(message)).split())), err=True)
-
-        # on a terminal the sweep's own bar (chunks, members/s); elsewhere plain lines: the sweep calls
-        # progress(chunks_done, chunks_total), and the last line is written from its report
-        terminal = on_terminal()
-        try:
-            lines = Progress("sweep", unit="chunks", terminal=False, heartbeat=not terminal)
-            with warnings.catch_warnings(), lines:
-                warnings.simplefilter("always", SweepWarning)
-                warnings.showwarning = show
-                report = run_sweep(
-                    model, list(grid), out=out, h=h, steps=steps, t_final=t_final, method=method,
-                    save_every=save_every, set_params=set_params, project_v0=project_v0, chunk_size=chunk_size,
-                    scheduler=scheduler, workers=workers, overwrite=overwrite, max_chunks=max_chunks,
-                    progress=True if terminal else lines,
-                    max_bytes=None if yes else sweep_module.DEFAULT_MAX_BYTES, connect_timeout=connect_timeout,
-                )
-                if not terminal:
-                    lines.update(report.chunks - report.chunks_remaining, report.chunks)
-        except SweepError as e:
-            fail(sweep_message(str(e)), EXIT_USAGE)
-        except SweepFailure as e:
-            fail(f"{e}; the chunks done are kept: run the same command again to resume", EXIT_FAILURE)
-        except KeyboardInterrupt:
-            fail("interrupted; the chunks done are kept: run the same command again to resume", 130)
-        sweep_report(report, report.spec)
-        if report.failed_members:
-            fail(failures_message(report), EXIT_FAILURE)
-        return getattr(report, "unhealthy_members", 0) == 0
+        return _sweep(model, grid, method=method, h=h, steps=steps, t_final=t_final, save_every=save_every, set_=set_,
+                      project_v0=project_v0, chunk_size=chunk_size, scheduler=scheduler,
+                      connect_timeout=connect_timeout, workers=workers, overwrite=overwrite, max_chunks=max_chunks,
+                      yes=yes, out=out)
 
     exit_for_health(guarded(go), accept_out_of_band)
+
+
+def _sweep(model, grid, *, method, h, steps, t_final, save_every, set_, project_v0, chunk_size, scheduler,
+           connect_timeout, workers, overwrite, max_chunks, yes, out) -> bool:
+    """`gni sweep` with the command line's options: checks them, runs the sweep, prints its
+    summary; returns whether no member went qualitatively wrong (failed members: exit code 1)."""
+    import gnipy.sweep as sweep_module
+    from gnipy.sweep import SweepError, SweepFailure, run_sweep
+
+    if not grid:
+        raise UsageError("--grid", "missing: give at least one --grid NAME=START:STOP:COUNT")
+    check_positive("--h", h)
+    if h is None:
+        raise UsageError("--h", "missing: give --h")
+    if (steps is None) == (t_final is None):
+        raise UsageError("--steps/--t-final", "give exactly one of --steps and --t-final")
+    check_positive("--steps", steps, "integer")
+    check_positive("--t-final", t_final)
+    set_params = parse_set(set_)
+    hold("--out", out)  # one writer per store: a second sweep into it is refused now
+
+    def run(progress):
+        return run_sweep(
+            model, list(grid), out=out, h=h, steps=steps, t_final=t_final, method=method,
+            save_every=save_every, set_params=set_params, project_v0=project_v0, chunk_size=chunk_size,
+            scheduler=scheduler, workers=workers, overwrite=overwrite, max_chunks=max_chunks,
+            progress=progress, max_bytes=None if yes else sweep_module.DEFAULT_MAX_BYTES,
+            connect_timeout=connect_timeout,
+        )
+
+    try:
+        report = _shown(run)
+    except SweepError as e:
+        fail(sweep_message(str(e)), EXIT_USAGE)
+    except SweepFailure as e:
+        fail(f"{e}; the chunks done are kept: run the same command again to resume", EXIT_FAILURE)
+    except KeyboardInterrupt:
+        fail("interrupted; the chunks done are kept: run the same command again to resume", 130)
+    sweep_report(report, report.spec)
+    if report.failed_members:
+        fail(failures_message(report), EXIT_FAILURE)
+    return getattr(report, "unhealthy_members", 0) == 0
+
+
+def _shown(run):
+    """`run(progress)`, a sweep, shown: each :class:`~gnipy.sweep.SweepWarning` (a damaged chunk
+    computed again) as one line, and its progress: on a terminal the sweep's own bar (chunks,
+    members/s); elsewhere plain lines (the sweep calls `progress(chunks_done, chunks_total)`, and
+    the last line is written from its report). Returns the sweep's report."""
+    import warnings
+
+    from gnipy.sweep import SweepWarning
+
+    original = warnings.showwarning
+
+    def show(message, category, *args, **kwargs):  # a damaged chunk computed again: one line
+        if not issubclass(category, SweepWarning):
+            return original(message, category, *args, **kwargs)
+        typer.echo("warning: " + safe(" ".join(sweep_message(str(message)).split())), err=True)
+
+    terminal = on_terminal()
+    lines = Progress("sweep", unit="chunks", terminal=False, heartbeat=not terminal)
+    with warnings.catch_warnings(), lines:
+        warnings.simplefilter("always", SweepWarning)
+        warnings.showwarning = show
+        report = run(True if terminal else lines)
+        if not terminal:
+            lines.update(report.chunks - report.chunks_remaining, report.chunks)
+    return report
 
 
 def failures_message(report) -> str:

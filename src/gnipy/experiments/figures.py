@@ -82,20 +82,37 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
             table.append({"method": key, "h": h, "steps": N, "error_position": e[0], "error_omega": e[1],
                           "error_energy": e[2]})
             work(N + RUN_OVERHEAD, f"figure 1: {key} h = {format_h(h)}")
+    metrics = _figure_1_metrics(errors, hs)
+    fig, title = _figure_1_plot(methods, errors, hs, metrics)
+    files = write_figure(fig, out_dir, "figure1")
+    work.finish("figure 1: done")
+    caption = _figure_1_caption(T, n_saves, Ns, hs, quick)
+    notes = _figure_1_notes(metrics, hs)
+    metrics["runtime_s"] = time.perf_counter() - t_start
+    return FigureResult("figure1", title, caption, files, metrics, table, notes)
 
-    quantities = ("position", "omega", "energy")
+
+_QUANTITIES = ("position", "omega", "energy")
+_YLABELS = ("max error in position $(x, y)$", "max error in angular velocity $\\omega$", "max error in energy")
+
+
+def _figure_1_metrics(errors: dict[str, list], hs: list[float]) -> dict[str, float]:
+    """The fitted slopes (all h, the finest 3) and the errors at the smallest h, by method and quantity."""
     metrics: dict[str, float] = {}
-    for key in methods:
+    for key in errors:
         arr = np.array(errors[key])
-        for i, qn in enumerate(quantities):
+        for i, qn in enumerate(_QUANTITIES):
             metrics[f"{key}_order_{qn}"] = observed_order(hs, arr[:, i])
             metrics[f"{key}_order_{qn}_fine"] = asymptotic_order(hs, arr[:, i])
             metrics[f"{key}_error_{qn}_smallest_h"] = float(arr[-1, i])
+    return metrics
 
+
+def _figure_1_plot(methods: dict, errors: dict[str, list], hs: list[float], metrics: dict[str, float]):
+    """The figure of Fig. 1 (a panel per quantity, a curve per method) and its title."""
     fig = new_figure(13.5, 4.2)
     axes = fig.subplots(1, 3)
-    ylabels = ("max error in position $(x, y)$", "max error in angular velocity $\\omega$", "max error in energy")
-    for i, (ax, qn, yl) in enumerate(zip(axes, quantities, ylabels)):
+    for i, (ax, qn, yl) in enumerate(zip(axes, _QUANTITIES, _YLABELS)):
         for key, (_, label, ls, mk) in methods.items():
             arr = np.array(errors[key])[:, i]
             ax.loglog(hs, arr, ls=ls, marker=mk, ms=4, label=f"{label}: slope {metrics[f'{key}_order_{qn}']:.2f} "
@@ -107,10 +124,12 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     title = "Figure 1 — homogeneous rolling ball (§7.4, example 1): errors against the exact solution"
     fig.suptitle(title + "\nsolid: GNI with the paper's $l_d = h\\,l(q_k, \\Delta, \\omega_k)$ (Euler A) and Cayley; "
                  "dashed: discrete Lagrange–d'Alembert [IMMM]", fontsize=10)
-    files = write_figure(fig, out_dir, "figure1")
-    work.finish("figure 1: done")
+    return fig, title
 
-    caption = (
+
+def _figure_1_caption(T: float, n_saves: int, Ns: list[int], hs: list[float], quick: bool) -> str:
+    """The caption of Fig. 1."""
+    return (
         "Rolling ball on a rotating table (paper §7.4, model rolling-ball, example 1): homogeneous ball "
         "I1 = I2 = I3 = 2/3, m = r = Ω = 1, (x0, y0, ẋ0, ẏ0) = (1, 1, 1, 1), ω0 = (0, 2, 0), R0 = I, "
         f"total time {T:g}. Time steps h = 10/N for N = {Ns[0]}, {Ns[1]}, ..., {Ns[-1]} "
@@ -127,7 +146,11 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
         "three smallest of those h."
         + (" Quick run: only the five smallest h of the full run's range." if quick else "")
     )
-    notes = [
+
+
+def _figure_1_notes(metrics: dict[str, float], hs: list[float]) -> list[str]:
+    """The findings of Fig. 1: the GNI's order 2, DLA's orders, the errors at the smallest h."""
+    return [
         "With V = 0 and a constant metric the paper's Euler A l_d equals the trapezoid and midpoint l_d, so "
         "this GNI is the reduced RATTLE, a symmetric method: order 2 in position, ω and energy "
         f"(fitted {metrics['gni_order_position']:.2f}, {metrics['gni_order_omega']:.2f}, "
@@ -143,8 +166,6 @@ def figure_1(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
         f"{metrics['gni_error_position_smallest_h']:.2e} (GNI) and {metrics['dla_error_position_smallest_h']:.2e} "
         "(DLA).",
     ]
-    metrics["runtime_s"] = time.perf_counter() - t_start
-    return FigureResult("figure1", title, caption, files, metrics, table, notes)
 
 
 # ------------------------------------------------------------------------------------------------
@@ -168,13 +189,39 @@ def figure_2(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     x2, _ = run_saved_nodes(system, method, h / 2, 2 * steps, SaveAt(every=2), q0, v0)
     x2 = x2[1:]
     work(2 * steps + RUN_OVERHEAD, "figure 2: GNI h = 0.05")
-    t = h * np.arange(steps + 1)
+    centre, radius, kappa = _exact_circle(p, q0, v0)
+    metrics, table = _figure_2_metrics(p, q0, v0, h, steps, path, v_path, x2)
+    fig, title = _figure_2_plot(path, q0, h, steps, centre, radius)
+    files = write_figure(fig, out_dir, "figure2")
+    work.finish("figure 2: done")
+    caption = (
+        "Position (x_k, y_k) of the contact point of the homogeneous ball (paper §7.4, example 1: "
+        "I1 = I2 = I3 = 2/3, m = r = Ω = 1, (x0, y0, ẋ0, ẏ0) = (1, 1, 1, 1), ω0 = (0, 2, 0)), GNI with the "
+        f"paper's l_d (Euler A) and Cayley, h = {h:g}, {steps} steps (total time {h * steps:g}); every node "
+        "is plotted. The cross marks the centre of the rotating table (0, 0). Grey: the exact path, the "
+        f"circle of centre ({centre.real:.4g}, {centre.imag:.4g}) = z0 + iż0/κ and radius |ż0|/κ = {radius:.4g}, "
+        "κ = IΩ/(I + mr²) = 0.4. Metric: the maximum over all nodes of | |z_k − c| − radius |; the same run "
+        f"with h = {h / 2:g} over the same time (not plotted) checks that this distance is O(h²)."
+        + (" Quick run (1000 steps instead of the paper's 10000)." if quick else "")
+    )
+    notes = _figure_2_notes(metrics, h, steps)
+    metrics["runtime_s"] = time.perf_counter() - t_start
+    return FigureResult("figure2", title, caption, files, metrics, table, notes)
 
-    # the exact motion: z = x + iy runs round a circle at rate κ = IΩ/(I + mr²)
+
+def _exact_circle(p, q0, v0) -> tuple[complex, float, float]:
+    """`(centre, radius, kappa)`: the exact motion of the contact point, z = x + iy, runs round a
+    circle at rate κ = IΩ/(I + mr²)."""
     kappa = p["I1"] * p["Omega"] / (p["I1"] + p["m"] * p["r"] ** 2)
     z0, dz0 = complex(*q0), complex(v0[0], v0[1])
-    centre = z0 + 1j * dz0 / kappa
-    radius = abs(dz0) / kappa
+    return z0 + 1j * dz0 / kappa, abs(dz0) / kappa, kappa
+
+
+def _figure_2_metrics(p, q0, v0, h: float, steps: int, path, v_path, x2) -> tuple[dict[str, float], list[dict]]:
+    """The metrics of Fig. 2 (distances from the exact circle, with h and h/2; the discrete angular
+    rate; the Jacobi integral's drift) and its table (every tenth of the run)."""
+    t = h * np.arange(steps + 1)
+    centre, radius, kappa = _exact_circle(p, q0, v0)
     z = path[:, 0] + 1j * path[:, 1]
     dist = np.abs(np.abs(z - centre) - radius)
     z2 = x2[:, 0] + 1j * x2[:, 1]
@@ -187,7 +234,6 @@ def figure_2(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     angle = np.unwrap(np.angle(z - centre))
     kappa_h = float(np.polyfit(t, angle, 1)[0])
     half = len(dist) // 2
-
     metrics = {
         "h": h,
         "steps": float(steps),
@@ -210,7 +256,11 @@ def figure_2(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
          "position_error": float(pos_err[k])}
         for k in np.linspace(0, steps, 11).astype(int)
     ]
+    return metrics, table
 
+
+def _figure_2_plot(path, q0, h: float, steps: int, centre: complex, radius: float):
+    """The figure of Fig. 2 (the discrete path, the exact circle, the table's centre) and its title."""
     fig = new_figure(6.4, 6.0)
     ax = fig.subplots()
     th = np.linspace(0.0, 2 * np.pi, 721)
@@ -226,39 +276,28 @@ def figure_2(out_dir: Path, quick: bool, progress: Progress = None) -> FigureRes
     ax.legend(fontsize=7, loc="center")
     title = f"Figure 2 — contact point of the homogeneous ball, h = {h:g}, {steps} steps"
     ax.set_title(title, fontsize=9)
-    files = write_figure(fig, out_dir, "figure2")
-    work.finish("figure 2: done")
+    return fig, title
 
-    caption = (
-        "Position (x_k, y_k) of the contact point of the homogeneous ball (paper §7.4, example 1: "
-        "I1 = I2 = I3 = 2/3, m = r = Ω = 1, (x0, y0, ẋ0, ẏ0) = (1, 1, 1, 1), ω0 = (0, 2, 0)), GNI with the "
-        f"paper's l_d (Euler A) and Cayley, h = {h:g}, {steps} steps (total time {h * steps:g}); every node "
-        "is plotted. The cross marks the centre of the rotating table (0, 0). Grey: the exact path, the "
-        f"circle of centre ({centre.real:.4g}, {centre.imag:.4g}) = z0 + iż0/κ and radius |ż0|/κ = {radius:.4g}, "
-        "κ = IΩ/(I + mr²) = 0.4. Metric: the maximum over all nodes of | |z_k − c| − radius |; the same run "
-        f"with h = {h / 2:g} over the same time (not plotted) checks that this distance is O(h²)."
-        + (" Quick run (1000 steps instead of the paper's 10000)." if quick else "")
-    )
-    notes = [
+
+def _figure_2_notes(metrics: dict[str, float], h: float, steps: int) -> list[str]:
+    """The findings of Fig. 2: on the circle (order 2), the Jacobi integral, the phase error, the
+    table's centre."""
+    return [
         f"The discrete path stays on the exact circle to within {metrics['max_distance_from_exact_circle']:.2e} "
         f"({metrics['relative_max_distance_from_exact_circle']:.1e} of the radius) over {steps} steps; "
         f"first half {metrics['max_distance_first_half']:.2e}, second half "
         f"{metrics['max_distance_second_half']:.2e} (no secular drift off the circle). With h/2 over the same "
-        f"time the largest distance is {dist_half_h:.2e}, {metrics['distance_ratio_h_over_half_h']:.2f} times "
-        "smaller (4 for order 2).",
+        f"time the largest distance is {metrics['max_distance_half_h']:.2e}, "
+        f"{metrics['distance_ratio_h_over_half_h']:.2f} times smaller (4 for order 2).",
         f"The Jacobi integral J = E − mΩ(xẏ − yẋ), conserved by the continuous motion, varies by at most "
         f"{metrics['jacobi_drift']:.2e} along the discrete path (the energy E itself is not conserved: the "
         "table does work on the ball).",
         f"The motion along the circle has a phase error: the discrete angular rate about the centre is "
-        f"{kappa_h:.8f} against κ = {kappa:g}, so the position error at t = {h * steps:g} is "
-        f"{metrics['final_position_error']:.3g} although the path lies on the circle.",
+        f"{metrics['kappa_discrete']:.8f} against κ = {metrics['kappa']:g}, so the position error at "
+        f"t = {h * steps:g} is {metrics['final_position_error']:.3g} although the path lies on the circle.",
         "The contact point never reaches the table's centre: the ball circles a point away from it "
         f"(largest distance from (0, 0): {metrics['max_distance_from_table_centre']:.4g}).",
     ]
-    metrics["runtime_s"] = time.perf_counter() - t_start
-    return FigureResult("figure2", title, caption, files, metrics, table, notes)
-
-
 
 #: The figures by name.
 FIGURES: dict[str, Callable[..., FigureResult]] = {"figure1": figure_1, "figure2": figure_2, "figure3": figure_3}

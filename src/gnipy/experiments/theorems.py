@@ -93,17 +93,29 @@ def theorem_table(quick: bool, progress: Progress = None) -> list[Row]:
         weights.pop("shake"), weights.pop("affine")
     work = Work(progress, weights)
     study = particle_study(quick, lambda key: work(key, f"theorems: particle runs ({key})"))
-    rows: list[Row] = []
-    hs, Ns = study["hs"], study["Ns"]
+    Ns = study["Ns"]
     h_range = f"h = T/{Ns[0]} … T/{Ns[-1]}, T = {T_ORDER:g}"
+    rows = [
+        *_order_rows(study, h_range),  # Theorem 5.1, Remark 5.1, Remark after Theorem 5.2
+        _adjoint_row(study, quick, work),  # Theorem 5.2
+        *_momentum_rows(study, quick),  # exact constraints of the reported momentum
+        *_equality_rows(study, quick, h_range),  # the explicit schemes are the GNI
+        _energy_row(quick, work),  # the energy theorem
+    ]
+    work.finish("theorems: done")
+    return rows
+
+
+def _order_rows(study: dict, h_range: str) -> list[Row]:
+    """The rows of the fitted convergence orders (Theorem 5.1, Remark 5.1, Remark after Theorem 5.2)."""
+    hs = study["hs"]
     ref_note = (" Reference: gnipy.ContinuousReference (gnipy's Lagrange–d'Alembert equations by Dopri8 at "
                 "tolerance 1e-12). Expected order: the method's `order`.")
-
-    # --- orders (Theorem 5.1, Remark 5.1, Remark after Theorem 5.2) -------------------------
     names = {"euler-a": "nonholonomic Euler A (EuAHam)", "euler-b": "nonholonomic Euler B (EuBHam)",
              "rattle": "nonholonomic RATTLE", "euler-ab": "composition Euler A(h/2) ∘ Euler B(h/2)",
              "gni-euler-a": "GNI, Euler A l_d", "gni-euler-b": "GNI, Euler B l_d",
              "gni-trapezoid": "GNI, trapezoid l_d", "gni-midpoint": "GNI, midpoint l_d"}
+    rows = []
     for key, ref in ORDER_REFS.items():
         claim = study["expected"][key]
         order = study["orders"][key]
@@ -119,8 +131,11 @@ def theorem_table(quick: bool, progress: Progress = None) -> list[Row]:
                     f"tolerance ±{ORDER_TOL}." + ref_note),
             values={"method": key, "order": order, "expected": float(claim), "errors": list(errs), "hs": list(hs)},
         ))
+    return rows
 
-    # --- Theorem 5.2 --------------------------------------------------------------------------
+
+def _adjoint_row(study: dict, quick: bool, work: Work) -> Row:
+    """The row of Theorem 5.2: F_A^h ∘ F_B^{−h} = Id on M_A."""
     cases = {"linear": study["system"]}
     if not quick:
         cases["affine"] = spring_ball()[0]
@@ -129,7 +144,7 @@ def theorem_table(quick: bool, progress: Progress = None) -> list[Row]:
     work("adjoint", "theorems: Theorem 5.2")
     mb = max(a["manifold_B"] for a in adj.values())
     ma, od = min(a["manifold_A"] for a in adj.values()), min(a["off_domain"] for a in adj.values())
-    rows.append(Row(
+    return Row(
         claim="nonholonomic Euler A and B are each other's adjoint: F_A^h ∘ F_B^{−h} = Id",
         paper_ref="Theorem 5.2",
         expected="0 (identity)",
@@ -144,9 +159,12 @@ def theorem_table(quick: bool, progress: Progress = None) -> list[Row]:
                 f"F_A^{{−h}} leaves M_A ({ma:.1e}). Note: F_A^h depends on (p̃, λ̃) only through p_{{k+1/2}}, so as "
                 "formulas F_A^h ∘ F_A^{−h} also returns every s of M_A; the adjoint is the map that stays on M_A."),
         values={"residual": res, "manifold_B": mb, "manifold_A": ma, "off_domain": od},
-    ))
+    )
 
-    # --- exact constraints of the reported momentum --------------------------------------------
+
+def _momentum_rows(study: dict, quick: bool) -> list[Row]:
+    """The rows of the exact constraints of every GNI variant's reported momentum (§4, (GNIintAffb))."""
+    rows = []
     for key in GNI_VARIANTS:
         res_p = max(float(np.max(np.abs(r["residual"]))) for r in study["runs"][key])
         delta = max(float(np.max(np.abs(r["step_residual"]))) for r in study["runs"][key])
@@ -165,8 +183,12 @@ def theorem_table(quick: bool, progress: Progress = None) -> list[Row]:
                     f"velocity (q_{{k+1}} − q_k)/h violates them by up to {delta:.1e}."),
             values={"method": key, "residual": res_p, "step_velocity_residual": delta},
         ))
+    return rows
 
-    # --- the explicit schemes are the GNI -------------------------------------------------------
+
+def _equality_rows(study: dict, quick: bool, h_range: str) -> list[Row]:
+    """The rows of the explicit schemes of §5 (and SHAKE, §6.1) equal to the GNI node by node."""
+    rows = []
     for explicit, gni, label in EQUAL_PAIRS + ([] if quick else [("shake", "gni-trapezoid", "(Afin), SHAKE")]):
         pairs = list(zip(study["runs"][explicit], study["runs"][gni]))
         if not quick:
@@ -185,13 +207,16 @@ def theorem_table(quick: bool, progress: Progress = None) -> list[Row]:
                     "(gnipy.integrators.paper_schemes) are written separately from the GNI core."),
             values={"methods": (explicit, gni), "difference": diff, "tolerance": tol},
         ))
+    return rows
 
-    # --- the energy theorem -----------------------------------------------------------------------
+
+def _energy_row(quick: bool, work: Work) -> Row:
+    """The row of the energy theorem on SO(3) (§4, end; [SDD1]): 10⁴ (quick) or 10⁵ steps."""
     steps = 10_000 if quick else 100_000
     en = energy_theorem(steps)
     work("energy", "theorems: energy theorem on SO(3)")
     passed = en["drift"] <= en["bound"] and en["trend"] <= en["bound"] and en["constraint_residual"] <= EQUAL_TOL
-    rows.append(Row(
+    return Row(
         claim="on a Lie group with a bi-invariant metric, any distribution and a left-invariant l_d, the GNI "
               "conserves the energy",
         paper_ref="§4 (end of the section), [SDD1]",
@@ -205,9 +230,7 @@ def theorem_table(quick: bool, progress: Progress = None) -> list[Row]:
                 f"Reported v̄ on the constraints to {en['constraint_residual']:.0e}. Control: the energy of the "
                 f"reported v̄ (a projection of p⁺) varies by {en['reported_energy_variation']:.1e} (relative)."),
         values=en,
-    ))
-    work.finish("theorems: done")
-    return rows
+    )
 
 
 # ------------------------------------------------------------------------------------------------

@@ -146,55 +146,83 @@ def check_part(file: Path, c: int, plan: ChunkPlan) -> tuple[dict | None, str]:
 
 
 def _check_contents(attrs: dict, data: dict, c: int, plan: ChunkPlan) -> tuple[dict | None, str]:
+    why = _check_attributes(attrs, data, c, plan)
+    if why:
+        return None, why
+    result = int(attrs["result"])
+    leaves, why = _check_state(data, plan, result)
+    if why:
+        return None, why
+    n = int(data["time"].shape[0])
+    why = _check_nodes(attrs, data, c, plan, result, n)
+    if why:
+        return None, why
+    return {"data": data, "attrs": attrs, "n": n, "result": result, "failed": int(attrs["failed_step"]),
+            "leaves": leaves}, ""
+
+
+def _check_attributes(attrs: dict, data: dict, c: int, plan: ChunkPlan) -> str:
+    """Why a part's attributes (and checksum) are not those of chunk `c` of the run, with the
+    variables it must hold; "" when they are."""
     for key in ("gnipy_checksum", SPEC_HASH_ATTR, CHUNK_ATTR, "result", "failed_step", "residual",
                 "iterations_total", "iterations_max"):
         if key not in attrs:
-            return None, f"it has no attribute {key!r} (not a checkpoint of this gnipy)"
+            return f"it has no attribute {key!r} (not a checkpoint of this gnipy)"
     if attrs[SPEC_HASH_ATTR] != plan.spec_hash:
-        return None, "it belongs to a different run (its spec hash differs from spec.json's)"
+        return "it belongs to a different run (its spec hash differs from spec.json's)"
     if int(attrs[CHUNK_ATTR]) != c:
-        return None, f"it holds chunk {int(attrs[CHUNK_ATTR])}, not chunk {c}"
+        return f"it holds chunk {int(attrs[CHUNK_ATTR])}, not chunk {c}"
     actual = _checksum_of(data)
     if actual != attrs["gnipy_checksum"]:
-        return None, f"its data do not match its checksum ({attrs['gnipy_checksum']}; computed {actual})"
+        return f"its data do not match its checksum ({attrs['gnipy_checksum']}; computed {actual})"
     missing = [v for v in (*_REQUIRED, "monitor", *(("R",) if plan.group else ())) if v not in data]
     if missing:
-        return None, f"it lacks the variable(s) {', '.join(missing)}"
-    result = int(attrs["result"])
+        return f"it lacks the variable(s) {', '.join(missing)}"
+    return ""
+
+
+def _check_state(data: dict, plan: ChunkPlan, result: int) -> tuple[list, str]:
+    """`(leaves, "")`, the integrator state stored in a part (as the plan's leaves), or `([], why)`
+    when it is not one of the plan's shapes and dtypes (or, in a part that did not fail, not finite)."""
     leaves = []
     for i, x in enumerate(plan.leaves):
         a = data.get(f"state_{i}")
         want = storable_array(x)
         if a is None:
-            return None, f"it lacks the integrator state state_{i}"
+            return [], f"it lacks the integrator state state_{i}"
         if a.shape != want.shape or a.dtype != want.dtype:
-            return None, (f"its integrator state state_{i} has shape {a.shape} and dtype {a.dtype}, "
-                          f"expected {want.shape} and {want.dtype}")
+            return [], (f"its integrator state state_{i} has shape {a.shape} and dtype {a.dtype}, "
+                        f"expected {want.shape} and {want.dtype}")
         if result == 0 and a.dtype.kind in "fc" and not np.all(np.isfinite(a)):
-            return None, f"its integrator state state_{i} is not finite"
+            return [], f"its integrator state state_{i} is not finite"
         leaves.append(a.astype(np.asarray(x).dtype) if a.dtype != np.asarray(x).dtype else a)
     if f"state_{len(plan.leaves)}" in data:
-        return None, f"it holds more than the {len(plan.leaves)} arrays of the integrator state"
+        return [], f"it holds more than the {len(plan.leaves)} arrays of the integrator state"
+    return leaves, ""
+
+
+def _check_nodes(attrs: dict, data: dict, c: int, plan: ChunkPlan, result: int, n: int) -> str:
+    """Why the `n` nodes of a part (their variables' shapes, the monitor, `time` and `step`, the
+    failed step) are not those of chunk `c`; "" when they are."""
     k_start, length, _, _, k_local, keep = plan.chunk(c)
     want_steps = (k_start + k_local)[keep]
     want_times = plan.times(k_start, k_local)[keep]
-    n = int(data["time"].shape[0])
     for v, dims in (*DATA_DIMS.items(), ("time", ("time",)), ("step", ("time",))):
         if v in data and (data[v].ndim != len(dims) or data[v].shape[0] != n):
-            return None, f"its variable {v} has shape {data[v].shape}, not {len(dims)} dimensions along {n} nodes"
+            return f"its variable {v} has shape {data[v].shape}, not {len(dims)} dimensions along {n} nodes"
     from ..monitor import SIZE
 
     if data["monitor"].shape != (SIZE,) or data["monitor"].dtype != np.float64:
-        return None, f"its monitor has shape {data['monitor'].shape}, expected ({SIZE},)"
+        return f"its monitor has shape {data['monitor'].shape}, expected ({SIZE},)"
     failed = int(attrs["failed_step"])
     if result == 0:
         if n != len(want_steps) or failed != -1:
-            return None, f"it holds {n} nodes, expected {len(want_steps)}"
+            return f"it holds {n} nodes, expected {len(want_steps)}"
     elif n > len(want_steps) or not (k_start <= failed < k_start + length):
-        return None, f"its failed step {failed} is not in the chunk (steps {k_start} to {k_start + length})"
+        return f"its failed step {failed} is not in the chunk (steps {k_start} to {k_start + length})"
     if not (np.array_equal(data["step"], want_steps[:n]) and np.array_equal(data["time"], want_times[:n])):
-        return None, "its time and step do not continue where the previous part ended"
-    return {"data": data, "attrs": attrs, "n": n, "result": result, "failed": failed, "leaves": leaves}, ""
+        return "its time and step do not continue where the previous part ended"
+    return ""
 
 
 def clean_own_temporaries(parts: Path) -> None:

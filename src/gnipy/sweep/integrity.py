@@ -42,52 +42,65 @@ def verify_chunks(arrays, names, layout: ChunkLayout, done: np.ndarray,
         sums = None
     per_member = sum(math.prod(arrays[n].shape[g:]) * arrays[n].dtype.itemsize for n in data_names)
     per_block = max(1, block_bytes // max(1, layout.size * per_member))
+    for block in _blocks([int(i) for i in np.flatnonzero(done)], layout, per_block):
+        a0 = layout.member_range(block[0])[0]
+        data = _read_chunks(arrays, data_names, layout, block[0], block[-1]) if len(block) > 1 else None
+        for i in block:
+            a, b = layout.member_range(i)
+            if isinstance(data, dict):
+                part = {name: x[a - a0: b - a0] for name, x in data.items()}
+            else:
+                part = _read_chunks(arrays, data_names, layout, i, i)
+            reason = _check_chunk(arrays, sums, i, part)
+            if reason is not None:
+                bad[i] = reason
+    return bad
 
-    def read(first, last):
-        region = layout.region(first, last)
-        out = {}
-        for name in data_names:
-            try:
-                a = np.asarray(arrays[name][region])
-            except Exception as e:  # noqa: BLE001 - a truncated or corrupted chunk file
-                return f"its {name!r} data cannot be read ({why(e)})"
-            out[name] = a.reshape(-1, *a.shape[g:])
-        return out
 
-    def check(i, data):
-        if sums is not None:
-            stored = sums[i]
-        else:
-            try:
-                stored = np.asarray(arrays["chunk_checksum"][i], dtype=np.uint8)
-            except Exception as e:  # noqa: BLE001
-                return f"its checksum cannot be read ({why(e)})"
-        if stored.shape != (32,) or not stored.any():
-            return "it has no checksum"
-        if isinstance(data, str):
-            return data
-        if digest(data) != stored.tobytes():
-            return "its data differ from their checksum"
-        return None
-
-    todo = [int(i) for i in np.flatnonzero(done)]
-    # runs of consecutive chunks of one row, cut into blocks of at most `per_block` chunks
+def _blocks(todo: list[int], layout: ChunkLayout, per_block: int) -> list[list[int]]:
+    """The chunks `todo` (in order) as runs of consecutive chunks of one row, cut into blocks of
+    at most `per_block` chunks."""
     blocks, start = [], 0
     for k in range(1, len(todo) + 1):
         if (k == len(todo) or todo[k] != todo[k - 1] + 1 or layout.row(todo[k]) != layout.row(todo[start])
                 or k - start == per_block):
             blocks.append(todo[start:k])
             start = k
-    for block in blocks:
-        a0 = layout.member_range(block[0])[0]
-        data = read(block[0], block[-1]) if len(block) > 1 else None
-        for i in block:
-            a, b = layout.member_range(i)
-            part = {name: x[a - a0: b - a0] for name, x in data.items()} if isinstance(data, dict) else read(i, i)
-            reason = check(i, part)
-            if reason is not None:
-                bad[i] = reason
-    return bad
+    return blocks
+
+
+def _read_chunks(arrays, data_names, layout: ChunkLayout, first: int, last: int) -> dict[str, np.ndarray] | str:
+    """The member variables `data_names` of the chunks `first` to `last` (members along the first
+    axis), or what cannot be read."""
+    g = len(layout.shape)
+    region = layout.region(first, last)
+    out = {}
+    for name in data_names:
+        try:
+            a = np.asarray(arrays[name][region])
+        except Exception as e:  # noqa: BLE001 - a truncated or corrupted chunk file
+            return f"its {name!r} data cannot be read ({why(e)})"
+        out[name] = a.reshape(-1, *a.shape[g:])
+    return out
+
+
+def _check_chunk(arrays, sums: np.ndarray | None, i: int, data: dict[str, np.ndarray] | str) -> str | None:
+    """What is wrong with chunk `i`, whose data (or what could not be read) are `data`, against
+    its checksum (in `sums`, or read alone when they could not be read together); None: nothing."""
+    if sums is not None:
+        stored = sums[i]
+    else:
+        try:
+            stored = np.asarray(arrays["chunk_checksum"][i], dtype=np.uint8)
+        except Exception as e:  # noqa: BLE001
+            return f"its checksum cannot be read ({why(e)})"
+    if stored.shape != (32,) or not stored.any():
+        return "it has no checksum"
+    if isinstance(data, str):
+        return data
+    if digest(data) != stored.tobytes():
+        return "its data differ from their checksum"
+    return None
 
 
 def list_bad(axes, layout: ChunkLayout, bad: Mapping[int, str], most: int = 5) -> str:

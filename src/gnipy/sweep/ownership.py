@@ -188,19 +188,7 @@ def check_out(out, overwrite: bool) -> tuple[Path, str]:
                          f"({purpose}), not a sweep store; choose another path")
     ours = is_dir and is_ours(path)
     try:
-        if ours:
-            parent = path.parent if str(path.parent) else Path(".")
-            for where in (path, parent):
-                if not os.access(where, os.W_OK | os.X_OK):
-                    raise files.OutputError(f"out: {where} is not writable")
-        elif is_dir and any(path.iterdir()):
-            if looks_like_store(path):
-                open_group(path, "out")  # says what is damaged
-                raise damaged("out", path, f"it has no attribute {OWNER_ATTR}", REMOVE_IT)
-            raise SweepError(f"out: {str(path)!r} is a directory gnipy did not create and is not "
-                             "empty; gnipy will not write into or delete it (choose another path)")
-        else:  # nothing there, an empty directory, or what gnipy never writes into
-            files.check_directory_destination(path, overwrite=overwrite, reuse=True, argument="out")
+        _check_destination(path, is_dir, ours, overwrite)
     except (files.OutputError, OSError) as e:
         raise SweepError(str(e) if isinstance(e, files.OutputError) else
                          f"out: cannot use {str(path)!r}: {e.strerror or e}") from None
@@ -208,6 +196,31 @@ def check_out(out, overwrite: bool) -> tuple[Path, str]:
         return path, "create"
     if not overwrite:
         return path, "resume"
+    _check_all_ours(path)
+    return path, "replace"
+
+
+def _check_destination(path: Path, is_dir: bool, ours: bool, overwrite: bool) -> None:
+    """Refuse (OutputError, OSError or SweepError) a destination gnipy must not write: a store of
+    its own (`ours`) it cannot write, a directory it did not create that is not empty, or
+    what :func:`gnipy.files.check_directory_destination` refuses."""
+    if ours:
+        parent = path.parent if str(path.parent) else Path(".")
+        for where in (path, parent):
+            if not os.access(where, os.W_OK | os.X_OK):
+                raise files.OutputError(f"out: {where} is not writable")
+    elif is_dir and any(path.iterdir()):
+        if looks_like_store(path):
+            open_group(path, "out")  # says what is damaged
+            raise damaged("out", path, f"it has no attribute {OWNER_ATTR}", REMOVE_IT)
+        raise SweepError(f"out: {str(path)!r} is a directory gnipy did not create and is not "
+                         "empty; gnipy will not write into or delete it (choose another path)")
+    else:  # nothing there, an empty directory, or what gnipy never writes into
+        files.check_directory_destination(path, overwrite=overwrite, reuse=True, argument="out")
+
+
+def _check_all_ours(path: Path) -> None:
+    """Refuse to replace the store at `path` when it holds what gnipy did not write."""
     foreign = foreign_entries(path)
     if foreign:
         listed = ", ".join(repr(f) for f in foreign[:5]) + (", ..." if len(foreign) > 5 else "")
@@ -215,4 +228,3 @@ def check_out(out, overwrite: bool) -> tuple[Path, str]:
             f"out: {str(path)!r} holds {listed}, which gnipy did not write; gnipy replaces "
             "a sweep store only when everything in it is its own: move them away, or choose another path"
         )
-    return path, "replace"

@@ -157,20 +157,9 @@ def make_plan(model, grid, *, method, h, steps, t_final, save_every, set_params,
     InputError or MethodError). The sizes are checked (:func:`check_size`, with `max_bytes` and
     `disk`) before anything of the sweep's size is allocated."""
     from ..version import __version__
-    from ..methods import is_method_name, method_names
-    from ..models import get_model
-    from ..registry import default_method_for
     from ..simulate import resolve_steps
 
-    if not isinstance(model, str):
-        raise SweepError(f"model: expected a model name, got {model!r}")
-    spec = get_model(model)  # InputError "model: unknown model ..."
-    if method is None:  # the model's measured default
-        method = default_method_for(model)
-    if not is_method_name(method):
-        raise SweepError(f"method: unknown method {method!r} (known: {', '.join(method_names())})")
-    if method == "reference":
-        raise SweepError("method: the continuous reference runs one trajectory at a time; it cannot be swept")
+    spec, method = _model_and_method(model, method)
     h, steps = resolve_steps(h, steps, t_final)
     save_every = min(steps if save_every is None else positive_int("save_every", save_every), steps)
     chunk_size = positive_int("chunk_size", chunk_size)
@@ -182,16 +171,7 @@ def make_plan(model, grid, *, method, h, steps, t_final, save_every, set_params,
         raise SweepError(f"set_params: {str(e).partition(':')[2].strip()}") from None
     system = spec.build(params)
     coordinates, velocities = tuple(spec.coordinates), tuple(system.velocities)
-    ic_names = [f"q0.{c}" for c in coordinates] + [f"v0.{v}" for v in velocities]
-    for a in axes:
-        if a.name in set_params:
-            raise SweepError(f"grid: {a.name!r} is both swept (grid) and fixed (set_params)")
-        if a.name not in spec.params and a.name not in ic_names:
-            known = ", ".join([*spec.params, *ic_names]) or "none"
-            raise SweepError(f"grid: unknown name {a.name!r} for model {spec.name!r} (known: {known})")
-        if a.name in _RESERVED:
-            raise SweepError(f"grid: {a.name!r} cannot be swept: the sweep store has a variable or "
-                             "dimension of that name")
+    _check_axes(axes, spec, set_params, [f"q0.{c}" for c in coordinates] + [f"v0.{v}" for v in velocities])
     swept = {a.name for a in axes}
     layout = ChunkLayout.of([a.count for a in axes], chunk_size)
     k = system.group.matrix_size if system.group is not None else None
@@ -220,6 +200,38 @@ def make_plan(model, grid, *, method, h, steps, t_final, save_every, set_params,
     m, orientation = _preflight(sweep_spec, axes)
     times = h * saved_steps(steps, save_every).astype(np.float64)
     return Plan(sweep_spec, tuple(axes), layout, times, coordinates, velocities, m, k, orientation, store_bytes)
+
+
+def _model_and_method(model, method) -> tuple[Any, str]:
+    """The model's spec and the method's name (None: the model's measured default), checked."""
+    from ..methods import is_method_name, method_names
+    from ..models import get_model
+    from ..registry import default_method_for
+
+    if not isinstance(model, str):
+        raise SweepError(f"model: expected a model name, got {model!r}")
+    spec = get_model(model)  # InputError "model: unknown model ..."
+    if method is None:  # the model's measured default
+        method = default_method_for(model)
+    if not is_method_name(method):
+        raise SweepError(f"method: unknown method {method!r} (known: {', '.join(method_names())})")
+    if method == "reference":
+        raise SweepError("method: the continuous reference runs one trajectory at a time; it cannot be swept")
+    return spec, method
+
+
+def _check_axes(axes, spec, set_params: dict, ic_names: list[str]) -> None:
+    """Refuse a grid axis that is also fixed in `set_params`, names neither a parameter of the
+    model nor an initial condition (`ic_names`), or names a variable or dimension of the store."""
+    for a in axes:
+        if a.name in set_params:
+            raise SweepError(f"grid: {a.name!r} is both swept (grid) and fixed (set_params)")
+        if a.name not in spec.params and a.name not in ic_names:
+            known = ", ".join([*spec.params, *ic_names]) or "none"
+            raise SweepError(f"grid: unknown name {a.name!r} for model {spec.name!r} (known: {known})")
+        if a.name in _RESERVED:
+            raise SweepError(f"grid: {a.name!r} cannot be swept: the sweep store has a variable or "
+                             "dimension of that name")
 
 
 def layout_of(spec) -> ChunkLayout:

@@ -220,7 +220,38 @@ def run_sweep(
     """
     check("dask", "distributed", "zarr", "xarray", "rich", extra="sweeps")  # before anything is written
     t_start = time.perf_counter()
-    address = None
+    workers, max_chunks = _check_arguments(project_v0=project_v0, overwrite=overwrite, scheduler=scheduler,
+                                           client=client, workers=workers, max_chunks=max_chunks, max_bytes=max_bytes,
+                                           connect_timeout=connect_timeout, progress=progress)
+    address = None if scheduler is None else scheduler_address(scheduler)
+    # one writer per store: a second sweep on `out` is refused at once (files.output_lock)
+    with files.output_lock(out, argument="out") if isinstance(out, (str, os.PathLike)) else contextlib.nullcontext():
+        path, mode = check_out(out, overwrite)
+        creating = mode != "resume"
+        plan = _plan.make_plan(
+            model, grid, method=method, h=h, steps=steps, t_final=t_final, save_every=save_every,
+            set_params=set_params, project_v0=project_v0, chunk_size=chunk_size,
+            max_bytes=max_bytes if creating else None,
+            disk=(path.parent if str(path.parent) else Path(".")) if creating else None,
+        )
+        # temporaries of runs killed while creating or replacing this store
+        files.clean_stale_temporaries(path)
+        todo, skipped, repaired = _chunks_to_do(path, plan, creating, max_chunks)
+        computed = members = 0
+        if todo:
+            with _Progress(progress, plan.chunks, skipped) as bar:
+                bar.describe(f"sweep {plan.spec['model']}: starting the cluster")
+                with Cluster(client, address, workers or default_workers(), connect_timeout, scheduler) as c:
+                    if creating:
+                        create_store(path, plan, mode)
+                    computed, members = _compute(path, plan, todo, c, bar)
+        return _report(path, plan, t_start, computed=computed, skipped=skipped, repaired=repaired, members=members)
+
+
+def _check_arguments(*, project_v0, overwrite, scheduler, client, workers, max_chunks, max_bytes, connect_timeout,
+                     progress) -> tuple[int | None, int | None]:
+    """Check the arguments of :func:`run_sweep` that say how it runs (each error names its
+    argument); returns `(workers, max_chunks)` checked."""
     for name, value in (("project_v0", project_v0), ("overwrite", overwrite)):
         if not isinstance(value, (bool, np.bool_)):
             raise SweepError(f"{name}: expected True or False, got {value!r}")
@@ -240,69 +271,58 @@ def run_sweep(
         raise SweepError(f"connect_timeout: must be a positive number of seconds, got {connect_timeout!r}")
     if not (isinstance(progress, bool) or callable(progress)):
         raise SweepError(f"progress: expected True, False or a callable, got {progress!r}")
-    if scheduler is not None:
-        address = scheduler_address(scheduler)
-    # one writer per store: a second sweep on `out` is refused at once (files.output_lock)
-    with files.output_lock(out, argument="out") if isinstance(out, (str, os.PathLike)) else contextlib.nullcontext():
-        path, mode = check_out(out, overwrite)
-        creating = mode != "resume"
-        plan = _plan.make_plan(
-            model, grid, method=method, h=h, steps=steps, t_final=t_final, save_every=save_every,
-            set_params=set_params, project_v0=project_v0, chunk_size=chunk_size,
-            max_bytes=max_bytes if creating else None,
-            disk=(path.parent if str(path.parent) else Path(".")) if creating else None,
-        )
-        # temporaries of runs killed while creating or replacing this store
-        files.clean_stale_temporaries(path)
+    return workers, max_chunks
 
-        repaired = 0
-        if creating:
-            done = np.zeros(plan.chunks, dtype=bool)
-        else:
-            done, repaired = resume(path, plan)
 
-        todo = [int(i) for i in np.flatnonzero(~done)]
-        skipped = plan.chunks - len(todo)
-        if max_chunks is not None:
-            todo = todo[:max_chunks]
-        computed = members = 0
-        if todo:
-            with _Progress(progress, plan.chunks, skipped) as bar:
-                bar.describe(f"sweep {plan.spec['model']}: starting the cluster")
-                with Cluster(client, address, workers or default_workers(), connect_timeout, scheduler) as c:
-                    if creating:
-                        create_store(path, plan, mode)
-                    computed, members = _compute(path, plan, todo, c, bar)
-        group, _ = open_group(path, "out")
-        arrays = {k: group[k] for k in ("chunk_done", "result", "failed_step", "failed_time", "failed_residual",
-                                        "healthy")}
-        done = read_done("out", path, arrays, plan.chunks)
-        failed, failures = _failures(arrays, plan, done)
-        unhealthy = int(np.sum(~np.asarray(arrays["healthy"][...]).reshape(-1).astype(bool)
-                               & (np.asarray(arrays["result"][...]).reshape(-1) == 0)
-                               & plan.layout.member_mask(done).reshape(-1)))
-        if unhealthy:
-            warnings.warn(QualitativeFailureWarning(
-                f"sweep of {plan.spec['model']} with {plan.spec['method']}: {unhealthy} of {plan.members} members "
-                "converged but went QUALITATIVELY WRONG (a verdict left its band; see the store's variables "
-                f"healthy, hidden_momentum_first_time and energy_drift_first_time in {path})"), stacklevel=2)
-        return SweepReport(
-            path=path,
-            members=plan.members,
-            chunks=plan.chunks,
-            chunks_computed=computed,
-            chunks_skipped=skipped,
-            chunks_remaining=int(np.sum(~done)),
-            failed_members=failed,
-            wall_time=time.perf_counter() - t_start,
-            members_computed=members,
-            steps=plan.spec["steps"],
-            chunk_size=plan.chunk,
-            spec=plan.spec,
-            chunks_repaired=repaired,
-            failures=failures,
-            unhealthy_members=unhealthy,
-        )
+def _chunks_to_do(path: Path, plan, creating: bool, max_chunks: int | None) -> tuple[list[int], int, int]:
+    """`(todo, skipped, repaired)`: the chunks to compute in this run (at most `max_chunks`), the
+    chunks found done and intact in the store, and those flagged done but damaged."""
+    repaired = 0
+    if creating:
+        done = np.zeros(plan.chunks, dtype=bool)
+    else:
+        done, repaired = resume(path, plan)
+    todo = [int(i) for i in np.flatnonzero(~done)]
+    skipped = plan.chunks - len(todo)
+    if max_chunks is not None:
+        todo = todo[:max_chunks]
+    return todo, skipped, repaired
+
+
+def _report(path: Path, plan, t_start: float, *, computed: int, skipped: int, repaired: int,
+            members: int) -> SweepReport:
+    """The :class:`SweepReport` of a run, read from the store; warns when members went
+    qualitatively wrong."""
+    group, _ = open_group(path, "out")
+    arrays = {k: group[k] for k in ("chunk_done", "result", "failed_step", "failed_time", "failed_residual",
+                                    "healthy")}
+    done = read_done("out", path, arrays, plan.chunks)
+    failed, failures = _failures(arrays, plan, done)
+    unhealthy = int(np.sum(~np.asarray(arrays["healthy"][...]).reshape(-1).astype(bool)
+                           & (np.asarray(arrays["result"][...]).reshape(-1) == 0)
+                           & plan.layout.member_mask(done).reshape(-1)))
+    if unhealthy:
+        warnings.warn(QualitativeFailureWarning(
+            f"sweep of {plan.spec['model']} with {plan.spec['method']}: {unhealthy} of {plan.members} members "
+            "converged but went QUALITATIVELY WRONG (a verdict left its band; see the store's variables "
+            f"healthy, hidden_momentum_first_time and energy_drift_first_time in {path})"), stacklevel=3)
+    return SweepReport(
+        path=path,
+        members=plan.members,
+        chunks=plan.chunks,
+        chunks_computed=computed,
+        chunks_skipped=skipped,
+        chunks_remaining=int(np.sum(~done)),
+        failed_members=failed,
+        wall_time=time.perf_counter() - t_start,
+        members_computed=members,
+        steps=plan.spec["steps"],
+        chunk_size=plan.chunk,
+        spec=plan.spec,
+        chunks_repaired=repaired,
+        failures=failures,
+        unhealthy_members=unhealthy,
+    )
 
 
 def _failures(arrays, plan, done: np.ndarray):
