@@ -3,9 +3,44 @@
 import gnipy
 
 
+import pathlib  # noqa: E402
+
 import pytest  # noqa: E402
 
 from gnipy.compilation import release_compiled_programs_if_needed  # noqa: E402
+
+
+#: The files left out of the contributors' inner loop, `pytest -m "not slow"` (README, "What is
+#: checked"): the exhaustive sweeps over models x methods, the docs and examples run as written,
+#: the experiments, the CLI end to end, control and the native backend's equalities, each more
+#: than about 12 s of CPU (measured with `--durations=0` on the 2-core machine). What stays is the
+#: core's unit level (the Problem, the driver, the GNI, groups, retractions, systems, files,
+#: inputs, the layers), about 3 minutes. The whole suite, `pytest`, is the CI command and runs
+#: them all; a test is also `slow` by its own `@pytest.mark.slow`.
+SLOW_FILES = frozenset({
+    "analysis", "test_doc_examples.py", "test_examples.py", "test_gradients.py", "test_monitor.py",
+    "test_forcing.py", "test_ensembles.py", "test_diagnostics.py", "test_sweep.py", "test_streaming.py",
+    "test_streaming_integrity.py", "test_sweep_integrity.py", "test_cli.py", "test_cli_fuzz.py", "test_sharding.py",
+    "test_spaces.py", "test_group_maps.py", "test_api_fuzz.py", "test_properties.py", "test_benchmark_numba.py",
+    "test_benchmark_baselines.py", "test_convergence_orders.py", "test_lie_groups.py",
+    "integrators/test_no_false_failures.py", "integrators/test_discrete_gradient.py",
+    "integrators/test_gni_variants.py", "integrators/test_reversal.py", "integrators/test_composition.py",
+    "integrators/test_roundoff.py", "integrators/test_paper_schemes.py", "integrators/test_comparators.py",
+    "integrators/test_reduced_rattle.py", "integrators/test_energy_theorem.py",
+    "native/test_backend.py", "native/test_primitives.py",
+    "control/test_optimal_control.py", "control/test_identification.py",
+    "models/test_group_models.py", "models/test_rolling_ball.py", "models/test_default_methods.py",
+    "models/test_decisive_models.py", "experiments", "cli",
+})
+
+
+def pytest_collection_modifyitems(config, items):
+    """Mark the tests of :data:`SLOW_FILES` (files, or folders of tests/) `slow`."""
+    root = pathlib.Path(__file__).parent
+    for item in items:
+        rel = pathlib.Path(str(item.fspath)).relative_to(root).as_posix()
+        if rel in SLOW_FILES or rel.split("/")[0] in SLOW_FILES:
+            item.add_marker(pytest.mark.slow)
 
 
 @pytest.fixture(autouse=True, scope="module")
