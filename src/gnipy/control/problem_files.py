@@ -182,15 +182,14 @@ def _matrix(where: str, value, k: int | None = None) -> np.ndarray:
 
 
 def entry_rotation(where: str, value, system: System) -> np.ndarray:
-    """A k x k group element (a rotation: RᵀR = I, det R > 0) for a system with a group part."""
+    """A k x k element of the system's group (e.g. a rotation on SO(3): RᵀR = I, det R > 0), by the
+    group's own membership test (:meth:`gnipy.lie_groups.MatrixLieGroup.is_element`)."""
     if system.group is None:
         raise InputError(f"{where}: the model {system.name!r} has no orientation (no group part)")
     R = _matrix(where, value, system.group.matrix_size)
-    err = float(np.max(np.abs(R.T @ R - np.eye(len(R)))))
-    det = float(np.linalg.det(R))
-    if err > 1e-10 or det <= 0:
-        raise InputError(f"{where}: not a rotation matrix (|RᵀR − I| = {err:.3e}, det = {det:.3g}); give its "
-                         "entries to full precision")
+    if not np.all(np.isfinite(R)) or not system.group.is_element(R):
+        why = "not finite" if not np.all(np.isfinite(R)) else system.group.why_not_element(R)
+        raise InputError(f"{where}: {why}; give its entries to full precision")
     return R
 
 
