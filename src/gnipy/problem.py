@@ -28,11 +28,7 @@ from .run_arguments import (MAX_STEPS, default_initial_condition, real_argument,
 from .saveat import SaveAt, Schedule, schedule
 from .system import System
 
-__all__ = ["Problem", "THROW_CHOICES"]
-
-#: What `throw` accepts: raise on a failed step (True), return it (False), or also raise when the
-#: motion went qualitatively wrong ("strict").
-THROW_CHOICES = (True, False, "strict")
+__all__ = ["Problem", "resolve_method"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -113,7 +109,7 @@ class Problem:
         project_v0 = flag("project_v0", project_v0)
         strict, throw = _throw(throw)
         system, systems = _systems(system)
-        method = _method(system, method)
+        method = resolve_method(system, method)
         saveat = _saveat(saveat, save_every)
         if progress is not False and progress is not None and progress is not True and not callable(progress):
             raise InputError(f"progress: expected True, False or a callable(steps_done, steps_total), got {progress!r}")
@@ -166,8 +162,10 @@ def _systems(system) -> tuple[System, tuple[System, ...] | None]:
     return system, None
 
 
-def _method(system, method):
-    """The method object: `method` itself, the named one, or the system's default (None)."""
+def resolve_method(system, method):
+    """The method object of a run of `system`: `method` itself (an integrator or the continuous
+    reference), the one it names, or the system's default when None (its model's measured default,
+    :func:`gnipy.registry.default_method_for`); :class:`~gnipy.MethodError` naming `method` otherwise."""
     from .methods import get_method
     from .reference import ContinuousReference
 

@@ -39,7 +39,7 @@ from ..saveat import SaveAt
 from ..compilation import jit
 from ..run_arguments import MAX_STEPS, default_initial_condition, resolve_steps
 from ..integration import solve
-from ..problem import Problem
+from ..problem import Problem, resolve_method
 from ..solution import RESULT_SOLVER_FAILED
 from ..system import System
 from .interrupts import DeferredInterrupt
@@ -243,7 +243,6 @@ def _checked_run(system, method, q0, v0, R0, *, h, steps, t_final, save_every, c
 def _checked_method(system, method) -> Integrator:
     """The integrator of the run: `system` checked (a System, not forced), `method` resolved (None:
     the model's default; a name) and checked (an integrator, not the continuous reference)."""
-    from ..methods import get_method
     from ..reference import ContinuousReference
 
     if not isinstance(system, System):
@@ -253,16 +252,9 @@ def _checked_method(system, method) -> Integrator:
         # do not describe a force, and the chunks take no controls: run it with gnipy.simulate
         raise InputError("system: a forced system (System(..., force=F)) is not streamed to a file; run it with "
                          "gnipy.simulate (controls=...) and write the Solution with gnipy.write_netcdf")
-    if method is None:  # as simulate: the model's measured default
-        from ..registry import default_method_for
-
-        method = default_method_for(system.model, system) if isinstance(system, System) else default_method_for(None)
-    if isinstance(method, str):
-        method = get_method(method)
+    method = resolve_method(system, method)  # as simulate: None is the model's measured default
     if isinstance(method, ContinuousReference):
         raise MethodError("method: the continuous reference is not streamed; use gnipy.simulate")
-    if not isinstance(method, Integrator):
-        raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
     return method
 
 
