@@ -15,6 +15,7 @@ h and span read one Solution, and the runs with every node saved have the same n
 import functools
 import subprocess
 import sys
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -160,6 +161,36 @@ def test_verdict_rule_on_synthetic_ratios():
     out = hidden_momentum_verdict(t, r, e, h)
     assert not out.in_band and out.first_time == pytest.approx(t[np.argmax(r > band)])
 
+
+
+def test_a_node_at_rest_under_a_force_is_not_judged():
+    """Where p̄ = 0 and the continuous impulse is not (r = e = inf: a start from rest under a
+    force), the relative size is undefined and the node is not judged; r = inf with a finite e
+    (a hidden momentum the continuous multiplier does not ask for) and NaN are still out of band."""
+    t, h = np.array([0.0, 0.05, 0.1]), 0.05
+    e = np.array([np.inf, 0.249, 0.124])
+    assert hidden_momentum_verdict(t, np.array([np.inf, 0.250, 0.124]), e, h).in_band
+    assert hidden_momentum_verdict(t, np.array([np.inf, 0.250, 0.124]), e, h).max_ratio == 0.250
+    assert not hidden_momentum_verdict(t, np.array([np.inf, 0.0, 0.0]), np.zeros(3), h).in_band
+    assert not hidden_momentum_verdict(t, np.array([0.0, np.nan, 0.0]), e, h).in_band
+
+
+def test_a_run_steered_from_rest_is_healthy_on_both_checks():
+    """The sleigh from rest with a torque that is not zero at t = 0 (the control guide's problem):
+    at t = 0 p̄ = 0 while p⁺ = p̄ + (h/2)·impulse; at the next nodes the hidden momentum has the size
+    the continuous multiplier asks for, r ≈ e (the GNI's O(h) relation, diagnostics module), and
+    neither the every-node check nor the saved-node verdict calls the run qualitatively wrong
+    (both did, at t = 0, before the rule above)."""
+    sleigh = gnipy.make_system("chaplygin-sleigh", m=1.0, I=1.0, a=0.5)
+    steered = sleigh.with_force(lambda q, v, u, t: jnp.array([0.0, 0.0, u[0]]), inputs=1)
+    U = np.cos(np.linspace(0.0, 2 * np.pi, 80))[:, None]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", gnipy.QualitativeFailureWarning)
+        sol = gnipy.simulate(steered, "gni-trapezoid", [0.0] * 3, [0.0] * 3, h=0.05, steps=80, controls=U)
+    r, e = np.asarray(sol.hidden_momentum), np.asarray(sol.hidden_expected)
+    assert np.isinf(r[0]) and np.isinf(e[0])  # the arrays keep what was measured
+    np.testing.assert_allclose(r[1:4], e[1:4], rtol=0.02)
+    assert sol.healthy and sol.hidden_verdict.in_band and sol.monitor is not None
 
 # ------------------------------------------------------------------------------------------------
 # The diagnostics of a batch call no LAPACK kernel (a hang on jax 0.10, found with a batch of

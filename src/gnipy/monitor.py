@@ -32,7 +32,7 @@ import numpy as np
 
 from .errors import InputError, QualitativeFailure, QualitativeFailureWarning
 from .diagnostics import (ENERGY_BAND, HIDDEN_BAND, HIDDEN_FLOOR, EnergyVerdict, HiddenMomentumVerdict,
-                          node_diagnostics)
+                          judged_ratio, node_diagnostics)
 
 __all__ = ["SLOTS", "SIZE", "initial", "continued", "start", "with_end", "stepping", "update", "hidden_verdict",
            "energy_verdict", "nodes_seen", "RunVerdicts", "announce"]
@@ -96,7 +96,7 @@ def update(method, system, monitor, state, h, k, active):
         e_running = jnp.maximum(get["e_running"], jnp.where(jnp.isfinite(e), e, 0.0))
         floor = jnp.where(jnp.isfinite(e0), e0, 0.0) + 0.5 * jnp.abs(h) * get["inv_span"]
         band = HIDDEN_BAND * jnp.maximum(e_running, floor) + HIDDEN_FLOOR
-        r = jnp.where(jnp.isnan(r), jnp.inf, r)
+        r = judged_ratio(r, e)
         rel = r / band
         new.update(e0=e0, e_running=e_running, ratio_max=jnp.maximum(get["ratio_max"], r),
                    band_ratio_max=jnp.maximum(get["band_ratio_max"], rel),
