@@ -191,9 +191,31 @@ def test_v0_off_constraints_hints_at_projection(tmp_path):
     assert "--project-v0" in _error_lines(res.output)[0]
 
 
-def test_missing_out_option():
+def test_run_without_out_prints_the_summary_and_writes_nothing(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
     res = invoke(*BASE)
-    assert res.exit_code == 2 and "--out" in res.output and "Traceback" not in res.output
+    assert res.exit_code == 0, res.output
+    assert "vertical-disk" in res.output and "error vs exact" in res.output and "written" not in res.output
+    assert os.listdir(tmp_path) == []
+    # a figure alone is written, and said
+    res = invoke(*BASE, "--plot", "run.png")
+    assert res.exit_code == 0 and "written: run.png" in res.output and os.listdir(tmp_path) == ["run.png"]
+
+
+@pytest.mark.parametrize("extra", [["--checkpoint-every", "5"], ["--checkpoint-every", "5", "--resume"],
+                                   ["--save-every", "1", "--steps", "1000001"]])
+def test_a_streamed_run_needs_out(extra, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    res = invoke(*BASE, *extra)
+    errors = _error_lines(res.output)
+    assert res.exit_code == 2 and len(errors) == 1 and "--out" in errors[0] and "Traceback" not in res.output
+    assert os.listdir(tmp_path) == []
+
+
+def test_the_model_is_checked_before_the_output_path(tmp_path):
+    res = invoke("run", "no-such-model", "--h", "0.1", "--steps", "10", "--out", tmp_path / "missing" / "x.nc")
+    errors = _error_lines(res.output)
+    assert res.exit_code == 2 and len(errors) == 1 and "MODEL" in errors[0] and "--out" not in errors[0], res.output
 
 
 @pytest.mark.parametrize("where", ["missing-dir", "is-dir", "parent-is-file"])

@@ -25,10 +25,11 @@ MAX_OUTPUT_BYTES = 64 * 2**30
 MEMORY_COPIES = 3
 
 
-def check_resources(system, n_steps: int, stride: int, streamed: bool, chunk, out: Path, length: str,
+def check_resources(system, n_steps: int, stride: int, streamed: bool, chunk, out: Path | None, length: str,
                     chunk_given: bool = True) -> None:
     """Refuse (`UsageError`) a run whose memory or file is estimated beyond the bounds
-    (:data:`MAX_MEMORY_BYTES`, :data:`MAX_OUTPUT_BYTES`, the free disk space); `--yes` skips this."""
+    (:data:`MAX_MEMORY_BYTES`, :data:`MAX_OUTPUT_BYTES`, the free disk space); `--yes` skips this.
+    `out` None: a run that writes no file (its memory is checked)."""
 
     per_node = node_bytes(system)
     nodes = 1 + -(-n_steps // stride)  # the initial node, every stride-th, and the last
@@ -56,6 +57,8 @@ def check_resources(system, n_steps: int, stride: int, streamed: bool, chunk, ou
                "stream the run with --checkpoint-every K (memory then holds one chunk) or save fewer nodes "
                "(--save-every K)") + ", or pass --yes to run anyway"
         )
+    if out is None:
+        return
     parts = " (twice that on disk while the run goes on: the checkpoint parts and the file)" if streamed else ""
     what = f"the file would hold {nodes:,} saved nodes, about {format_bytes(file_bytes)}{parts}"
     if file_bytes > MAX_OUTPUT_BYTES:

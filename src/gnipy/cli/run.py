@@ -67,7 +67,10 @@ def run(
     save_every: int | None = typer.Option(
         None, "--save-every", help="Save every K-th node (and always the last). [default: 1]", show_default=False
     ),
-    out: Path | None = typer.Option(None, "--out", "-o", help="Output netCDF file.", show_default=False),
+    out: Path | None = typer.Option(
+        None, "--out", "-o", help="Output netCDF file. Without it the run prints its summary and writes nothing "
+        "(a streamed run needs it).", show_default=False,
+    ),
     plot: Path | None = typer.Option(
         None, "--plot", help="Also write a figure (configuration path, energy error, constraint residual), "
         "e.g. run.png.", show_default=False,
@@ -100,9 +103,9 @@ def run(
         "after writing the files. Not read from --config.",
     ),
 ):
-    """Integrate MODEL with METHOD and write the trajectory to a netCDF file.
+    """Integrate MODEL with METHOD, print a summary and write the trajectory to a netCDF file (--out).
 
-    The file holds t(time), q(time, coordinate), v(time, velocity), p(time, velocity),
+    Without --out the run prints its summary (health, errors, drifts) and writes nothing. The file holds t(time), q(time, coordinate), v(time, velocity), p(time, velocity),
     energy(time) and constraint_residual(time, constraint), and R(time, i, j) on R^n x G, with
     provenance attributes. With --plot, also a figure of the run.
 
@@ -151,7 +154,7 @@ class _RunInputs:
     R0: str | None
     project_v0: bool
     save_every: int
-    out: Path
+    out: Path | None  # None: the summary only, nothing written
     plot: Path | None
     checkpoint_every: int | None
 
@@ -160,8 +163,7 @@ def _run_inputs(config: Path | None, origins: dict[str, str], *, model, method, 
                 project_v0, save_every, out, plot, checkpoint_every) -> _RunInputs:
     """The options of `gni run` from those of the command line (the keyword arguments, None where
     not given) and the file `config`; `origins` records the options read
-    from the file (option -> `"key 'h' in FILE"`). Raises UsageError for a missing model, --h or
-    --out."""
+    from the file (option -> `"key 'h' in FILE"`). Raises UsageError for a missing model or --h."""
     cfg: dict[str, Any] = {}
     if config is not None:
         cfg = load_config(config)
@@ -200,8 +202,6 @@ def _run_inputs(config: Path | None, origins: dict[str, str], *, model, method, 
         save_every=pick("save_every", save_every, 1), out=pick("out", out), plot=pick("plot", plot),
         checkpoint_every=pick("checkpoint_every", checkpoint_every),
     )
-    if inputs.out is None:
-        raise UsageError("--out", "missing: give --out FILE.nc (or `out` in --config)")
     return inputs
 
 
@@ -213,6 +213,9 @@ def _run(inputs: _RunInputs, config: Path | None, *, resume: bool, overwrite: bo
     R0 = parse_R0(spec, params, inputs.R0)
     _check_outputs(inputs.out, inputs.plot, overwrite, resume)
     chunk = inputs.checkpoint_every
+    if inputs.out is None and (chunk is not None or resume):
+        option = "--checkpoint-every" if chunk is not None else "--resume"
+        raise UsageError("--out", f"missing: {option} streams the run into a file; give --out FILE.nc")
     if chunk is not None and (isinstance(chunk, bool) or chunk < 1):
         raise UsageError("--checkpoint-every", f"must be a positive integer, got {chunk!r}")
     if resume and chunk is None:
@@ -223,6 +226,9 @@ def _run(inputs: _RunInputs, config: Path | None, *, resume: bool, overwrite: bo
     stride = min(int(inputs.save_every), n_steps)  # the stride the run has (the last node is always saved)
     streamed = chunk is not None or n_steps // stride > resources.STREAM_NODES or n_steps > MAX_STEPS
     if streamed:
+        if inputs.out is None:
+            raise UsageError("--out", f"missing: the run saves more than {resources.STREAM_NODES:,} nodes and is "
+                             "streamed into a file; give --out FILE.nc, or save fewer nodes (--save-every K)")
         chunk = _streamed_chunk(inputs, stride, chunk)
     length = "--steps" if inputs.steps is not None else "--t-final"
     if not yes:  # estimated before anything is compiled or allocated
@@ -237,14 +243,15 @@ def _run(inputs: _RunInputs, config: Path | None, *, resume: bool, overwrite: bo
                           overwrite=overwrite)
 
 
-def _check_outputs(out: Path, plot: Path | None, overwrite: bool, resume: bool) -> None:
+def _check_outputs(out: Path | None, plot: Path | None, overwrite: bool, resume: bool) -> None:
     """Check --out and --plot (each writable, not the other) and hold them: one writer per output,
     a second `gni run` on it is refused now, not at the end."""
     # --resume may find the run finished: its file is then read back, not replaced
-    check_output(out, "--out", overwrite or resume)
+    if out is not None:
+        check_output(out, "--out", overwrite or resume)
     if plot is not None:
         check_plot(plot, overwrite)
-        if same_file(out, plot):
+        if out is not None and same_file(out, plot):
             raise UsageError("--plot", f"{str(plot)!r} is also --out: choose another path for the figure")
     hold("--out", out)
     hold("--plot", plot)
@@ -292,14 +299,16 @@ def _run_in_memory(spec, params, inputs: _RunInputs, q0, v0, R0, stride: int, ex
     )
     exact = exact_errors(spec, params, sol, q0, v0_used)
     drifts = invariant_drifts(spec, params, sol.q, sol.v, sol.R)
-    attrs = attrs_for(spec, params, sol, q0, v0_used, exact, drifts, extra)
-    with writing("--out", inputs.out):
-        write_netcdf(sol, inputs.out, attrs=attrs, overwrite=overwrite)
-    written = str(inputs.out)
+    written = []
+    if inputs.out is not None:
+        attrs = attrs_for(spec, params, sol, q0, v0_used, exact, drifts, extra)
+        with writing("--out", inputs.out):
+            write_netcdf(sol, inputs.out, attrs=attrs, overwrite=overwrite)
+        written.append(str(inputs.out))
     if inputs.plot is not None:
         write_plot(sol, inputs.plot, overwrite)
-        written += f", {inputs.plot}"
-    run_report("gni run", spec, params, sol, exact, drifts, seconds, written)
+        written.append(str(inputs.plot))
+    run_report("gni run", spec, params, sol, exact, drifts, seconds, ", ".join(written) or None)
     return sol.healthy
 
 
