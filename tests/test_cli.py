@@ -60,7 +60,7 @@ def test_run_writes_netcdf_with_variables_and_provenance(tmp_path):
 def test_run_with_overrides_initial_condition_and_save_stride(tmp_path):
     out = tmp_path / "o.nc"
     x0, v0 = "1,-2,0.5,0", "0,0,0.3,1.5"  # (ẋ, ẏ) off the constraints: projected
-    res = invoke(*BASE, "--set", "r=2", "--set", "I_rot=3,m=0.5", "--x0", x0, "--v0", v0, "--project-v0",
+    res = invoke(*BASE, "--set", "r=2", "--set", "I_rot=3,m=0.5", "--q0", x0, "--v0", v0, "--project-v0",
                  "--save-every", "4", "--out", out)
     assert res.exit_code == 0, res.output
     ds = xr.load_dataset(out)
@@ -158,14 +158,14 @@ BAD = [
     ([*BASE, "--set", "r=abc"], "--set"),
     ([*BASE, "--set", "r=nan"], "--set"),
     ([*BASE, "--set", "m=-1"], "--set"),
-    ([*BASE, "--x0", "1,2,3"], "--x0"),
-    ([*BASE, "--x0", "1,2,3,4,5"], "--x0"),
-    ([*BASE, "--x0", "1,a,3,4"], "--x0"),
-    ([*BASE, "--x0", "1,nan,3,4"], "--x0"),
+    ([*BASE, "--q0", "1,2,3"], "--q0"),
+    ([*BASE, "--q0", "1,2,3,4,5"], "--q0"),
+    ([*BASE, "--q0", "1,a,3,4"], "--q0"),
+    ([*BASE, "--q0", "1,nan,3,4"], "--q0"),
     ([*BASE, "--v0", "1,0,1"], "--v0"),
     ([*BASE, "--v0", "1,0,x,1"], "--v0"),
     ([*BASE, "--v0", "0,1,1,1"], "--v0"),  # off the constraints (without --project-v0)
-    ([*BASE, "--x0", "0,0,1.5,0"], "--v0"),  # default v0 is off the constraints at this heading
+    ([*BASE, "--q0", "0,0,1.5,0"], "--v0"),  # default v0 is off the constraints at this heading
     ([*BASE, "--save-every", "0"], "--save-every"),
     ([*BASE, "--plot", "{tmp}/figure.unknown-format"], "--plot"),
     ([*BASE, "--plot", "{tmp}/no-such-dir/figure.png"], "--plot"),
@@ -295,7 +295,7 @@ def test_run_plot_writes_png(tmp_path):
 
 def test_config_file_gives_the_same_run_as_options(tmp_path):
     x0, v0 = "0.5,-1,0,0", "1,0,0,1"
-    res = invoke(*BASE, "--method", "gni-trapezoid", "--set", "r=1", "--x0", x0, "--v0", v0, "--save-every", "2",
+    res = invoke(*BASE, "--method", "gni-trapezoid", "--set", "r=1", "--q0", x0, "--v0", v0, "--save-every", "2",
                  "--out", tmp_path / "options.nc")
     assert res.exit_code == 0, res.output
     (tmp_path / "run.toml").write_text(
@@ -321,6 +321,24 @@ def test_config_file_gives_the_same_run_as_options(tmp_path):
     _same_run(a, xr.load_dataset(tmp_path / "config2.nc"))
 
 
+def test_x0_is_the_older_name_of_q0(tmp_path):
+    """`--x0` and the config key `x0` still give q0 (the library's name); both keys in one file are refused."""
+    runs = {}
+    for name, args in {"q0": ["--q0", "1,2,0,0"], "x0": ["--x0", "1,2,0,0"], "key": ["--config", tmp_path / "run.toml"]}.items():
+        (tmp_path / "run.toml").write_text('x0 = [1, 2, 0, 0]\n')
+        res = invoke(*BASE, *args, "--out", tmp_path / f"{name}.nc")
+        assert res.exit_code == 0, res.output
+        runs[name] = xr.load_dataset(tmp_path / f"{name}.nc")["q"].values
+        np.testing.assert_array_equal(runs[name][0], [1.0, 2.0, 0.0, 0.0])
+    np.testing.assert_array_equal(runs["x0"], runs["q0"])
+    np.testing.assert_array_equal(runs["key"], runs["q0"])
+    (tmp_path / "both.toml").write_text('x0 = [1, 2, 0, 0]\nq0 = [1, 2, 0, 0]\n')
+    res = invoke(*BASE, "--config", tmp_path / "both.toml")
+    assert res.exit_code == 2 and "'x0' and 'q0'" in _error_lines(res.output)[0], res.output
+    res = invoke(*BASE, "--x0", "1,2,3")
+    assert res.exit_code == 2 and "--q0" in _error_lines(res.output)[0], res.output
+
+
 def test_command_line_overrides_config(tmp_path):
     (tmp_path / "run.toml").write_text(
         'model = "vertical-disk"\nmethod = "no-such-method"\nh = 0.1\nsteps = 3\n'
@@ -328,7 +346,7 @@ def test_command_line_overrides_config(tmp_path):
     )
     out = tmp_path / "from-cli.nc"
     res = invoke("run", "--config", tmp_path / "run.toml", "--method", "gni-trapezoid", "--t-final", "1",
-                 "--x0", "1,2,0,0", "--set", "m=1", "--out", out)
+                 "--q0", "1,2,0,0", "--set", "m=1", "--out", out)
     assert res.exit_code == 0, res.output
     assert out.is_file() and not (tmp_path / "from-config.nc").exists()
     ds = xr.load_dataset(out)
@@ -346,7 +364,7 @@ CONFIG_ERRORS = [
     ('model = "vertical-disk"\nh = 0.1\nsteps = 10\nproject-v0 = 1\n', ["'project-v0'", "true or false"]),
     ('model = "vertical-disk"\nh = 0.1\nsteps = 10\nx0 = [1, "a", 0, 0]\n', ["'x0'", "list of numbers"]),
     ('model = "vertical-disk"\nh = 0.1\nsteps = 10\nset = { r = "big" }\n', ["'set.r'", "must be a number"]),
-    ('model = "vertical-disk"\nh = 0.1\nsteps = 10\nx0 = [1, 2]\n', ["--x0", "'x0' in", "run.toml"]),
+    ('model = "vertical-disk"\nh = 0.1\nsteps = 10\nx0 = [1, 2]\n', ["--q0", "'x0' in", "run.toml"]),
     ('model = "vertical-disk"\nh = -1\nsteps = 10\n', ["--h", "'h' in", "run.toml"]),
     ('model = "no-such-model"\nh = 0.1\nsteps = 10\n', ["MODEL", "'model' in", "run.toml"]),
     ('[model]\nname = "vertical-disk"\n', ["'model'", "must be a string"]),
@@ -495,7 +513,7 @@ CONVERGENCE_BAD = [
     (["--methods", "rat"], "--methods"),  # needs a group part
     (["--error", "energy"], "--error"),
     (["--set", "r=abc"], "--set"),
-    (["--x0", "1,2"], "--x0"),
+    (["--q0", "1,2"], "--q0"),
 ]
 
 

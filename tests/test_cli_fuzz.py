@@ -17,13 +17,13 @@ the `gnipy/cli/` modules:
 
 - `gni run`: config file, MODEL, --method, --h, --steps/--t-final, --save-every, the step
   count (gnipy.simulate.resolve_steps: h below the normal floats, t_final / h beyond any run,
-  t_final not a whole number of steps), --set, --x0, --v0, --R0, then --out (its directory
+  t_final not a whole number of steps), --set, --q0, --v0, --R0, then --out (its directory
   writable; nothing there, or a regular file and --overwrite; never a link, FIFO or
   directory), --plot (the same), --checkpoint-every, the memory and file bounds (unless
   --yes), then the run. Sentinel `--out /<missing dir>/x.nc` for everything parsed before
   --out; `--checkpoint-every 0` when fuzzing --out and --plot; `--method reference` (not
   streamed) when fuzzing --checkpoint-every.
-- `gni convergence`: --error, MODEL, --set, --x0, --v0, --methods, --h-max, --h-min,
+- `gni convergence`: --error, MODEL, --set, --q0, --v0, --methods, --h-max, --h-min,
   --count, --t-final, --R0, then --out, then the initial condition, then the study.
   Sentinel: --out an existing file; when fuzzing --out, a v0 off the constraints.
 - `gni demo`: --out is its only input: fuzzed below a missing directory.
@@ -76,7 +76,7 @@ RUN_OPTIONS = {
     "--steps",
     "--t-final",
     "--set",
-    "--x0",
+    "--q0",
     "--v0",
     "--R0",
     "--project-v0",
@@ -479,7 +479,7 @@ def test_run_set_option(values):
 
 @pytest.mark.parametrize(
     "option, model, n",
-    [("--x0", MODEL, 4), ("--v0", MODEL, 4), ("--R0", GROUP_MODEL, 9)],
+    [("--q0", MODEL, 4), ("--v0", MODEL, 4), ("--R0", GROUP_MODEL, 9)],
 )
 @fuzz_settings(40)
 @given(data=st.data())
@@ -792,7 +792,7 @@ CONVERGENCE_OPTIONS = {
     "--count": {"--count", "--h-min", "--h-max"},
     "--t-final": {"--t-final", "--h-max", "--count"},
     "--set": {"--set"},
-    "--x0": {"--x0"},
+    "--q0": {"--q0"},
     "--v0": {"--v0"},
     "--R0": {"--R0"},
     "--error": {"--error"},

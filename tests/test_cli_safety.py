@@ -74,14 +74,14 @@ def test_run_refuses_existing_out_and_plot_without_overwrite(tmp_path):
     assert invoke(*BASE, "--out", out, "--plot", png).exit_code == 0
     nc_bytes, png_bytes = out.read_bytes(), png.read_bytes()
 
-    res = invoke(*BASE, "--x0", "1,0,0,0", "--out", out)
+    res = invoke(*BASE, "--q0", "1,0,0,0", "--out", out)
     assert_usage_error(res, "--out", str(out), "--overwrite")
-    res = invoke(*BASE, "--x0", "1,0,0,0", "--out", tmp_path / "other.nc", "--plot", png)
+    res = invoke(*BASE, "--q0", "1,0,0,0", "--out", tmp_path / "other.nc", "--plot", png)
     assert_usage_error(res, "--plot", str(png), "--overwrite")
     assert out.read_bytes() == nc_bytes and png.read_bytes() == png_bytes  # untouched
     assert sorted(os.listdir(tmp_path)) == ["run.nc", "run.png"]  # refused before the run
 
-    res = invoke(*BASE, "--x0", "1,0,0,0", "--out", out, "--plot", png, "--overwrite")
+    res = invoke(*BASE, "--q0", "1,0,0,0", "--out", out, "--plot", png, "--overwrite")
     assert res.exit_code == 0, res.output
     assert xr.load_dataset(out)["q"].values[0, 0] == 1.0 and png.read_bytes() != png_bytes
     # --out and --plot naming one file: refused (the figure would replace the result)
@@ -231,7 +231,7 @@ def test_streamed_run_refuses_an_existing_out_without_overwrite(tmp_path):
     before = out.read_bytes()
     assert_usage_error(invoke(*streamed), "--out", "--overwrite")
     assert out.read_bytes() == before
-    res = invoke(*streamed, "--x0", "1,0,0,0", "--overwrite")  # simulate_to_file(overwrite=True)
+    res = invoke(*streamed, "--q0", "1,0,0,0", "--overwrite")  # simulate_to_file(overwrite=True)
     assert res.exit_code == 0, res.output
     assert xr.load_dataset(out)["q"].values[0, 0] == 1.0
     assert sorted(os.listdir(tmp_path)) == ["s.nc"]
@@ -272,7 +272,7 @@ FULL_DISK_SCRIPT = textwrap.dedent(r'''
     sizes = {f: (here / f).stat().st_size for f in files}
     cases = []
     limit(sizes["good.nc"] // 4)  # below every file written here
-    cases.append(("--out", invoke([*BASE, "--x0", "1,0,0,0", "--out", "good.nc", "--overwrite"])))
+    cases.append(("--out", invoke([*BASE, "--q0", "1,0,0,0", "--out", "good.nc", "--overwrite"])))
     cases.append(("--out", invoke([*BASE, "--out", "new.nc"])))
     cases.append(("--out", invoke([*BASE, "--out", "streamed.nc", "--checkpoint-every", "5"])))
     limit(sizes["study/convergence.csv"] // 2)

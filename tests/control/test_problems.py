@@ -35,7 +35,7 @@ def observed(tmp_path_factory):
     """An observation file made by `gni run` with I = 1.5, a = 0.4 (the truth the fit must find)."""
     d = tmp_path_factory.mktemp("fit")
     res = CliRunner().invoke(app, ["run", "chaplygin-sleigh", "--method", "gni-trapezoid", "--set", "I=1.5,a=0.4",
-                                   "--h", "0.05", "--steps", "60", "--x0", "0,0,0", "--v0", "1,0.4,1",
+                                   "--h", "0.05", "--steps", "60", "--q0", "0,0,0", "--v0", "1,0.4,1",
                                    "--out", str(d / "observed.nc")])
     assert res.exit_code == 0, res.output
     (d / "sleigh-fit.toml").write_text(PROBLEM)

@@ -547,11 +547,11 @@ def test_cli_run_writes_orientations(tmp_path):
     assert "space velocity" in ds.attrs["orientation"] and "dR/dt = hat(xi) R" in ds.attrs["orientation"]
     assert "R is the attitude of the physical ball" in ds.attrs["orientation"]
 
-    # --x0 (2 values), --v0 (5 values) and --R0 (9 values): on the constraints at x0
+    # --q0 (2 values), --v0 (5 values) and --R0 (9 values): on the constraints at x0
     out2 = tmp_path / "g.nc"
     Rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     res = _invoke("run", "rolling-ball", "--method", "gni-euler-a", "--h", "0.05", "--steps", str(N_CONV),
-                  "--x0", "0.5,-1", "--v0", "0.5,1.5,-1,-0.5,0.3", "--R0", ",".join(map(str, Rz.ravel())),
+                  "--q0", "0.5,-1", "--v0", "0.5,1.5,-1,-0.5,0.3", "--R0", ",".join(map(str, Rz.ravel())),
                   "--out", out2)
     assert res.exit_code == 0, res.output
     ds = xr.load_dataset(out2)
@@ -564,8 +564,8 @@ def test_cli_run_writes_orientations(tmp_path):
 @pytest.mark.parametrize(
     "args, option",
     [
-        (["--x0", "1,1,0"], "--x0"),
-        (["--x0", "1"], "--x0"),
+        (["--q0", "1,1,0"], "--q0"),
+        (["--q0", "1"], "--q0"),
         (["--v0", "1,1"], "--v0"),
         (["--v0", "1,1,0,2"], "--v0"),
         (["--v0", "1,1,0,2,0,0"], "--v0"),

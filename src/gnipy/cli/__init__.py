@@ -3,10 +3,10 @@ parameter sweeps; summaries and checks of result files; the paper's reproduction
 listings.
 
     gni run MODEL --method METHOD --h H (--steps N | --t-final T) [--set NAME=VALUE ...]
-            [--x0 a,b,...] [--v0 a,b,...] [--R0 r11,...,r33] [--project-v0] [--save-every K]
+            [--q0 a,b,...] [--v0 a,b,...] [--R0 r11,...,r33] [--project-v0] [--save-every K]
             [--plot FILE.png] [--config RUN.toml] [--out FILE.nc]
     gni convergence MODEL --methods M1,M2 --h-max A --h-min B --count N [--t-final T]
-            [--set NAME=VALUE ...] [--x0 ...] [--v0 ...] [--R0 ...] [--error state|q|v] --out DIR
+            [--set NAME=VALUE ...] [--q0 ...] [--v0 ...] [--R0 ...] [--error state|q|v] --out DIR
     gni sweep MODEL --grid NAME=START:STOP:COUNT ... --h H (--steps N | --t-final T) --out DIR.zarr
     gni control (PROBLEM.toml | --example NAME) [--print] --out FILE.nc [--plot FILE.png]
     gni fit PROBLEM.toml --out FILE.nc [--plot FILE.png]

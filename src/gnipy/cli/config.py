@@ -23,7 +23,8 @@ CONFIG_KEYS: dict[str, tuple[str, str]] = {
     "steps": ("--steps", "integer"),
     "t_final": ("--t-final", "number"),
     "set": ("--set", "set"),
-    "x0": ("--x0", "vector"),
+    "q0": ("--q0", "vector"),
+    "x0": ("--q0", "vector"),  # the older name of q0
     "v0": ("--v0", "vector"),
     "R0": ("--R0", "vector"),
     "save_every": ("--save-every", "integer"),
@@ -146,6 +147,8 @@ def load_config(path: Path) -> dict[str, Any]:
         key = raw_key.replace("-", "_")
         if key == "r0":
             key = "R0"
+        if key == "x0" and "q0" in data:
+            raise UsageError("--config", f"{where}: keys 'x0' and 'q0' both given ('x0' is the older name of 'q0')")
         if key not in CONFIG_KEYS:
             known = ", ".join(k.replace("_", "-") for k in CONFIG_KEYS)
             raise UsageError("--config", f"{where}: unknown key {raw_key!r} (known: {known})")

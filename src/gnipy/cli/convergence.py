@@ -41,7 +41,8 @@ def convergence(
     set_: list[str] | None = typer.Option(
         None, "--set", help="Parameter override NAME=VALUE (repeatable, or comma-separated).", show_default=False
     ),
-    x0: str | None = typer.Option(None, "--x0", help="Initial configuration (default: the model's).", show_default=False),
+    q0: str | None = typer.Option(None, "--q0", "--x0", help="Initial configuration (default: the model's; --x0 is "
+                                  "its older name).", show_default=False),
     v0: str | None = typer.Option(None, "--v0", help="Initial velocity (default: the model's).", show_default=False),
     R0: str | None = typer.Option(
         None, "--R0", help="Initial orientation on R^n x G, row-major (default: the model's).", show_default=False
@@ -76,7 +77,7 @@ def convergence(
 
         if error not in ("auto", "state", "q", "v"):
             raise UsageError("--error", f"expected auto, state, q or v, got {error!r}")
-        spec, params, q0, v0_ = prepare_model(model, set_, x0, v0)
+        spec, params, q0_, v0_ = prepare_model(model, set_, q0, v0)
         measure = ("q" if spec.coordinates else "v") if error == "auto" else error
         names = parse_methods(methods_)
         counts = step_counts(h_max, h_min, count, t_final)
@@ -89,7 +90,7 @@ def convergence(
 
         exact = None if spec.exact is None else functools.partial(spec.exact, params)
         with Progress("convergence", unit="runs") as progress:
-            study = convergence_study(spec.build(params), names, q0, v0_, R0=R0_, t_final=t_final, steps=counts,
+            study = convergence_study(spec.build(params), names, q0_, v0_, R0=R0_, t_final=t_final, steps=counts,
                                       measure=measure, exact=exact, project_v0=project_v0, progress=progress)
         csv_path, png_path = write_convergence_files(study, spec, out, replace)
         convergence_report(study, spec, params, csv_path, png_path)

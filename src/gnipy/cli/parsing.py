@@ -74,8 +74,8 @@ def _model(name: str):
         raise UsageError("MODEL", str(e).partition(":")[2].strip()) from None
 
 
-def prepare_model(model: str, set_items, x0_text, v0_text):
-    """The model, its parameters and the initial condition (`--set`, `--x0`, `--v0` or the
+def prepare_model(model: str, set_items, q0_text, v0_text):
+    """The model, its parameters and the initial condition (`--set`, `--q0`, `--v0` or the
     model's defaults); returns `(spec, params, q0, v0)`."""
     import gnipy
 
@@ -85,14 +85,14 @@ def prepare_model(model: str, set_items, x0_text, v0_text):
     except gnipy.InputError as e:
         raise UsageError("--set", str(e).partition(":")[2].strip()) from None
     names = spec.coordinates
-    x0 = parse_vector("--x0", x0_text, len(names), names)
+    q0 = parse_vector("--q0", q0_text, len(names), names)
     vnames = spec.build(params).velocities  # (ẋ, ξ) on R^n × G: longer than x
     v0 = parse_vector("--v0", v0_text, len(vnames), vnames)
     dq, dv = spec.initial_condition(params)
-    return spec, params, tuple(dq if x0 is None else x0), tuple(dv if v0 is None else v0)
+    return spec, params, tuple(dq if q0 is None else q0), tuple(dv if v0 is None else v0)
 
 
-def prepare(model: str, method: str, h, steps, t_final, set_items, x0_text, v0_text, save_every):
+def prepare(model: str, method: str, h, steps, t_final, set_items, q0_text, v0_text, save_every):
     """Check the options of a run (`gni run`, `gni demo`); returns `(spec, params, q0, v0)`."""
     import gnipy
 
@@ -110,7 +110,7 @@ def prepare(model: str, method: str, h, steps, t_final, set_items, x0_text, v0_t
     from gnipy.simulate import resolve_steps
 
     resolve_steps(h, steps, t_final)
-    return prepare_model(model, set_items, x0_text, v0_text)
+    return prepare_model(model, set_items, q0_text, v0_text)
 
 
 def parse_R0(spec, params, text: str | None):

@@ -50,8 +50,9 @@ def run(
     set_: list[str] | None = typer.Option(
         None, "--set", help="Parameter override NAME=VALUE (repeatable, or comma-separated).", show_default=False
     ),
-    x0: str | None = typer.Option(
-        None, "--x0", help="Initial configuration a,b,... (default: the model's).", show_default=False
+    q0: str | None = typer.Option(
+        None, "--q0", "--x0", help="Initial configuration a,b,... (default: the model's; --x0 is its older name).",
+        show_default=False
     ),
     v0: str | None = typer.Option(
         None, "--v0", help="Initial velocity a,b,... (default: the model's).", show_default=False
@@ -116,11 +117,12 @@ def run(
         method = "gni-midpoint"
         h = 0.05
         t-final = 10
-        x0 = [0, 0, 0, 0]
+        q0 = [0, 0, 0, 0]
         set = { I_rot = 2 }
         out = "disk.nc"
 
-    (`set` may also be a list of "NAME=VALUE" strings, `x0`/`v0`/`R0` strings "a,b,...").
+    (`set` may also be a list of "NAME=VALUE" strings, `q0`/`v0`/`R0` strings "a,b,..."; `x0` is
+    read as `q0`).
     Relative paths in the file are relative to the file's directory.
 
     Long runs are streamed: with --checkpoint-every K (or when more than 10^6 nodes are saved)
@@ -131,7 +133,7 @@ def run(
 
     def go():
         inputs = _run_inputs(config, origins, model=model, method=method, h=h, steps=steps, t_final=t_final,
-                             set_=set_, x0=x0, v0=v0, R0=R0, project_v0=project_v0, save_every=save_every, out=out,
+                             set_=set_, q0=q0, v0=v0, R0=R0, project_v0=project_v0, save_every=save_every, out=out,
                              plot=plot, checkpoint_every=checkpoint_every)
         return _run(inputs, config, resume=resume, overwrite=overwrite, yes=yes)
 
@@ -149,7 +151,7 @@ class _RunInputs:
     steps: int | None
     t_final: float | None
     set_items: list[str]  # NAME=VALUE, the config file's first (the command line wins per name)
-    x0: str | None
+    q0: str | None
     v0: str | None
     R0: str | None
     project_v0: bool
@@ -159,7 +161,7 @@ class _RunInputs:
     checkpoint_every: int | None
 
 
-def _run_inputs(config: Path | None, origins: dict[str, str], *, model, method, h, steps, t_final, set_, x0, v0, R0,
+def _run_inputs(config: Path | None, origins: dict[str, str], *, model, method, h, steps, t_final, set_, q0, v0, R0,
                 project_v0, save_every, out, plot, checkpoint_every) -> _RunInputs:
     """The options of `gni run` from those of the command line (the keyword arguments, None where
     not given) and the file `config`; `origins` records the options read
@@ -198,7 +200,7 @@ def _run_inputs(config: Path | None, origins: dict[str, str], *, model, method, 
         origins.pop("--set", None)
     inputs = _RunInputs(
         model=model_, method=method_, h=h_, steps=steps_, t_final=t_final_, set_items=set_items,
-        x0=pick("x0", x0), v0=pick("v0", v0), R0=pick("R0", R0), project_v0=bool(pick("project_v0", project_v0, False)),
+        q0=pick("x0" if "x0" in cfg else "q0", q0), v0=pick("v0", v0), R0=pick("R0", R0), project_v0=bool(pick("project_v0", project_v0, False)),
         save_every=pick("save_every", save_every, 1), out=pick("out", out), plot=pick("plot", plot),
         checkpoint_every=pick("checkpoint_every", checkpoint_every),
     )
@@ -209,7 +211,7 @@ def _run(inputs: _RunInputs, config: Path | None, *, resume: bool, overwrite: bo
     """`gni run` with its options read: checks them and the outputs, runs in memory or streamed,
     writes and reports; returns whether the run is healthy (or failed)."""
     spec, params, q0, v0 = prepare(inputs.model, inputs.method, inputs.h, inputs.steps, inputs.t_final,
-                                   inputs.set_items, inputs.x0, inputs.v0, inputs.save_every)
+                                   inputs.set_items, inputs.q0, inputs.v0, inputs.save_every)
     R0 = parse_R0(spec, params, inputs.R0)
     _check_outputs(inputs.out, inputs.plot, overwrite, resume)
     chunk = inputs.checkpoint_every
