@@ -168,6 +168,33 @@ def test_cli_exits_1_and_lists_the_failed_members(copy):
     assert "member 5 (epsilon=0.5, v0.dx=3000)" in errors[0]
 
 
+def test_gni_info_summarizes_a_sweep_store(reference, copy, tmp_path):
+    """`gni info` on a store (issue 31): the run, the grid, the chunks, the members that failed (the
+    three with v0.dx = 3000, by the design of SMALL) and the checksums; a damaged chunk is named."""
+    res = invoke("info", reference[0])
+    assert res.exit_code == 0, res.output
+    text = " ".join(res.output.split())
+    for expected in ("sweep store", "contact-oscillator", "rattle", "grid epsilon 3 values, 0.1 .. 0.5",
+                     "grid v0.dx 2 values, -1 .. 3000", "6 in 3 chunk(s): 3 done", "failed members 3",
+                     "verified: the 3 done chunk(s) match"):
+        assert expected in text, (expected, res.output)
+    _truncate(copy / "q/c/1/0/0/0")
+    res = invoke("info", copy)
+    assert res.exit_code == 0 and "NOT verified" in res.output and "chunk 1" in res.output, res.output
+    (tmp_path / "empty").mkdir()
+    res = invoke("info", tmp_path / "empty")
+    errors = _error_lines(res.output)
+    assert res.exit_code == 2 and len(errors) == 1 and "not a gnipy sweep store" in errors[0], res.output
+
+
+def test_gni_info_on_the_checkpoints_of_a_streamed_run(tmp_path):
+    parts = tmp_path / "x.nc.parts"
+    parts.mkdir()
+    (parts / "spec.json").write_text("{}")
+    res = invoke("info", parts)
+    assert res.exit_code == 0 and "unfinished streamed run" in res.output and "--resume" in res.output, res.output
+
+
 # --------------------------------------------------------------------------------------
 # 2. Integrity: damaged chunks recomputed, damaged metadata a clear error
 # --------------------------------------------------------------------------------------

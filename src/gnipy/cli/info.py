@@ -15,8 +15,8 @@ from .output import EXIT_FAILURE, console, fail, safe, table
 from .paths import check_readable
 from .sweep import sweep_message
 
-__all__ = ["SHOWN_ATTRS", "checksum_text", "format_attr", "info", "info_table", "is_parts_dir", "unfinished",
-           "verify", "verify_store"]
+__all__ = ["SHOWN_ATTRS", "checksum_text", "format_attr", "info", "info_table", "is_parts_dir", "parts_info",
+           "store_info", "unfinished", "verify", "verify_store"]
 
 #: The attributes `gni info` shows in their own rows (the others follow, each in a row of its own).
 SHOWN_ATTRS = {"model", "params", "method", "h", "steps", "start", "save_every", "t_final", "gnipy_version",
@@ -38,15 +38,22 @@ def format_attr(v) -> str:
 
 @app.command()
 def info(
-    file: Path = typer.Argument(..., help="A result file written by `gni run` (or gnipy.io.write_netcdf).",
-                                show_default=False, metavar="FILE.nc"),
+    file: Path = typer.Argument(..., help="A result file written by `gni run` (or gnipy.io.write_netcdf), a "
+                                "sweep store (DIR.zarr) or the checkpoint directory of a streamed run (FILE.nc.parts).",
+                                show_default=False, metavar="FILE"),
 ):
-    """Summarize a result file: model, parameters, method, times, variables, energy drift,
-    constraint residual and provenance."""
+    """Summarize what gnipy wrote: a result file (model, parameters, method, times, variables,
+    energy drift, constraint residual and provenance), a sweep store (the run, the grid, the chunks
+    done, the failed and qualitatively wrong members, the checksums) or the checkpoints of an
+    unfinished streamed run."""
 
     def go():
         from gnipy.io import OutputError, read_netcdf
 
+        if file.is_dir() and not file.is_symlink():
+            if is_parts_dir(file):
+                return parts_info(file)
+            return store_info(file)
         check_readable(file, "FILE")
         try:
             ds = read_netcdf(file)
@@ -62,6 +69,64 @@ def info(
             ) from None
 
     guarded(go)
+
+
+def store_info(path: Path) -> None:
+    """`gni info` of a sweep store: what ran, the grid, the chunks done and the members' health
+    (read with :func:`gnipy.sweep.open_sweep`, which verifies every done chunk's checksum)."""
+    import json
+    import warnings
+
+    import numpy as np
+
+    from gnipy.sweep import SweepError, SweepWarning, open_sweep
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SweepWarning)
+        try:
+            ds = open_sweep(path, allow_incomplete=True)
+        except SweepError as e:
+            raise UsageError("FILE", re.sub(r"^(--out|path|out): ", "", sweep_message(str(e)))) from None
+    a = dict(ds.attrs)
+    rows = table(title=f"gni info: {path}", show_header=False, title_justify="left", box=None)
+    rows.add_column(style="bold")
+    rows.add_column(overflow="fold")
+    rows.add_row("kind", "sweep store (gni sweep, gnipy.run_sweep)")
+    for key in ("model", "method", "h", "steps", "t_final", "save_every", "params", "set_params", "start"):
+        if key in a:
+            rows.add_row(key, format_attr(a[key]))
+    for axis in json.loads(a.get("grid", "[]")):
+        rows.add_row(f"grid {axis['name']}", f"{axis['count']} values, {axis['start']:g} .. {axis['stop']:g}")
+    done = np.asarray(ds["chunk_done"].values, dtype=bool)
+    rows.add_row("members", f"{a.get('members', '?')} in {done.size} chunk(s): {int(done.sum())} done"
+                 + ("" if done.all() else ", incomplete (run the same gni sweep again to resume)"))
+    result = np.asarray(ds["result"].values)
+    healthy = np.asarray(ds["healthy"].values, dtype=bool)
+    computed = result >= 0
+    rows.add_row("failed members", str(int(np.sum(result > 0))))
+    rows.add_row("qualitatively wrong", f"{int(np.sum(computed & (result == 0) & ~healthy))} member(s) (a verdict "
+                 "out of band: the variables healthy, hidden_momentum_first_time, energy_drift_first_time)")
+    damaged = [str(w.message) for w in caught if issubclass(w.category, SweepWarning)]
+    rows.add_row("checksum", "NOT verified: " + "; ".join(damaged) if damaged
+                 else f"verified: the {int(done.sum())} done chunk(s) match their checksums")
+    rows.add_row("variables", ", ".join(f"{k}({', '.join(map(str, ds[k].dims))})" for k in ds.data_vars))
+    for key in ("gnipy_version", "jax_version", "created"):
+        if key in a:
+            rows.add_row(key, format_attr(a[key]))
+    console().print(rows)
+
+
+def parts_info(parts: Path) -> None:
+    """`gni info` of the checkpoint directory of a streamed run: what it holds and how to finish it."""
+    result = parts.with_name(parts.name[: -len(".parts")])
+    rows = table(title=f"gni info: {parts}", show_header=False, title_justify="left", box=None)
+    rows.add_column(style="bold")
+    rows.add_column(overflow="fold")
+    rows.add_row("kind", f"the checkpoints of an unfinished streamed run of {result} (not a result yet)")
+    rows.add_row("parts", f"{len(list(parts.glob('part_*.nc')))} committed chunk(s)")
+    rows.add_row("to finish", "run the same `gni run ... --checkpoint-every K` again with --resume (it verifies "
+                 "the parts, continues from the last good one and writes the file)")
+    console().print(rows)
 
 
 def checksum_text(path: Path) -> str:
