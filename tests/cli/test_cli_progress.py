@@ -60,7 +60,7 @@ def test_the_callback_form_and_a_total_given_late():
     with progress:
         for k in range(4):
             progress(k, 3, f"run {k}")  # as gnipy.analysis.convergence_study calls it
-    assert lines == [f"study: {k}/3 runs, 0 s" for k in range(4)]
+    assert lines == [f"study: {k}/3 runs, 0 s: run {k}" for k in range(4)]  # the plain lines name the stage
     progress, lines, _ = plain()
     with progress:
         pass
@@ -68,7 +68,8 @@ def test_the_callback_form_and_a_total_given_late():
 
 
 def _progress_lines(output, command, unit):
-    return [line for line in output.splitlines() if re.fullmatch(rf"{command}: [\d,]+/[\d,]+ {unit}, \d+ s", line)]
+    return [line for line in output.splitlines()
+            if re.fullmatch(rf"{command}: [\d,]+/[\d,]+ {unit}, \d+ s(: .+)?", line)]
 
 
 def test_gni_convergence_reports_its_runs(tmp_path):
@@ -147,6 +148,7 @@ def test_gni_reproduce_passes_its_progress_to_the_stages(tmp_path, monkeypatch):
     assert res.exit_code == 0, res.output
     lines = _progress_lines(res.output, "reproduce", "stages")
     assert [line.split(",")[0] for line in lines] == [f"reproduce: {k}/6 stages" for k in range(7)], res.output
+    assert [line.partition(" s:")[2] for line in lines] == [f" stage {k}" for k in range(6)] + [""], res.output
 
 
 def test_gni_sweep_reports_its_chunks(tmp_path, monkeypatch):

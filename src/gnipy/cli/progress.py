@@ -3,13 +3,14 @@
 On a terminal (stderr is a tty) a rich bar shows the progress and disappears when done. Elsewhere
 (a batch job, a pipe, a CI log) the same progress is written as plain lines on stderr,
 
-    convergence: 3/8 runs, 12 s
+    convergence: 3/8 runs, 12 s: gni-trapezoid, h = 0.025
 
-one each time another tenth of the work is done or 10 s have passed since the last line with
-something new to say, and one at the end. Work that reports seldom or not at all (a sweep's
-chunks, the stages of the reproduction, where the library gives no count) gets a line every 10 s
-all the same (`reproduce: 40 s`). `gni run` (long runs), `gni convergence`, `gni sweep` and
-`gni reproduce` report through :class:`Progress`.
+(after the colon: what runs now, where the work names it), one each time another tenth of the
+work is done or 10 s have passed since the last line with something new to say, and one at the
+end. Work that reports seldom or not at all (a sweep's
+chunks, the stages of the reproduction) gets a line every 10 s all the same
+(`reproduce: 3/9 stages, 40 s: Figure 4`). `gni run` (long runs), `gni convergence`, `gni sweep`,
+`gni atlas` and `gni reproduce` report through :class:`Progress`.
 """
 
 from __future__ import annotations
@@ -48,7 +49,7 @@ class Progress:
         clock: the time in seconds (default `time.monotonic`).
         heartbeat: with plain lines, also write one when :data:`LINE_EVERY_SECONDS` pass without
             one (from a thread), for work that reports seldom or not at all
-            (`reproduce: 40 s`).
+            (`reproduce: 3/9 stages, 40 s: Figure 4`).
     """
 
     def __init__(self, command: str, total: int | None = None, unit: str = "", *, description: str | None = None,
@@ -60,6 +61,7 @@ class Progress:
         self.write = write or _echo_stderr
         self.clock = clock
         self.done = 0
+        self.stage = ""  # what runs now (the last description given), named in the plain lines
         self._bar = self._task = None
         self._start = self._last_time = 0.0
         self._last_done = -1
@@ -110,6 +112,8 @@ class Progress:
         if self.total is not None and done > self.total:  # more work than announced: never "70/60"
             self.total = done
         self.done = done
+        if description is not None:
+            self.stage = _shown(description)
         if self._bar is not None:
             self._bar.update(self._task, completed=done, total=self.total,
                              **({} if description is None else {"description": _shown(description)}))
@@ -127,8 +131,9 @@ class Progress:
 
     def __call__(self, done: int, total: int, *rest) -> None:
         """The callback form, `progress(done, total[, description])` (what `gnipy.simulate`,
-        :func:`gnipy.analysis.convergence_study` and the sweeps call)."""
-        self.update(done, total, rest[0] if rest and rest[0] else None)
+        :func:`gnipy.analysis.convergence_study` and the sweeps call; an empty description clears
+        the stage the plain lines name)."""
+        self.update(done, total, str(rest[0]) if rest and rest[0] is not None else None)
 
     def _beat(self) -> None:
         while not self._stop.wait(min(1.0, LINE_EVERY_SECONDS)):
@@ -141,7 +146,8 @@ class Progress:
         unit = f" {self.unit}" if self.unit else ""
         done = f"{_count(self.done)}/{_count(self.total)}{unit}, " if self.total is not None else ""
         done = "finished, " if finished else done
-        self.write(f"{self.command}: {done}{now - self._start:.0f} s")
+        stage = f": {self.stage}" if self.stage and not finished else ""
+        self.write(f"{self.command}: {done}{now - self._start:.0f} s{stage}")
         self._last_done, self._last_time = self.done, now
         if self.total:
             step = max(LINE_EVERY_FRACTION * self.total, 1.0)

@@ -186,11 +186,14 @@ def check_output_dir(out_dir, overwrite: bool = False, files=OUTPUT_FILES) -> Pa
     return out_dir
 
 
-def run_reproduction(out_dir: Path, quick: bool, *, console=None, overwrite: bool = False) -> ReproductionResult:
+def run_reproduction(out_dir: Path, quick: bool, *, console=None, overwrite: bool = False,
+                     progress=None) -> ReproductionResult:
     """Run every stage and write the report (see :func:`reproduce`); returns everything produced.
 
     `overwrite`: replace the files of a reproduction in a folder gnipy did not create (see the
     module docstring; :func:`check_output_dir` is checked first, before anything is computed).
+    `progress`: optional `progress(stages_done, stages, stage)` called as each stage starts and at
+    the end (`gni reproduce` prints it as plain lines when stderr is not a terminal).
 
     Raises:
         gnipy.files.OutputError: the folder may not be written (see :func:`check_output_dir`), or
@@ -201,10 +204,10 @@ def run_reproduction(out_dir: Path, quick: bool, *, console=None, overwrite: boo
     t_start = time.perf_counter()
     out_dir = ensure_output_dir(check_output_dir(out_dir, overwrite))
     with overwriting(overwrite):
-        return _run_stages(out_dir, quick, console or _console(), t_start)
+        return _run_stages(out_dir, quick, console or _console(), t_start, progress)
 
 
-def _run_stages(out_dir: Path, quick: bool, console, t_start: float) -> ReproductionResult:
+def _run_stages(out_dir: Path, quick: bool, console, t_start: float, report_stage=None) -> ReproductionResult:
     from rich.progress import (
         BarColumn,
         Progress,
@@ -227,7 +230,9 @@ def _run_stages(out_dir: Path, quick: bool, console, t_start: float) -> Reproduc
                TaskProgressColumn(), TimeElapsedColumn())
     with Progress(*columns, console=err_console, disable=not err_console.is_terminal) as progress:
         tasks = {key: progress.add_task(f"{label}: waiting", total=1.0, start=False) for key, label in stages}
-        for key, label in stages:
+        for i, (key, label) in enumerate(stages):
+            if report_stage is not None:
+                report_stage(i, len(stages), label)
             task = tasks[key]
             progress.start_task(task)
             progress.update(task, description=f"{label}: starting")
@@ -261,6 +266,8 @@ def _run_stages(out_dir: Path, quick: bool, console, t_start: float) -> Reproduc
                                     measured="error", passed=False, detail=detail)]
                 progress.update(task, completed=1.0, description=f"{label}: FAILED")
             stage_times[label] = time.perf_counter() - t0
+        if report_stage is not None:
+            report_stage(len(stages), len(stages), "report")
 
     runtime = time.perf_counter() - t_start
     meta = {
