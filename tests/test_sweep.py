@@ -428,10 +428,18 @@ def test_parse_grid():
     axis = parse_grid("q0.x=-1:1:5")
     assert axis == GridAxis("q0.x", -1.0, 1.0, 5) and str(axis) == "q0.x=-1.0:1.0:5"
     np.testing.assert_array_equal(axis.values, np.linspace(-1, 1, 5))
-    np.testing.assert_array_equal(parse_grid("m = 2 : 3 : 1").values, [2.0])
-    bad = ["m=1:2", "m=a:b:3", "m=1:2:0", "m=nan:1:2", "m=1:inf:2", "m=1:2:2.5"]
+    np.testing.assert_array_equal(parse_grid("m = 2 : 2 : 1").values, [2.0])
+    # the unambiguous form: the same axis
+    assert parse_grid("q0.x=linspace(-1, 1, 5)") == axis and parse_grid("q0.x = linspace(-1,1,5)") == axis
+    np.testing.assert_array_equal(parse_grid("m=linspace(2, 3, 1)").values, [2.0])  # numpy's own reading
+    bad = ["m=1:2", "m=a:b:3", "m=1:2:0", "m=nan:1:2", "m=1:inf:2", "m=1:2:2.5", "m=linspace(1, 2)",
+           "m=linspace(1, 2, 2.5)", "m=linspace(1, 2, 3", "m=lin(1, 2, 3)"]
     for text in [*bad, "=1:2:3", "m1:2:3"]:
         with pytest.raises(SweepError, match="^grid: "):
+            parse_grid(text)
+    # the short form read as START:STEP:STOP or a slice: refused, saying what it means
+    for text in ("m=0:0.1:1", "m=2:3:1", "m=0:1:0.25"):
+        with pytest.raises(SweepError, match=r"is numpy\.linspace\(START, STOP, COUNT\), not a slice or START:STEP:STOP"):
             parse_grid(text)
 
 

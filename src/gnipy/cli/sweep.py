@@ -89,8 +89,9 @@ def sweep_report(report, spec: dict[str, Any]) -> None:
 def sweep(
     model: str = typer.Argument(..., help="Model name (see `gni models`).", show_default=False, metavar="MODEL"),
     grid: list[str] | None = typer.Option(
-        None, "--grid", "-g", help="A grid axis NAME=START:STOP:COUNT, values numpy.linspace(START, STOP, COUNT); "
-        "NAME is a parameter, q0.<coordinate> or v0.<velocity> (e.g. m=0.5:2:10, q0.x=-1:1:5, v0.omega3=0:1:3). "
+        None, "--grid", "-g", help="A grid axis NAME=linspace(START, STOP, COUNT), or its short form NAME=START:STOP:COUNT (the "
+        "same values: COUNT values, not a step); NAME is a parameter, q0.<coordinate> or v0.<velocity> (e.g. "
+        "m=linspace(0.5, 2, 10), q0.x=-1:1:5, v0.omega3=0:1:3). "
         "Repeatable: the sweep is the Cartesian product.", show_default=False,
     ),
     method: str | None = typer.Option(
@@ -184,7 +185,7 @@ def _sweep(model, grid, *, method, h, steps, t_final, save_every, set_, project_
     from gnipy.sweep import SweepError, SweepFailure, run_sweep
 
     if not grid:
-        raise UsageError("--grid", "missing: give at least one --grid NAME=START:STOP:COUNT")
+        raise UsageError("--grid", "missing: give at least one --grid NAME=linspace(START, STOP, COUNT)")
     check_positive("--h", h)
     if h is None:
         raise UsageError("--h", "missing: give --h")

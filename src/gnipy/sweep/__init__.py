@@ -1,7 +1,8 @@
 """Parameter sweeps: grids of runs in vmapped chunks on dask.distributed, to zarr.
 
 A sweep runs one model with one method over the Cartesian product of a few *grid axes*,
-each `NAME=START:STOP:COUNT` (values `numpy.linspace(START, STOP, COUNT)`). NAME is a
+each `NAME=linspace(START, STOP, COUNT)` or `NAME=START:STOP:COUNT` (values
+`numpy.linspace(START, STOP, COUNT)`). NAME is a
 model parameter (`m`, `Omega`, ...) or a component of the initial condition:
 `q0.<coordinate>` (e.g. `q0.x`) or `v0.<velocity>` (e.g. `v0.omega3`). The members (grid
 points) are numbered in C order: the last axis varies fastest.

@@ -1,5 +1,5 @@
-"""The grid of a sweep: its axes (`NAME=START:STOP:COUNT`), its members, and how it is cut into
-chunks.
+"""The grid of a sweep: its axes (`NAME=linspace(START, STOP, COUNT)`, or `NAME=START:STOP:COUNT`),
+its members, and how it is cut into chunks.
 
 The members are the points of the Cartesian product of the axes, numbered in C order (the last
 axis varies fastest). A chunk is a block of the grid, :class:`ChunkLayout`: the last axes whole
@@ -76,21 +76,35 @@ class GridAxis:
         return f"{self.name}={self.start!r}:{self.stop!r}:{self.count}"
 
 
+#: What the colon form means, said where it may have been read as a slice or START:STEP:STOP.
+_COLON_FORM = ("NAME=START:STOP:COUNT is numpy.linspace(START, STOP, COUNT), not a slice or START:STEP:STOP; "
+               "NAME=linspace(START, STOP, COUNT) says the same unambiguously")
+_LINSPACE_RE = re.compile(r"^linspace\((?P<args>[^()]*)\)$")
+
+
 def parse_grid(text: str) -> GridAxis:
-    """Parse `NAME=START:STOP:COUNT` (e.g. `"m=0.5:2:4"`, `"q0.x=-1:1:5"`) into a
-    :class:`GridAxis`.
+    """Parse `NAME=linspace(START, STOP, COUNT)` or its short form `NAME=START:STOP:COUNT` (the
+    same values, `numpy.linspace(START, STOP, COUNT)`; e.g. `"m=linspace(0.5, 2, 4)"`,
+    `"q0.x=-1:1:5"`) into a :class:`GridAxis`.
+
+    The short form reads like a slice or START:STEP:STOP; where it was probably meant so (a COUNT
+    that is not a whole number, or COUNT = 1 with STOP different from START, which linspace
+    ignores), the error says what it means instead.
 
     Raises:
         SweepError: a message starting `grid:` that quotes the text and says what is
             wrong.
     """
+    expected = "expected NAME=linspace(START, STOP, COUNT) or NAME=START:STOP:COUNT (e.g. m=linspace(0.5, 2, 4))"
     if not isinstance(text, str):
-        raise SweepError(f"grid: expected NAME=START:STOP:COUNT, got {text!r}")
+        raise SweepError(f"grid: {expected}, got {text!r}")
     name, eq, rest = text.partition("=")
-    name = name.strip()
-    parts = [s.strip() for s in rest.split(":")]
+    name, rest = name.strip(), rest.strip()
+    call = _LINSPACE_RE.match(rest)
+    parts = [s.strip() for s in (call.group("args").split(",") if call else rest.split(":"))]
     if not eq or not name or len(parts) != 3 or not all(parts):
-        raise SweepError(f"grid: expected NAME=START:STOP:COUNT (e.g. m=0.5:2:4), got {text!r}")
+        raise SweepError(f"grid: {expected}, got {text!r}")
+    hint = "" if call else f" ({_COLON_FORM})"
     values = []
     for what, s in zip(("START", "STOP"), parts[:2]):
         try:
@@ -104,12 +118,15 @@ def parse_grid(text: str) -> GridAxis:
         count = int(parts[2])
     except ValueError:
         raise SweepError(
-            f"grid: {name}: COUNT must be a positive integer, got {parts[2]!r} in {text!r}"
+            f"grid: {name}: COUNT must be a positive integer, got {parts[2]!r} in {text!r}{hint}"
         ) from None
     if count < 1:
-        raise SweepError(f"grid: {name}: COUNT must be a positive integer, got {parts[2]!r} in {text!r}")
+        raise SweepError(f"grid: {name}: COUNT must be a positive integer, got {parts[2]!r} in {text!r}{hint}")
     if count > MAX_COUNT:
         raise SweepError(f"grid: {name}: COUNT must be at most {MAX_COUNT:,}, got {parts[2]!r} in {text!r}")
+    if not call and count == 1 and values[0] != values[1]:
+        raise SweepError(f"grid: {name}: COUNT = 1 gives START only, and STOP differs, in {text!r} ({_COLON_FORM}; "
+                         f"one value: {name}={parts[0]}:{parts[0]}:1)")
     return GridAxis(name, values[0], values[1], count)
 
 

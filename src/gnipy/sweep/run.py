@@ -156,7 +156,7 @@ def run_sweep(
 
     Arguments:
         model: a model name (see :func:`gnipy.model_names`).
-        grid: the grid axes: `"NAME=START:STOP:COUNT"` strings, :class:`GridAxis`
+        grid: the grid axes: `"NAME=linspace(START, STOP, COUNT)"` or `"NAME=START:STOP:COUNT"` strings, :class:`GridAxis`
             objects, or a mapping `{name: (start, stop, count)}`; NAME is a parameter,
             `q0.<coordinate>` or `v0.<velocity>`. The sweep is their Cartesian product
             (C order).
