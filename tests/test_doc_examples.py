@@ -286,7 +286,7 @@ def _check_performance(ns, cwd):
 
 
 def _check_sweeps(ns, cwd):
-    assert ns["ds"]["q"].dims == ("Omega", "q0.x", "time", "coordinate")
+    assert ns["ds"]["q"].dims == ("Omega", "q0_x", "time", "coordinate")
     assert ns["report"].failed_members == 0
 
 

@@ -137,7 +137,7 @@ def test_every_member_equals_its_own_simulation(ball_store):
     assert report.chunks_computed == 4 and report.chunk_size == 2
     assert report.failed_members == 0
     ds = xr.open_zarr(out)
-    assert (ds.sizes["Omega"], ds.sizes["q0.x"]) == (2, 3)  # no padding in the store
+    assert (ds.sizes["Omega"], ds.sizes["q0_x"]) == (2, 3)  # no padding in the store
     spec = gnipy.get_model("rolling-ball")
     for Omega in (0.5, 1.0):
         for x in (-1.0, 0.0, 1.0):
@@ -157,7 +157,7 @@ def test_every_member_equals_its_own_simulation(ball_store):
                 project_v0=True,
                 check_every_node=False,  # the numbers only (the verdicts: test_every_member_has_its_own_...)
             )
-            member = ds.sel({"Omega": Omega, "q0.x": x})
+            member = ds.sel({"Omega": Omega, "q0_x": x})
             for name in ("q", "v", "p", "R", "energy", "constraint_residual"):
                 np.testing.assert_allclose(
                     member[name].values,
@@ -174,16 +174,15 @@ def test_every_member_equals_its_own_simulation(ball_store):
 def test_open_sweep_gives_the_grid_as_dimensions(ball_store):
     out, _ = ball_store
     ds = open_sweep(out)
-    assert ds["q"].dims == ("Omega", "q0.x", "time", "coordinate")
-    assert ds["R"].dims == ("Omega", "q0.x", "time", "i", "j")
-    assert ds["result"].dims == ("Omega", "q0.x")
+    assert ds["q"].dims == ("Omega", "q0_x", "time", "coordinate")
+    assert ds["R"].dims == ("Omega", "q0_x", "time", "i", "j")
+    assert ds["result"].dims == ("Omega", "q0_x")
     np.testing.assert_array_equal(ds["Omega"].values, [0.5, 1.0])
-    np.testing.assert_array_equal(ds["q0.x"].values, [-1.0, 0.0, 1.0])
+    np.testing.assert_array_equal(ds["q0_x"].values, [-1.0, 0.0, 1.0])
+    assert ds["q0_x"].attrs["long_name"] == "grid axis q0.x"  # the dimension's name is an identifier
     assert list(ds["velocity"].values) == ["dx", "dy", "omega1", "omega2", "omega3"]
     raw = zarr.open_group(str(out), mode="r")  # the arrays as stored, the grid as their first axes
-    np.testing.assert_array_equal(
-        ds["q"].sel({"Omega": 1.0, "q0.x": 0.0}).values, raw["q"][1, 1]
-    )
+    np.testing.assert_array_equal(ds["q"].sel(Omega=1.0, q0_x=0.0).values, raw["q"][1, 1])  # as keywords
     np.testing.assert_array_equal(
         ds["q"].isel(time=0).values[..., 0], [[-1.0, 0.0, 1.0]] * 2
     )
@@ -225,9 +224,9 @@ def test_plain_xarray_open_zarr_gives_the_grid_without_warnings(ball_store):
     assert sorted(p.name for p in out.iterdir()) == sorted([*listed, "zarr.json"])
     for name, dims in {"q": ("time", "coordinate"), "R": ("time", "i", "j"), "valid": ("time",),
                        "result": (), "failed_time": ()}.items():
-        assert ds[name].dims == ("Omega", "q0.x", *dims), name
+        assert ds[name].dims == ("Omega", "q0_x", *dims), name
     np.testing.assert_array_equal(ds["Omega"].values, np.linspace(0.5, 1.0, 2))
-    np.testing.assert_array_equal(ds["q0.x"].values, np.linspace(-1.0, 1.0, 3))
+    np.testing.assert_array_equal(ds["q0_x"].values, np.linspace(-1.0, 1.0, 3))
     assert ds["Omega"].attrs["long_name"] == "grid axis Omega"
     assert ds["failed_time"].attrs["units"] == "s" and ds["time"].attrs["units"] == "s"
     assert "member" not in ds.dims and not any(str(k).startswith("grid_") for k in ds.variables)

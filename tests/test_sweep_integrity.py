@@ -368,12 +368,12 @@ def _old_store(reference, path, fmt: str, marker: bool):
     import xarray as xr
 
     ds = xr.open_zarr(reference).load()
-    grid = ["epsilon", "v0.dx"]
-    flat = ds.drop_vars(grid).stack(member=grid).reset_index("member", drop=True)
+    grid = {"epsilon": "epsilon", "v0_dx": "v0.dx"}  # dimension: grid name
+    flat = ds.drop_vars(list(grid)).stack(member=list(grid)).reset_index("member", drop=True)
     flat = flat.transpose("member", ...).assign_coords(member=np.arange(6))
-    for name in grid:
-        flat[f"grid_{name}"] = ("member", np.repeat(ds[name].values, 2) if name == "epsilon"
-                                else np.tile(ds[name].values, 3))
+    for dim, name in grid.items():
+        flat[f"grid_{name}"] = ("member", np.repeat(ds[dim].values, 2) if dim == "epsilon"
+                                else np.tile(ds[dim].values, 3))
     spec = json.loads(ds.attrs["sweep_spec"])
     flat.attrs = {"sweep_spec": json.dumps({**spec, "format": fmt})}
     flat.to_zarr(str(path), mode="w-", consolidated=False)
@@ -403,6 +403,17 @@ def test_a_store_of_an_earlier_format_is_a_clear_error_and_gnipy_s(reference, cl
     assert report.chunks_computed == 1 and _owned(old)
     assert json.loads(zarr.open_group(str(old)).attrs["sweep_spec"])["format"] == sweep_module.FORMAT
     assert [p.name for p in tmp_path.iterdir()] == ["old.zarr"]  # the old store is gone
+
+
+def test_a_store_of_the_previous_format_names_the_dimensions_change(reference, copy):
+    """Format gnipy-sweep/4 named the dimensions as the grid (`v0.dx`); this version names them
+    `v0_dx` and neither reads nor resumes the older stores: the error says why."""
+    group = zarr.open_group(str(copy), mode="r+")
+    spec = json.loads(group.attrs["sweep_spec"])
+    group.attrs["sweep_spec"] = json.dumps({**spec, "format": "gnipy-sweep/4"})
+    with pytest.raises(SweepError, match=r"earlier gnipy \(format gnipy-sweep/4, its dimensions named as the grid, "
+                                         r"q0\.x where they are now q0_x\)"):
+        open_sweep(copy)
 
 
 def test_stale_temporaries_of_dead_processes_are_removed(client, tmp_path):

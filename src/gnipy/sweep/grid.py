@@ -64,6 +64,12 @@ class GridAxis:
         object.__setattr__(self, "count", int(c))
 
     @property
+    def dim(self) -> str:
+        """The axis's dimension in the store and the Dataset: `name` with `.` written `_` (`q0.x` ->
+        `q0_x`), a Python identifier, so that `ds.sel(q0_x=0.5)` and `ds.q0_x` work."""
+        return self.name.replace(".", "_")
+
+    @property
     def values(self) -> np.ndarray:
         """The grid values, `numpy.linspace(start, stop, count)`."""
         return np.linspace(self.start, self.stop, self.count)
@@ -151,11 +157,14 @@ def as_axes(grid) -> list[GridAxis]:
     axes = [g if isinstance(g, GridAxis) else parse_grid(g) for g in grid]
     if not axes:
         raise SweepError("grid: give at least one grid axis NAME=START:STOP:COUNT")
-    seen = set()
+    seen = {}
     for a in axes:
         if a.name in seen:
             raise SweepError(f"grid: {a.name!r} is given twice")
-        seen.add(a.name)
+        if a.dim in seen.values():
+            other = next(k for k, d in seen.items() if d == a.dim)
+            raise SweepError(f"grid: {a.name!r} and {other!r} would both be the store's dimension {a.dim!r}")
+        seen[a.name] = a.dim
     return axes
 
 

@@ -143,7 +143,7 @@ def resume(path: Path, plan: Plan) -> tuple[np.ndarray, int]:
     chunks' flags cleared, with a warning each) and the number of damaged chunks."""
     group, stored = open_group(path, "out", mode="r+")
     compare_specs(path, stored, plan.spec)
-    names = array_names(plan.member_vars, [a.name for a in plan.axes])
+    names = array_names(plan.member_vars, [a.dim for a in plan.axes])
     arrays = check_arrays("out", path, group, names, plan.spec)
     check_coordinates("out", path, arrays, plan.spec)
     done = read_done("out", path, arrays, plan.chunks)

@@ -25,10 +25,11 @@ __all__ = ["FORMAT", "OLD_FORMATS", "DEFAULT_MAX_BYTES", "MEMBER_VARS", "Plan", 
 
 #: The format tag stored in the `sweep_spec` attribute (and compared on resume). Stores of the
 #: earlier formats (`gnipy-sweep/1`, before checksums; `gnipy-sweep/2`, a flat `member` axis;
-#: `gnipy-sweep/3`, before the members' verdicts) are recognised as gnipy's (and may be replaced),
-#: not read or resumed.
-FORMAT = "gnipy-sweep/4"
-OLD_FORMATS = ("gnipy-sweep/1", "gnipy-sweep/2", "gnipy-sweep/3")
+#: `gnipy-sweep/3`, before the members' verdicts; `gnipy-sweep/4`, dimensions named as the grid,
+#: `q0.x` where they are now `q0_x`) are recognised as gnipy's (and may be replaced), not read or
+#: resumed.
+FORMAT = "gnipy-sweep/5"
+OLD_FORMATS = ("gnipy-sweep/1", "gnipy-sweep/2", "gnipy-sweep/3", "gnipy-sweep/4")
 
 #: The default bound on a store's estimated size, in bytes (`run_sweep(max_bytes=...)`): 100 GiB.
 DEFAULT_MAX_BYTES = 100 * 2**30
@@ -229,7 +230,7 @@ def _check_axes(axes, spec, set_params: dict, ic_names: list[str]) -> None:
         if a.name not in spec.params and a.name not in ic_names:
             known = ", ".join([*spec.params, *ic_names]) or "none"
             raise SweepError(f"grid: unknown name {a.name!r} for model {spec.name!r} (known: {known})")
-        if a.name in _RESERVED:
+        if a.name in _RESERVED or a.dim in _RESERVED:
             raise SweepError(f"grid: {a.name!r} cannot be swept: the sweep store has a variable or "
                              "dimension of that name")
 

@@ -112,7 +112,7 @@ def open_sweep(path, *, allow_incomplete: bool = False, verify: bool = True):
         )
     ds = xr.open_zarr(str(p))
     if not done.all():
-        member_done = xr.DataArray(layout.member_mask(done), dims=tuple(a.name for a in axes))
+        member_done = xr.DataArray(layout.member_mask(done), dims=tuple(a.dim for a in axes))
         for name, masked in (("valid", ds["valid"] & member_done), ("result", ds["result"].where(member_done, -1))):
             ds[name] = masked.assign_attrs(ds[name].attrs)
     return ds

@@ -50,7 +50,7 @@ def template(plan: Plan):
     from ..version import __version__
     from ..file_attributes import cf_attributes, jax_version
 
-    grid = tuple(a.name for a in plan.axes)
+    grid = tuple(a.dim for a in plan.axes)
     layout = plan.layout
     T = len(plan.times)
     sizes = {"time": T, "coordinate": len(plan.coordinates), "velocity": len(plan.velocities),
@@ -66,7 +66,7 @@ def template(plan: Plan):
     variables["chunk_done"] = (schema.dims("chunk_done"), da.zeros((layout.chunks,), chunks=(1,), dtype=bool))
     variables["chunk_checksum"] = (schema.dims("chunk_checksum"),
                                    da.zeros((layout.chunks, 32), chunks=(1, 32), dtype=np.uint8))
-    coords = {a.name: ((a.name,), a.values, schema.grid_axis_attrs(a.name)) for a in plan.axes}
+    coords = {a.dim: ((a.dim,), a.values, schema.grid_axis_attrs(a.name)) for a in plan.axes}
     coords.update({
         **schema.time_coordinates(plan.times, plan.spec["h"]),
         "coordinate": np.array(plan.coordinates, dtype=object),
@@ -76,7 +76,7 @@ def template(plan: Plan):
     })
     ds = xr.Dataset(variables, coords=coords)
     for a in plan.axes:
-        ds[a.name].encoding["chunks"] = (min(a.count, _MAX_AXIS_CHUNK),)
+        ds[a.dim].encoding["chunks"] = (min(a.count, _MAX_AXIS_CHUNK),)
     ds["time"].encoding["_FillValue"] = None  # CF: a coordinate variable has no missing values
     schema.apply(ds, sweep=True)
     s = plan.spec
@@ -204,7 +204,7 @@ def check_arrays(argument: str, path: Path, group, names, spec) -> dict[str, Any
 
     axes = axes_of(spec)
     grid = tuple(a.count for a in axes)
-    counts = {a.name: a.count for a in axes}
+    counts = {a.dim: a.count for a in axes}
     chunks = layout_of(spec).chunks
     saved = len(saved_steps(int(spec["steps"]), int(spec["save_every"])))
     arrays = {}
@@ -245,9 +245,9 @@ def check_coordinates(argument: str, path: Path, arrays, spec) -> None:
         "time": float(spec["h"]) * steps.astype(np.float64),
         "node": np.arange(len(steps)),
         "step": steps,
-        **{a.name: a.values for a in axes_of(spec)},
+        **{a.dim: a.values for a in axes_of(spec)},
     }
-    for name in (*COORDS, *(a.name for a in axes_of(spec))):
+    for name in (*COORDS, *(a.dim for a in axes_of(spec))):
         if name not in arrays:
             continue
         try:
@@ -272,7 +272,8 @@ def read_done(argument: str, path: Path, arrays, chunks: int) -> np.ndarray:
 def old_format(argument: str, path: Path, spec, action: str) -> SweepError:
     """The SweepError for a store of an earlier format, which this version cannot `action`."""
     fmt = spec.get("format")
-    what = {"gnipy-sweep/3": "without the members' verdicts",
+    what = {"gnipy-sweep/4": "its dimensions named as the grid, q0.x where they are now q0_x",
+            "gnipy-sweep/3": "without the members' verdicts",
             "gnipy-sweep/2": "with a flat member axis (the grid values in grid_NAME)"}.get(
         fmt, "with a flat member axis and without chunk checksums")
     return SweepError(
