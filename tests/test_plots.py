@@ -1,6 +1,8 @@
 """gnipy.plots: what each figure draws, from a Solution or from a file read back (no compilation:
 hand-made solutions)."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 import xarray as xr
@@ -94,6 +96,84 @@ def test_plot_solution_from_a_file_read_back(tmp_path):
         np.testing.assert_array_equal(_line(a)[1], _line(b)[1])
     fig.savefig(tmp_path / "run.svg")  # other formats by suffix
     assert (tmp_path / "run.svg").stat().st_size > 1000
+
+
+def _gni_solution(out_at=None):
+    """A hand-made GNI-family run (T = 21 nodes, h = 0.1): hidden momentum 1e-3 of |p̄| with an
+    expected size 1e-3, except from `out_at` on, where it is 100 times its band."""
+    sol = _solution()
+    t = np.asarray(sol.t)
+    e = np.full_like(t, 1e-3)
+    r = np.where(t >= out_at, 0.5, 1e-3) if out_at is not None else e.copy()
+    return dataclasses.replace(sol, hidden_momentum=r, hidden_expected=e, energy_plus=np.asarray(sol.energy))
+
+
+def _texts_inside(fig) -> None:
+    """Every axis label and title of `fig` lies within the figure once drawn (none cut at an edge)."""
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+    canvas = FigureCanvasAgg(fig)
+    canvas.draw()
+    W, H = fig.bbox.width, fig.bbox.height
+    for ax in fig.axes:
+        for text in (ax.xaxis.label, ax.yaxis.label, ax.title):
+            if text.get_text():
+                bb = text.get_window_extent(canvas.get_renderer())
+                assert bb.x0 >= 0 and bb.y0 >= 0 and bb.x1 <= W and bb.y1 <= H, (text.get_text(), bb)
+
+
+def test_plot_solution_shows_the_hidden_momentum_and_when_the_warning_fired(tmp_path):
+    """For the GNI family a fourth panel: r with its O(h) band (log scale, labelled); the time the
+    verdict went out of band (t = 1.0 by construction) marked on every panel against time and named
+    in the title. A healthy run has neither mark nor title note."""
+    import warnings
+
+    sol = _gni_solution(out_at=1.0)
+    assert sol.hidden_verdict.first_time == pytest.approx(1.0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fig = plots.plot_solution(sol, tmp_path / "gni.png")
+    assert len(fig.axes) == 4 and (tmp_path / "gni.png").read_bytes()[:8] == PNG
+    hidden = fig.axes[3]
+    assert hidden.get_yscale() == "log" and hidden.get_ylabel() == "|p⁺ − p̄| / |p̄|"
+    assert [t.get_text() for t in hidden.get_legend().get_texts()] == ["|p⁺ − p̄| / |p̄|", "its O(h) band"]
+    np.testing.assert_array_equal(_line(hidden)[1], np.asarray(sol.hidden_momentum))
+    for ax in fig.axes[1:]:  # the energy, the residual, the hidden momentum: against time
+        marks = [line for line in ax.lines if np.all(np.asarray(line.get_xdata()) == 1.0)]
+        assert len(marks) == 1, ax.get_title()
+    assert "QUALITATIVELY WRONG from t = 1 " in fig._suptitle.get_text()
+    assert any("hidden momentum out of band, t = 1" in t.get_text() for t in fig.axes[1].texts)
+    _texts_inside(fig)
+    healthy = plots.plot_solution(_gni_solution())
+    assert len(healthy.axes) == 4 and "WRONG" not in healthy._suptitle.get_text()
+    assert not any(np.all(np.asarray(line.get_xdata()) == 1.0) for ax in healthy.axes[1:] for line in ax.lines)
+    assert len(plots.plot_solution(_solution()).axes) == 3  # no hidden momentum: three panels
+    with pytest.raises(ValueError, match="only the GNI family"):
+        plots.plot_hidden_momentum(_solution())
+
+
+def test_plot_control_labels_stay_inside_the_figure():
+    """The path's y label was cut at the left edge (equal scales applied after the layout) and the
+    velocities had no y label; the angle turned is drawn on R^n x G only (the help says so)."""
+    sol = _solution(n=3, coords=("x", "y", "theta"))
+    t = np.asarray(sol.t)  # the sleigh's path of the control guide: x 0 .. 1, y 0 .. 0.65
+    sol = dataclasses.replace(sol, q=np.stack([t / 2, 0.65 * np.sin(t * 1.2), t], axis=1))
+    ds = sol.to_xarray()
+    ds["u"] = xr.DataArray(np.ones((20, 1)), dims=("control_step", "input"))
+    ds = ds.assign_coords(input=["torque"])
+    fig = plots.plot_control(ds)
+    assert [ax.get_ylabel() for ax in fig.axes] == ["y", "input", "velocity"]
+    _texts_inside(fig)
+
+
+def test_convergence_guides_are_told_apart():
+    h = 1.0 / 2.0 ** np.arange(3, 7)
+    fig = plots.plot_convergence(h, {"a": h, "b": h**2}, guides=(1, 2))
+    ax = fig.axes[0]
+    guides = [line for line in ax.lines if line.get_label().startswith("$O(h")]
+    assert len(guides) == 2 and guides[0].get_linestyle() != guides[1].get_linestyle()
+    assert guides[0].get_color() != guides[1].get_color()
+    assert sorted(t.get_text() for t in ax.texts) == ["$h^{1}$", "$h^{2}$"]  # each named at its end
 
 
 def test_rejects_other_objects():

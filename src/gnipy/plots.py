@@ -32,6 +32,7 @@ __all__ = [
     "plot_path",
     "plot_energy_error",
     "plot_constraint_residual",
+    "plot_hidden_momentum",
     "plot_solution",
     "plot_convergence",
     "plot_controls",
@@ -151,7 +152,10 @@ def plot_path(obj, ax=None):
     ax.set_xlabel(xl)
     ax.set_ylabel(yl)
     if equal:
-        ax.set_aspect("equal", adjustable="datalim")
+        # equal scales by the axes' box: with adjustable="datalim" the limits widen only at drawing,
+        # after a constrained layout has placed the axes for the narrower tick labels, and the y
+        # label went off the figure (gni control --plot on the sleigh: its "y" was cut at the edge)
+        ax.set_aspect("equal", adjustable="box")
     ax.legend(loc="best", fontsize="small")
     ax.set_title(_title(ds, what), fontsize="medium")
     ax.grid(True, alpha=0.3)
@@ -210,8 +214,60 @@ def plot_constraint_residual(obj, ax=None):
     return ax
 
 
+def plot_hidden_momentum(obj, ax=None):
+    """The GNI family's hidden momentum $|p^+ - \\bar p|/|\\bar p|$ at the saved nodes against
+    time, on a logarithmic scale, with its O(h) band (:func:`gnipy.diagnostics.hidden_momentum_band`,
+    from the saved nodes) and the time its verdict fired (the run's every-node check).
+
+    Arguments:
+        obj: a :class:`~gnipy.Solution` or a result `xarray.Dataset` of a GNI-family run (with the
+            variables `hidden_momentum` and `hidden_momentum_expected`).
+        ax: the matplotlib axes to draw on (default: a new figure).
+
+    Returns:
+        The axes.
+    """
+    from .diagnostics import hidden_momentum_band
+
+    ds = as_dataset(obj)
+    if "hidden_momentum" not in ds:
+        raise ValueError("plot_hidden_momentum: the run has no hidden momentum (only the GNI family carries one)")
+    ax = _new_axes(ax)
+    t = np.asarray(ds["time"].values, dtype=float)
+    r = np.asarray(ds["hidden_momentum"].values, dtype=float)
+    ax.semilogy(t, np.clip(np.nan_to_num(r, nan=np.inf, posinf=1e300), _ZERO_LEVEL, None), lw=1.1,
+                label="|p⁺ − p̄| / |p̄|")
+    if "hidden_momentum_expected" in ds and "h" in ds.attrs:
+        e = np.asarray(ds["hidden_momentum_expected"].values, dtype=float)
+        ax.semilogy(t, hidden_momentum_band(t, e, float(ds.attrs["h"])), lw=0.9, ls="--", color="0.4",
+                    label="its O(h) band")
+    ax.set_xlabel("t")
+    ax.set_ylabel("|p⁺ − p̄| / |p̄|")
+    ax.set_title(_title(ds, "hidden momentum"), fontsize="medium")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    return ax
+
+
+def _verdict_times(ds) -> list[tuple[float, str]]:
+    """`(time, what)` of each verdict out of band recorded in the run's attributes."""
+    out = []
+    for key, what in (("hidden_momentum_first_time", "hidden momentum out of band"),
+                      ("energy_drift_first_time", "energy out of band")):
+        try:
+            t = float(ds.attrs[key])
+        except (KeyError, TypeError, ValueError):
+            continue
+        if np.isfinite(t):
+            out.append((t, what))
+    return out
+
+
 def plot_solution(obj, path=None, *, title: str | None = None, overwrite: bool = False):
-    """A three-panel figure: configuration path, energy error, constraint residual.
+    """The figure of a run: configuration path, energy error, constraint residual and, for the GNI
+    family, the hidden momentum with its band (:func:`plot_hidden_momentum`); the time a verdict
+    went out of band (the run's warning) is marked on every panel against time, and named in the
+    title.
 
     Arguments:
         obj: a :class:`~gnipy.Solution` or a result `xarray.Dataset`.
@@ -228,13 +284,26 @@ def plot_solution(obj, path=None, *, title: str | None = None, overwrite: bool =
     Figure = require("matplotlib.figure", extra="plots").Figure
 
     ds = as_dataset(obj)
-    fig = Figure(figsize=(15, 4.6), layout="constrained")
-    axes = fig.subplots(1, 3)
+    hidden = "hidden_momentum" in ds
+    fig = Figure(figsize=(20 if hidden else 15, 4.6), layout="constrained")
+    axes = fig.subplots(1, 4 if hidden else 3)
     plot_path(ds, axes[0])
     plot_energy_error(ds, axes[1])
     plot_constraint_residual(ds, axes[2])
-    for ax, what in zip(axes, ["configuration path", "energy error E − E₀", "constraint residual"]):
+    names = ["configuration path", "energy error E − E₀", "constraint residual"]
+    if hidden:
+        plot_hidden_momentum(ds, axes[3])
+        names.append("hidden momentum (GNI)")
+    for ax, what in zip(axes, names):
         ax.set_title(what, fontsize="medium")
+    verdicts = _verdict_times(ds)
+    for ax in axes[1:]:
+        for (t_out, what), ls in zip(verdicts, (":", "-.")):
+            ax.axvline(t_out, color="C3", lw=1.0, ls=ls)
+    for (t_out, what), ls in zip(verdicts, (":", "-.")):  # named once, on the energy panel
+        axes[1].annotate(f"{what}, t = {t_out:.4g}", (t_out, 1.0), xycoords=("data", "axes fraction"),
+                         xytext=(-3, -4), textcoords="offset points", rotation=90, va="top", ha="right",
+                         fontsize="small", color="C3")
     if title is None:
         a = ds.attrs
         parts = [str(a[k]) for k in ("model", "method") if a.get(k)]
@@ -243,6 +312,8 @@ def plot_solution(obj, path=None, *, title: str | None = None, overwrite: bool =
         if "steps" in a:
             parts.append(f"{int(a['steps'])} steps")
         title = ", ".join(parts)
+        if verdicts:
+            title += f": QUALITATIVELY WRONG from t = {min(t for t, _ in verdicts):.4g} (the run's warning)"
     if title:
         fig.suptitle(title)
     if path is not None:
@@ -268,7 +339,8 @@ def plot_convergence(
         h: the step sizes: one array for all methods, or a mapping method → array.
         errors: method name → errors (same length as its step sizes).
         path: where to save the figure (None: do not save); written atomically.
-        guides: orders p of dashed reference lines C·hᵖ (through the middle of the data).
+        guides: orders p of reference lines C·hᵖ (through the middle of the data), each in a line
+            style of its own and named at its right end.
         floor: the round-off level below which points are not used in the fit
             (see :func:`fitted_order`); such points are drawn with open markers.
         title: the axes title.
@@ -305,9 +377,13 @@ def plot_convergence(
         if hi > lo:
             hm, em = np.sqrt(lo * hi), np.exp(np.mean(np.log(ee)))
             grid = np.geomspace(lo, hi, 20)
+            styles = (("--", "0.35"), (":", "0.45"), ("-.", "0.55"), ((0, (5, 1, 1, 1, 1, 1)), "0.65"))
             for j, p in enumerate(guides):
-                ax.loglog(grid, em * (grid / hm) ** p, ls="--", color="0.5", lw=0.9,
-                          dashes=(4 + 2 * j, 2 + j), label=f"$O(h^{{{p:g}}})$")
+                ls, color = styles[j % len(styles)]
+                ax.loglog(grid, em * (grid / hm) ** p, ls=ls, color=color, lw=1.1, label=f"$O(h^{{{p:g}}})$")
+                # each guide named at its end too: two grey lines of a legend are easily confused
+                ax.annotate(f"$h^{{{p:g}}}$", (grid[-1], em * (grid[-1] / hm) ** p), xytext=(3, 0),
+                            textcoords="offset points", va="center", fontsize="small", color=color)
     ax.set_xlabel("h")
     ax.set_ylabel(ylabel)
     ax.grid(True, which="both", alpha=0.3)
@@ -391,6 +467,7 @@ def plot_control(obj, path=None, *, title: str | None = None, overwrite: bool = 
     for j, name in enumerate(_names(ds, "velocity", v.shape[-1], "v")):
         axes[2].plot(t, v[:, j], lw=1.1, label=name)
     axes[2].set_xlabel("t")
+    axes[2].set_ylabel("velocity")
     axes[2].legend(loc="best", fontsize="small")
     axes[2].set_title("velocities", fontsize="medium")
     axes[2].grid(True, alpha=0.3)

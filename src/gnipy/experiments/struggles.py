@@ -71,6 +71,7 @@ def _energy_and_diagnostic(fig, axes, runs, gni, label: str, out_dir: Path, name
     for sol, run_label, color, ls in runs:
         axes[1].plot(np.asarray(sol.t), np.asarray(sol.energy), color=color, ls=ls, label=f"{run_label}: energy")
     axes[1].set_xlabel("t")
+    axes[1].set_ylabel("energy E")
     axes[1].set_title("energy (a constant of the motion)")
     axes[1].legend(fontsize=7)
     _hidden_panel(axes[2], gni, label, "tab:red")
@@ -176,6 +177,7 @@ def suslov_figure(out_dir: Path, quick: bool, progress: Progress = None):
     for sol, label, color, ls in runs:
         axes[0].plot(np.asarray(sol.t), np.asarray(sol.v)[:, 0], color=color, ls=ls, lw=1.0, label=f"{label}: ω₁")
     axes[0].set_xlabel("t")
+    axes[0].set_ylabel("ω₁")
     axes[0].set_title("body angular velocity ω₁")
     axes[0].legend(fontsize=7)
     files = _energy_and_diagnostic(fig, axes, runs, gni, "gni-midpoint", out_dir, "struggles_suslov",
@@ -227,9 +229,11 @@ def oscillator_figure(out_dir: Path, quick: bool, progress: Progress = None):
                       "hidden-momentum verdict": "in band" if hv.in_band else f"out of band at t = {hv.first_time:.4g}",
                       "max |E − E0|/E0": f"{float(np.nanmax(np.abs(e - e[0]) / e[0])):.2e}"})
     axes[0].set_xlabel("t")
+    axes[0].set_ylabel("|E − E₀| / E₀")
     axes[0].set_title("relative energy error (dotted: the energy verdict)")
     axes[0].legend(fontsize=7)
     axes[1].set_xlabel("t")
+    axes[1].set_ylabel("|p⁺ − p̄| / |p̄|")
     axes[1].set_title("hidden momentum")
     axes[1].legend(fontsize=7)
     fig.suptitle(f"Contact oscillator, h = {h:g}: the first-order GNIs gain energy step after step")
