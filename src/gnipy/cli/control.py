@@ -80,8 +80,8 @@ def control(
     ),
     out: Path | None = typer.Option(None, "--out", "-o", help="Output netCDF file.", show_default=False),
     plot: Path | None = typer.Option(
-        None, "--plot", help="Also write a figure (path, inputs, velocities and, on R^n x G, the angle the body turned), "
-        "e.g. control.png.",
+        None, "--plot", help="Also write a figure (path, inputs, velocities and, on R^n x G, the angle the "
+        "body turned), e.g. control.png.",
         show_default=False,
     ),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace existing --out and --plot files."),

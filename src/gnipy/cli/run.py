@@ -106,9 +106,10 @@ def run(
 ):
     """Integrate MODEL with METHOD, print a summary and write the trajectory to a netCDF file (--out).
 
-    Without --out the run prints its summary (health, errors, drifts) and writes nothing. The file holds t(time), q(time, coordinate), v(time, velocity), p(time, velocity),
-    energy(time) and constraint_residual(time, constraint), and R(time, i, j) on R^n x G, with
-    provenance attributes. With --plot, also a figure of the run.
+    Without --out the run prints its summary (health, errors, drifts) and writes nothing. The
+    file holds t(time), q(time, coordinate), v(time, velocity), p(time, velocity), energy(time)
+    and constraint_residual(time, constraint), and R(time, i, j) on R^n x G, with provenance
+    attributes. With --plot, also a figure of the run.
 
     A config file holds the same options, e.g.
 
@@ -200,7 +201,8 @@ def _run_inputs(config: Path | None, origins: dict[str, str], *, model, method, 
         origins.pop("--set", None)
     inputs = _RunInputs(
         model=model_, method=method_, h=h_, steps=steps_, t_final=t_final_, set_items=set_items,
-        q0=pick("x0" if "x0" in cfg else "q0", q0), v0=pick("v0", v0), R0=pick("R0", R0), project_v0=bool(pick("project_v0", project_v0, False)),
+        q0=pick("x0" if "x0" in cfg else "q0", q0), v0=pick("v0", v0), R0=pick("R0", R0),
+        project_v0=bool(pick("project_v0", project_v0, False)),
         save_every=pick("save_every", save_every, 1), out=pick("out", out), plot=pick("plot", plot),
         checkpoint_every=pick("checkpoint_every", checkpoint_every),
     )

@@ -89,8 +89,8 @@ def sweep_report(report, spec: dict[str, Any]) -> None:
 def sweep(
     model: str = typer.Argument(..., help="Model name (see `gni models`).", show_default=False, metavar="MODEL"),
     grid: list[str] | None = typer.Option(
-        None, "--grid", "-g", help="A grid axis NAME=linspace(START, STOP, COUNT), or its short form NAME=START:STOP:COUNT (the "
-        "same values: COUNT values, not a step); NAME is a parameter, q0.<coordinate> or v0.<velocity> (e.g. "
+        None, "--grid", "-g", help="A grid axis NAME=linspace(START, STOP, COUNT), or its short form "
+        "NAME=START:STOP:COUNT (the same values: COUNT values, not a step); NAME is a parameter, q0.<coordinate> or v0.<velocity> (e.g. "
         "m=linspace(0.5, 2, 10), q0.x=-1:1:5, v0.omega3=0:1:3). "
         "Repeatable: the sweep is the Cartesian product.", show_default=False,
     ),

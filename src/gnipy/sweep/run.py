@@ -156,10 +156,10 @@ def run_sweep(
 
     Arguments:
         model: a model name (see :func:`gnipy.model_names`).
-        grid: the grid axes: `"NAME=linspace(START, STOP, COUNT)"` or `"NAME=START:STOP:COUNT"` strings, :class:`GridAxis`
-            objects, or a mapping `{name: (start, stop, count)}`; NAME is a parameter,
-            `q0.<coordinate>` or `v0.<velocity>`. The sweep is their Cartesian product
-            (C order).
+        grid: the grid axes: `"NAME=linspace(START, STOP, COUNT)"` or `"NAME=START:STOP:COUNT"`
+            strings, :class:`GridAxis` objects, or a mapping `{name: (start, stop, count)}`; NAME
+            is a parameter, `q0.<coordinate>` or `v0.<velocity>`. The sweep is their Cartesian
+            product (C order); the store's dimension of `q0.x` is `q0_x` (`GridAxis.dim`).
         out: the zarr store (a directory, e.g. `"sweep.zarr"`); its parent must exist.
         h: the step size.
         steps / t_final: the number of steps, or the final time (a whole number of
