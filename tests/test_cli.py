@@ -213,9 +213,10 @@ def test_a_streamed_run_needs_out(extra, tmp_path, monkeypatch):
 
 
 def test_the_model_is_checked_before_the_output_path(tmp_path):
-    res = invoke("run", "no-such-model", "--h", "0.1", "--steps", "10", "--out", tmp_path / "missing" / "x.nc")
-    errors = _error_lines(res.output)
-    assert res.exit_code == 2 and len(errors) == 1 and "MODEL" in errors[0] and "--out" not in errors[0], res.output
+    for out in (["--out", tmp_path / "missing" / "x.nc"], []):  # a bad --out, or none (once "--out missing")
+        res = invoke("run", "no-such-model", "--h", "0.1", "--steps", "10", *out)
+        errors = _error_lines(res.output)
+        assert res.exit_code == 2 and len(errors) == 1 and "MODEL" in errors[0] and "--out" not in errors[0], res.output
 
 
 @pytest.mark.parametrize("where", ["missing-dir", "is-dir", "parent-is-file"])

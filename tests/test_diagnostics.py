@@ -190,7 +190,8 @@ def test_a_run_steered_from_rest_is_healthy_on_both_checks():
     r, e = np.asarray(sol.hidden_momentum), np.asarray(sol.hidden_expected)
     assert np.isinf(r[0]) and np.isinf(e[0])  # the arrays keep what was measured
     np.testing.assert_allclose(r[1:4], e[1:4], rtol=0.02)
-    assert sol.healthy and sol.hidden_verdict.in_band and sol.monitor is not None
+    assert sol.healthy and sol.hidden_verdict.in_band and sol.monitor is not None  # the every-node check
+    assert hidden_momentum_verdict(sol.t, r, e, 0.05).in_band  # the saved-node verdict, on the same data
 
 # ------------------------------------------------------------------------------------------------
 # The diagnostics of a batch call no LAPACK kernel (a hang on jax 0.10, found with a batch of

@@ -152,6 +152,21 @@ def test_plot_solution_shows_the_hidden_momentum_and_when_the_warning_fired(tmp_
         plots.plot_hidden_momentum(_solution())
 
 
+def test_hidden_momentum_panel_of_a_run_from_rest_and_of_a_nan():
+    """r = e = inf at a node at rest under a force is not judged: a gap, not a point at 1e300 that
+    would flatten the axis; a NaN ratio (out of band) is marked at the top."""
+    sol = _gni_solution()
+    r, e = np.asarray(sol.hidden_momentum).copy(), np.asarray(sol.hidden_expected).copy()
+    r[0] = e[0] = np.inf
+    ax = plots.plot_hidden_momentum(dataclasses.replace(sol, hidden_momentum=r, hidden_expected=e))
+    y = _line(ax)[1]
+    assert np.isnan(y[0]) and np.all(y[1:] == 1e-3) and ax.get_ylim()[1] < 1.0
+    r[0], e[0] = np.nan, 1e-3
+    ax = plots.plot_hidden_momentum(dataclasses.replace(sol, hidden_momentum=r, hidden_expected=e))
+    marks = [line for line in ax.lines if line.get_label() == "infinite or NaN (out of band)"]
+    assert len(marks) == 1 and list(marks[0].get_xdata()) == [0.0] and ax.get_ylim()[1] < 1.0
+
+
 def test_plot_control_labels_stay_inside_the_figure():
     """The path's y label was cut at the left edge (equal scales applied after the layout) and the
     velocities had no y label; the angle turned is drawn on R^n x G only (the help says so)."""

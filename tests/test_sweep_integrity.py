@@ -180,7 +180,10 @@ def test_gni_info_summarizes_a_sweep_store(reference, copy, tmp_path):
         assert expected in text, (expected, res.output)
     _truncate(copy / "q/c/1/0/0/0")
     res = invoke("info", copy)
-    assert res.exit_code == 0 and "NOT verified" in res.output and "chunk 1" in res.output, res.output
+    text = " ".join(res.output.split())
+    assert res.exit_code == 0 and "NOT verified" in text and "chunk 1" in text, res.output
+    assert "6 in 3 chunk(s): 2 done, incomplete" in text, res.output  # the damaged chunk is not done
+    assert "failed members 2" in text, res.output  # member 3 (chunk 1) is not counted: not done
     (tmp_path / "empty").mkdir()
     res = invoke("info", tmp_path / "empty")
     errors = _error_lines(res.output)

@@ -127,8 +127,8 @@ def judged_ratio(ratio, expected, xp=jnp):
     sleigh steered from rest (h = 0.05): r = e = inf at t = 0, then r = 0.250 against e = 0.249 at the
     next node; before this rule every controlled run from rest was called qualitatively wrong at t = 0.
     `xp`: `jax.numpy` (in the loop, :mod:`gnipy.monitor`) or `numpy` (saved nodes)."""
-    r = xp.where(xp.isnan(ratio), xp.inf, ratio)
-    return xp.where(xp.isinf(r) & xp.isinf(expected), 0.0, r)
+    unjudged = xp.isposinf(ratio) & xp.isposinf(expected)  # tested before NaN becomes inf
+    return xp.where(unjudged, 0.0, xp.where(xp.isnan(ratio), xp.inf, ratio))
 
 
 def saved_node_diagnostics(system, b, v, p, hidden, h, *, batched_system: bool = False, batch: bool = False,

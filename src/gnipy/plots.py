@@ -154,8 +154,11 @@ def plot_path(obj, ax=None):
     if equal:
         # equal scales by the axes' box: with adjustable="datalim" the limits widen only at drawing,
         # after a constrained layout has placed the axes for the narrower tick labels, and the y
-        # label went off the figure (gni control --plot on the sleigh: its "y" was cut at the edge)
-        ax.set_aspect("equal", adjustable="box")
+        # label went off the figure (gni control --plot on the sleigh: its "y" was cut at the edge);
+        # a path much longer one way than the other keeps free scales (a box would be a thin strip)
+        spans = np.ptp(x), np.ptp(y)
+        if min(spans) > 0 and max(spans) <= 4 * min(spans):
+            ax.set_aspect("equal", adjustable="box")
     ax.legend(loc="best", fontsize="small")
     ax.set_title(_title(ds, what), fontsize="medium")
     ax.grid(True, alpha=0.3)
@@ -235,10 +238,18 @@ def plot_hidden_momentum(obj, ax=None):
     ax = _new_axes(ax)
     t = np.asarray(ds["time"].values, dtype=float)
     r = np.asarray(ds["hidden_momentum"].values, dtype=float)
-    ax.semilogy(t, np.clip(np.nan_to_num(r, nan=np.inf, posinf=1e300), _ZERO_LEVEL, None), lw=1.1,
-                label="|p⁺ − p̄| / |p̄|")
+    e = (np.asarray(ds["hidden_momentum_expected"].values, dtype=float) if "hidden_momentum_expected" in ds
+         else np.zeros_like(r))
+    # a node at rest under a force (r = e = inf) is not judged (gnipy.diagnostics.judged_ratio): a gap;
+    # an infinite or NaN ratio that is judged (out of band) is drawn at the top, with a marker
+    r = np.where(np.isposinf(r) & np.isposinf(e), np.nan, np.where(np.isnan(r), np.inf, r))
+    finite = np.isfinite(r)
+    top = 10.0 * (float(np.max(r[finite])) if finite.any() else 1.0)
+    ax.semilogy(t, np.where(finite, np.maximum(r, _ZERO_LEVEL), np.nan), lw=1.1, label="|p⁺ − p̄| / |p̄|")
+    if np.any(np.isposinf(r)):
+        ax.semilogy(t[np.isposinf(r)], np.full(int(np.sum(np.isposinf(r))), top), "^", color="C3",
+                    label="infinite or NaN (out of band)")
     if "hidden_momentum_expected" in ds and "h" in ds.attrs:
-        e = np.asarray(ds["hidden_momentum_expected"].values, dtype=float)
         ax.semilogy(t, hidden_momentum_band(t, e, float(ds.attrs["h"])), lw=0.9, ls="--", color="0.4",
                     label="its O(h) band")
     ax.set_xlabel("t")

@@ -212,7 +212,7 @@ def variable_attrs(name: str, *, sweep: bool = False) -> dict[str, str]:
 def dims(name: str, leading: tuple[str, ...] = ()) -> tuple[str, ...]:
     """The dimensions of the variable `name`, after the `leading` ones: `dims("q")` is
     `("time", "coordinate")`, `dims("q", ("member",))` that of a batch, and a sweep store's
-    `dims("q", ("m", "q0.x"))` `("m", "q0.x", "time", "coordinate")`. A batch's per-member
+    `dims("q", ("m", "q0_x"))` `("m", "q0_x", "time", "coordinate")`. A batch's per-member
     parameter `param_NAME` has none of its own.
 
     Raises:

@@ -7,10 +7,10 @@ listings.
             [--plot FILE.png] [--config RUN.toml] [--out FILE.nc]
     gni convergence MODEL --methods M1,M2 --h-max A --h-min B --count N [--t-final T]
             [--set NAME=VALUE ...] [--q0 ...] [--v0 ...] [--R0 ...] [--error state|q|v] --out DIR
-    gni sweep MODEL --grid NAME=START:STOP:COUNT ... --h H (--steps N | --t-final T) --out DIR.zarr
+    gni sweep MODEL --grid "NAME=linspace(START, STOP, COUNT)" ... --h H (--steps N | --t-final T) --out DIR.zarr
     gni control (PROBLEM.toml | --example NAME) [--print] --out FILE.nc [--plot FILE.png]
     gni fit PROBLEM.toml --out FILE.nc [--plot FILE.png]
-    gni info FILE.nc
+    gni info (FILE.nc | DIR.zarr | FILE.nc.parts)
     gni verify PATH
     gni reproduce [--out DIR] [--quick]
     gni atlas [--quick] [--out DIR] [--models a,b] [--methods x,y]

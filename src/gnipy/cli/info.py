@@ -50,7 +50,7 @@ def info(
     def go():
         from gnipy.io import OutputError, read_netcdf
 
-        if file.is_dir() and not file.is_symlink():
+        if file.is_dir():  # a store or checkpoints, read as `gni verify` reads them (a link followed)
             if is_parts_dir(file):
                 return parts_info(file)
             return store_info(file)
@@ -75,18 +75,19 @@ def store_info(path: Path) -> None:
     """`gni info` of a sweep store: what ran, the grid, the chunks done and the members' health
     (read with :func:`gnipy.sweep.open_sweep`, which verifies every done chunk's checksum)."""
     import json
-    import warnings
 
     import numpy as np
 
-    from gnipy.sweep import SweepError, SweepWarning, open_sweep
+    from gnipy.files import OutputError
+    from gnipy.sweep import SweepError, open_sweep, verify_sweep
 
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always", SweepWarning)
-        try:
-            ds = open_sweep(path, allow_incomplete=True)
-        except SweepError as e:
-            raise UsageError("FILE", re.sub(r"^(--out|path|out): ", "", sweep_message(str(e)))) from None
+    try:
+        ok, message, damaged = verify_sweep(path)  # every done chunk read back against its checksum
+        ds = open_sweep(path, allow_incomplete=True, verify=False)
+    except SweepError as e:
+        raise UsageError("FILE", re.sub(r"^(--out|path|out): ", "", sweep_message(str(e)))) from None
+    except (OutputError, OSError, ValueError, KeyError, TypeError) as e:
+        raise UsageError("FILE", f"cannot read {str(path)!r}: {e}") from None
     a = dict(ds.attrs)
     rows = table(title=f"gni info: {path}", show_header=False, title_justify="left", box=None)
     rows.add_column(style="bold")
@@ -97,17 +98,20 @@ def store_info(path: Path) -> None:
             rows.add_row(key, format_attr(a[key]))
     for axis in json.loads(a.get("grid", "[]")):
         rows.add_row(f"grid {axis['name']}", f"{axis['count']} values, {axis['start']:g} .. {axis['stop']:g}")
-    done = np.asarray(ds["chunk_done"].values, dtype=bool)
+    done = np.asarray(ds["chunk_done"].values, dtype=bool).copy()
+    done[list(damaged)] = False  # a damaged chunk is computed again on resume: not done
     rows.add_row("members", f"{a.get('members', '?')} in {done.size} chunk(s): {int(done.sum())} done"
                  + ("" if done.all() else ", incomplete (run the same gni sweep again to resume)"))
-    result = np.asarray(ds["result"].values)
+    from gnipy.sweep.plan import layout_of
+
+    member_done = layout_of(json.loads(a["sweep_spec"])).member_mask(done).reshape(np.shape(ds["result"]))
+    result = np.where(member_done, np.asarray(ds["result"].values), -1)
     healthy = np.asarray(ds["healthy"].values, dtype=bool)
     computed = result >= 0
     rows.add_row("failed members", str(int(np.sum(result > 0))))
     rows.add_row("qualitatively wrong", f"{int(np.sum(computed & (result == 0) & ~healthy))} member(s) (a verdict "
                  "out of band: the variables healthy, hidden_momentum_first_time, energy_drift_first_time)")
-    damaged = [str(w.message) for w in caught if issubclass(w.category, SweepWarning)]
-    rows.add_row("checksum", "NOT verified: " + "; ".join(damaged) if damaged
+    rows.add_row("checksum", f"NOT verified: {message}" if damaged or not ok
                  else f"verified: the {int(done.sum())} done chunk(s) match their checksums")
     rows.add_row("variables", ", ".join(f"{k}({', '.join(map(str, ds[k].dims))})" for k in ds.data_vars))
     for key in ("gnipy_version", "jax_version", "created"):

@@ -73,8 +73,8 @@ def run(
         "(a streamed run needs it).", show_default=False,
     ),
     plot: Path | None = typer.Option(
-        None, "--plot", help="Also write a figure (configuration path, energy error, constraint residual), "
-        "e.g. run.png.", show_default=False,
+        None, "--plot", help="Also write a figure (configuration path, energy error, constraint residual and, "
+        "for the GNI family, the hidden momentum), e.g. run.png.", show_default=False,
     ),
     config: Path | None = typer.Option(
         None, "--config", "-c", help="A TOML file with any of these options (keys as the option names, "
@@ -231,8 +231,9 @@ def _run(inputs: _RunInputs, config: Path | None, *, resume: bool, overwrite: bo
     streamed = chunk is not None or n_steps // stride > resources.STREAM_NODES or n_steps > MAX_STEPS
     if streamed:
         if inputs.out is None:
-            raise UsageError("--out", f"missing: the run saves more than {resources.STREAM_NODES:,} nodes and is "
-                             "streamed into a file; give --out FILE.nc, or save fewer nodes (--save-every K)")
+            why = (f"saves more than {resources.STREAM_NODES:,} nodes" if n_steps // stride > resources.STREAM_NODES
+                   else f"takes more than {MAX_STEPS:,} steps")
+            raise UsageError("--out", f"missing: the run {why} and is streamed into a file; give --out FILE.nc")
         chunk = _streamed_chunk(inputs, stride, chunk)
     length = "--steps" if inputs.steps is not None else "--t-final"
     if not yes:  # estimated before anything is compiled or allocated
@@ -310,7 +311,7 @@ def _run_in_memory(spec, params, inputs: _RunInputs, q0, v0, R0, stride: int, ex
             write_netcdf(sol, inputs.out, attrs=attrs, overwrite=overwrite)
         written.append(str(inputs.out))
     if inputs.plot is not None:
-        write_plot(sol, inputs.plot, overwrite)
+        write_plot(sol, inputs.plot, overwrite, result_written=inputs.out is not None)
         written.append(str(inputs.plot))
     run_report("gni run", spec, params, sol, exact, drifts, seconds, ", ".join(written) or None)
     return sol.healthy
@@ -367,10 +368,12 @@ def run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, s
     return result.healthy or bool(result.result)
 
 
-def write_plot(sol, path: Path, overwrite: bool = False, plot=None, **kwargs) -> None:
-    """The figure of a run, written atomically after its result file: by default the three panels
-    of :func:`gnipy.plots.plot_solution` (configuration path, energy error, constraint residual),
-    else `plot(sol, path, overwrite=..., **kwargs)` (e.g. `gnipy.plots.plot_control`)."""
+def write_plot(sol, path: Path, overwrite: bool = False, plot=None, *, result_written: bool = True,
+               **kwargs) -> None:
+    """The figure of a run, written atomically after its result file (if any: `result_written`):
+    by default :func:`gnipy.plots.plot_solution` (configuration path, energy error, constraint
+    residual and, for the GNI family, the hidden momentum), else `plot(sol, path,
+    overwrite=..., **kwargs)` (e.g. `gnipy.plots.plot_control`)."""
     if plot is None:
         from gnipy.plots import plot_solution as plot
 
@@ -378,4 +381,5 @@ def write_plot(sol, path: Path, overwrite: bool = False, plot=None, **kwargs) ->
         with writing("--plot", path):
             plot(sol, path, overwrite=overwrite, **kwargs)
     except WriteFailure as e:
-        raise WriteFailure(f"{e} (the result file was written; the figure was not)") from None
+        what = "the result file was written; the figure was not" if result_written else "the figure was not written"
+        raise WriteFailure(f"{e} ({what})") from None

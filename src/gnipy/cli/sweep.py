@@ -22,6 +22,10 @@ __all__ = ["SWEEP_OPTIONS", "failures_message", "sweep", "sweep_message", "sweep
 SWEEP_OPTIONS = {
     **ARGUMENT_OPTIONS,
     "grid": "--grid",
+    # gni sweep has no --q0/--v0: a member's initial condition comes from the model and the grid
+    "q0": "--grid",
+    "v0": "--grid",
+    "q0/v0": "--grid",
     "out": "--out",
     "chunk_size": "--chunk-size",
     "workers": "--workers",
@@ -90,8 +94,8 @@ def sweep(
     model: str = typer.Argument(..., help="Model name (see `gni models`).", show_default=False, metavar="MODEL"),
     grid: list[str] | None = typer.Option(
         None, "--grid", "-g", help="A grid axis NAME=linspace(START, STOP, COUNT), or its short form "
-        "NAME=START:STOP:COUNT (the same values: COUNT values, not a step); NAME is a parameter, q0.<coordinate> or v0.<velocity> (e.g. "
-        "m=linspace(0.5, 2, 10), q0.x=-1:1:5, v0.omega3=0:1:3). "
+        "NAME=START:STOP:COUNT (the same values: COUNT values, not a step); NAME is a parameter, "
+        "q0.<coordinate> or v0.<velocity> (e.g. m=linspace(0.5, 2, 10), q0.x=-1:1:5, v0.omega3=0:1:3). "
         "Repeatable: the sweep is the Cartesian product.", show_default=False,
     ),
     method: str | None = typer.Option(

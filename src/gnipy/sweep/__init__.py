@@ -33,8 +33,8 @@ recorded, and every variable of it is NaN after its last good node (`valid` Fals
 :class:`SweepReport` counts the failed members and lists the first few.
 
 **The store** (a zarr directory, format 3, with consolidated metadata) opens with plain
-`xarray.open_zarr(path)`: the grid axes are its first dimensions, named after the axes, with
-the grid values as their coordinates. It holds `q(<grid>, time, coordinate)`, `v` and
+`xarray.open_zarr(path)`: the grid axes are its first dimensions, named after the axes with
+`.` written `_` (`q0.x` is the dimension `q0_x`), with the grid values as their coordinates. It holds `q(<grid>, time, coordinate)`, `v` and
 `p(<grid>, time, velocity)`, `energy(<grid>, time)`, `constraint_residual(<grid>, time,
 constraint)`, `R(<grid>, time, i, j)` on Rⁿ × G, `result(<grid>)` (0: ok, 1: a step failed),
 `failed_step(<grid>)` (or -1), `failed_time(<grid>)` and `failed_residual(<grid>)` (NaN when
@@ -64,9 +64,10 @@ to do), then reads every chunk flagged done back and recomputes its checksum: a 
 cannot be read or whose data differ is recomputed, with a :class:`SweepWarning` naming the chunk
 and its members; the others are skipped. :func:`open_sweep` does the same check (and refuses a
 damaged store), and :func:`verify_sweep` reports on a store without changing it. Chunks not yet
-done read as NaN (floats) and `valid = False`. A store of an earlier format (`gnipy-sweep/1`,
-`gnipy-sweep/2`, with a flat `member` axis) is not resumed or read: the error names it and says
-what to do.
+done read as NaN (floats) and `valid = False`. A store of an earlier format (`gnipy-sweep/1` to
+`/4`: `/1` and `/2` with a flat `member` axis, `/3` without the members' verdicts, `/4` with the
+dimensions named as the grid, `q0.x`) is not resumed or read: the error names it and says what to
+do.
 
 Two runs must not write to the same store at the same time.
 

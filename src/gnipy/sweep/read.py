@@ -68,8 +68,8 @@ def open_sweep(path, *, allow_incomplete: bool = False, verify: bool = True):
     """Open a sweep store as an `xarray.Dataset` with the grid axes as dimensions.
 
     This is `xarray.open_zarr(path)` (the store holds its variables with the grid axes as
-    dimensions, named after the axes in the order of the grid, with the grid values as
-    coordinates: e.g. `q(m, Omega, time, coordinate)`; the data are loaded lazily with dask),
+    dimensions, named after the axes (`.` written `_`: `q0_x`) in the order of the grid, with the
+    grid values as coordinates: e.g. `q(m, Omega, time, coordinate)`; the data are loaded lazily with dask),
     after the checks below, and with the members of chunks not done marked.
 
     Arguments:
