@@ -35,6 +35,13 @@ def test_site_builds_strict(tmp_path):
         assert f'id="{name}"' in api, name
     assert 'id="gnipy.plots.plot_convergence"' in (site / "api" / "plots" / "index.html").read_text()
     assert 'id="gnipy.io.write_netcdf"' in (site / "api" / "io" / "index.html").read_text()
+    # no Sphinx role is left as text (docs/_hooks/sphinx_roles.py turns them into cross-references)
+    roles = re.compile(r":(?:py:)?(?:mod|class|func|meth|data|attr|exc|obj|const|term):")
+    literal = [str(page.relative_to(site)) for page in sorted(site.rglob("index.html"))
+               if roles.search(page.read_text(errors="replace"))]
+    assert literal == [], literal
+    # ... a link where the object has an entry (`:mod:`gnipy.forcing`` in a docstring of gnipy's page)
+    assert '<a class="autorefs autorefs-internal" href="../control/#gnipy.forcing"><code>gnipy.forcing</code></a>' in api
     # the maths of every page, the docstrings of the API pages included, reached MathJax intact
     mangled = [f"{page.relative_to(site)}: {problem}" for page in sorted(site.rglob("index.html"))
                for problem in rendered_math_problems(page.read_text())]
