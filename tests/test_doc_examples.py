@@ -4,7 +4,8 @@ The blocks are found, not listed: a page's fenced blocks run in the order of the
 temporary directory per page (files written by a block are there for the later ones):
 
 - ```python blocks are executed in one namespace per page (a later block uses the names of the
-  earlier ones);
+  earlier ones); one whose first line is a comment naming a file (`# my_sleigh.py`) is also written
+  to that file, which later commands of the page name (`gni run my_sleigh.py:make_sleigh`);
 - ```bash, ```sh, ```shell, ```console (the `$ ` lines) and unlabelled blocks are shell commands:
   each command line (with its `\\` continuations) runs with bash, the virtual environment's `gni`
   and `python` first on PATH; it must exit with 0 and print no Python traceback;
@@ -225,6 +226,10 @@ def run_page(page: pathlib.Path, cwd: pathlib.Path) -> dict:
     for lang, first, code in _blocks(page):
         where = f"{rel}:{first}"
         if lang in PYTHON:
+            name = re.match(r"#\s*(\S+\.py)\s*$", code.splitlines()[0])
+            if name:  # a file of the reader's (`# my_sleigh.py`): written, for the later commands, and run
+                (cwd / name.group(1)).write_text(code)
+                os.chmod(cwd / name.group(1), 0o644)  # whatever the umask: gnipy runs only files others cannot write
             start = time.perf_counter()
             # blank lines in front: tracebacks give the page's own line numbers
             exec(compile("\n" * (first - 1) + code, str(page), "exec"), namespace)  # noqa: S102

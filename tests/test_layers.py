@@ -25,7 +25,7 @@ LAYERS = [
     # foundations: errors, small solves, the files' schema, input checks, files, the native cache
     ["version", "errors", "text", "linalg", "schema"],
     ["inputs", "files", "resources", "sharding", "solution_text", "extras"],
-    ["private_cache", "file_attributes"],
+    ["private_cache", "file_attributes", "user_systems"],
     ["compilation"],
     # 1. Lie groups and retractions
     ["lie_groups"],

@@ -41,7 +41,7 @@ from .integrators import (  # noqa: E402
 )
 from .lie_groups import SE2, SO3, MatrixLieGroup, ProductGroup, Rn, TrivialGroup  # noqa: E402
 from .methods import get_method, method_names  # noqa: E402
-from .models import get_model, make_system, model_names  # noqa: E402
+from .models import get_model, make_system, model_from_function, model_names  # noqa: E402
 from .projectors import projectors, reflect_momentum, reported_momentum  # noqa: E402
 from .reference import ContinuousReference  # noqa: E402
 from .retractions import Cayley, Exp, Retraction, get_retraction  # noqa: E402
@@ -118,6 +118,7 @@ __all__ = [
     "get_method",
     "method_names",
     "get_model",
+    "model_from_function",
     "make_system",
     "model_names",
     "models",

@@ -80,7 +80,7 @@ def stack_systems(systems: Sequence[System]) -> System:
             raise InputError(
                 f"system[{i}]: a batch of systems must differ only in the values of array parameters "
                 f"(the same model, functions and dimensions as system[0]), but {why}. Build the members "
-                "from one function with the parameters as JAX arrays (jax.tree_util.Partial(l, m), as the "
+                "from one function with the parameters as JAX arrays (System(l, mu, args={...}), as the "
                 "zoo models and gnipy.model_systems do), or simulate the systems one at a time"
             )
         for col, x in zip(columns, (x for x, m in zip(flat, mask) if m)):
@@ -115,7 +115,8 @@ def model_systems(name: str, **params) -> list[System]:
     """The systems of the registered model `name` for arrays of parameter values.
 
     Arguments:
-        name: a model name (see :func:`gnipy.model_names`).
+        name: a model name (see :func:`gnipy.model_names`), the user's system as `"FILE.py:NAME"`
+            (:func:`gnipy.get_model`), or a :class:`~gnipy.registry.ModelSpec`.
         **params: parameter values; scalars and 1-D arrays, broadcast against each other
             (the others keep their defaults).
 
@@ -125,9 +126,9 @@ def model_systems(name: str, **params) -> list[System]:
     Raises:
         InputError: an unknown model or parameter, non-finite values, arrays of different lengths.
     """
-    from .registry import get_model
+    from .registry import ModelSpec, get_model
 
-    spec = get_model(name)
+    spec = name if isinstance(name, ModelSpec) else get_model(name)
     arrays = {}
     for k, v in params.items():
         refuse_text_or_bool(f"params: parameter {k!r}", v, "numbers")

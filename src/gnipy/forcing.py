@@ -152,7 +152,8 @@ class InputForce(eqx.Module):
     B: jax.Array
 
     def __call__(self, *args):
-        u = args[-2]
+        # (..., v, u, t), or (..., v, u, t, args) on a system with named parameters (a dict)
+        u = args[-3] if isinstance(args[-1], dict) else args[-2]
         return self.B @ u
 
 

@@ -298,7 +298,8 @@ def _traced(system, systems, method, q0, v0, R0, h, steps, t_final, t0, state0, 
         raise InputError(f"t_final: not a whole number of steps of h, and {method.name} cannot shorten its last step")
     plan = schedule(common["saveat"], n, partial, h=hv, t0=t0_num)
     if state0 is None:
-        if (q0 is None or v0 is None) and is_traced(system.lagrangian, system.constraints, system.affine, system.force):
+        if (q0 is None or v0 is None) and is_traced(system.lagrangian, system.constraints, system.affine, system.force,
+                                                                  system.args):
             # the defaults were computed from the parameters' values: their derivative is not in them
             raise InputError(
                 "q0/v0: the system's parameters are traced (differentiated or inside jax.jit), and its default "

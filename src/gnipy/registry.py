@@ -16,9 +16,12 @@ import jax
 
 from .errors import InputError
 from .system import System
+from .text import safe
+from .user_systems import is_reference, load, user_code_error
 
 __all__ = ["ModelSpec", "FALLBACK_METHOD", "FALLBACK_METHODS", "set_default_methods", "set_method_lookup", "method_table",
-           "register", "get_model", "model_names", "make_system", "registered_invariants", "default_method_for"]
+           "register", "get_model", "model_from_function", "model_names", "make_system", "registered_invariants",
+           "default_method_for"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,6 +44,8 @@ class ModelSpec:
         invariants: conserved quantities by name: `f(params, q, v) -> scalar`, or
             `f(params, q, v, R) -> scalar` for models whose functions depend on the orientation.
         notes: longer documentation.
+        origin: for a user's system (:func:`model_from_function`), `(reference, digest)`: how to
+            load it again and the SHA-256 of its source; None for the zoo's models.
     """
 
     name: str
@@ -55,6 +60,7 @@ class ModelSpec:
     exact: Callable[..., Any] | None = None
     invariants: Mapping[str, Callable[..., Any]] = dataclasses.field(default_factory=dict)
     notes: str = ""
+    origin: tuple[str, str | None] | None = None
 
     def resolve_params(self, overrides: Mapping[str, Any] | None = None) -> dict[str, float]:
         """Defaults updated with `overrides`; unknown names, values that are not numbers (a string or
@@ -177,10 +183,15 @@ def register(spec: ModelSpec) -> ModelSpec:
     name."""
     if spec.name in _REGISTRY:
         raise ValueError(f"model {spec.name!r} registered twice")
-    build, model = spec.build, spec.name
+    build, model, names = spec.build, spec.name, tuple(spec.params)
+
+    def rebuild(values):
+        if not set(values) <= set(names):  # a named parameter the model does not take
+            return None
+        return build(dict(spec.params) | values)
 
     def build_as_model(params):
-        return build(params).as_model(model)
+        return build(params).as_model(model, rebuild)
 
     spec = dataclasses.replace(spec, build=build_as_model)
     _REGISTRY[spec.name] = spec
@@ -188,10 +199,127 @@ def register(spec: ModelSpec) -> ModelSpec:
 
 
 def get_model(name: str) -> ModelSpec:
-    """The model called `name`; unknown names raise InputError listing the known ones."""
+    """The model called `name`: a zoo model's name (:func:`model_names`), or a reference to the
+    user's own system, `path/to/file.py:NAME` or `package.module:NAME` (NAME a function that returns
+    a :class:`~gnipy.System`, or a System), loaded as :mod:`gnipy.user_systems` says (a file that
+    another user could have written is refused before it runs) and made a model by
+    :func:`model_from_function`. Unknown names raise InputError listing the known ones."""
+    if is_reference(name):
+        loaded = load(name)
+        key = (loaded.reference, loaded.digest, id(loaded.obj))
+        spec = _USER_MODELS.get(key)
+        if spec is None:
+            spec = _USER_MODELS[key] = model_from_function(loaded.obj, reference=loaded.reference,
+                                                           digest=loaded.digest)
+        return spec
+    if not isinstance(name, str):
+        raise InputError(f"model: expected a model name or a reference FILE.py:NAME, got {type(name).__name__}")
     if name not in _REGISTRY:
         raise InputError(f"model: unknown model {name!r} (known: {', '.join(sorted(_REGISTRY))})")
     return _REGISTRY[name]
+
+
+#: The user's models made in this process: (reference, digest, id of the function) -> spec (one spec,
+#: and so one build function, per source: their runs share compilations).
+_USER_MODELS: dict[tuple, ModelSpec] = {}
+
+
+def model_from_function(function, *, reference: str | None = None, digest: str | None = None) -> ModelSpec:
+    """A model (:class:`ModelSpec`) of the user's function that builds a System.
+
+    Arguments:
+        function: `function(**params) -> System`; its parameters that have a number as default
+            are the model's parameters, with those defaults (what `--set`, sweeps and `fit`
+            reach); parameters with other defaults are left to theirs; a parameter without a
+            default is refused. A :class:`~gnipy.System` itself is a model without parameters.
+        reference: how to load it again (`FILE.py:NAME` or `module:NAME`); default the function's
+            `module:qualname`.
+        digest: the SHA-256 of its source (:mod:`gnipy.user_systems`), recorded with the runs.
+
+    The initial condition is the System's `defaults` (for the parameters asked), else the origin at
+    rest (and the identity orientation); the coordinates are the System's.
+
+    Raises:
+        InputError: a parameter without a default, a function that does not return a System.
+    """
+    import inspect
+    import math
+
+    if isinstance(function, System):
+        system_value = function
+        params: dict[str, float] = {}
+
+        def make(p):
+            return system_value
+        label = reference or system_value.name
+    elif callable(function):
+        label = reference or f"{getattr(function, '__module__', '?')}:{getattr(function, '__qualname__', '?')}"
+        try:
+            signature = inspect.signature(function)
+        except (TypeError, ValueError) as e:
+            raise InputError(f"model: cannot read the parameters of {safe(label)!r}: {e}") from None
+        params = {}
+        for p in signature.parameters.values():
+            if p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+                continue
+            if p.default is p.empty:
+                raise InputError(f"model: {safe(label)!r}: parameter {p.name!r} has no default; give each "
+                                 "parameter of the function a default (a number makes it a model parameter)")
+            d = p.default
+            if isinstance(d, (int, float)) and not isinstance(d, bool) and math.isfinite(d):
+                if p.kind is p.POSITIONAL_ONLY:
+                    raise InputError(f"model: {safe(label)!r}: parameter {p.name!r} is positional-only; "
+                                     "model parameters are passed by name")
+                params[p.name] = float(d)
+
+        def make(p):
+            return function(**p)
+    else:
+        raise InputError(f"model: {safe(reference or repr(function))!r} is a {type(function).__name__}, "
+                         "not a function that returns a gnipy.System")
+
+    def built(p):
+        try:
+            system = make(dict(p))
+        except InputError:
+            raise
+        except Exception as e:  # the user's code: the error names the model and its line
+            if any(isinstance(v, jax.core.Tracer) for v in p.values()):
+                raise  # under a transformation (gnipy.fit): its caller says what it needs
+            source = getattr(getattr(function, "__code__", None), "co_filename", None)
+            raise user_code_error(label, e, source) from e
+        if not isinstance(system, System):
+            raise InputError(f"model: {safe(label)!r} returned a {type(system).__name__}, expected a gnipy.System")
+        return system
+
+    def build(p):
+        base = dict(p)
+
+        def rebuild(values):  # the System of these values for the named parameters, the rest as built
+            if not set(values) <= set(params):  # a named parameter the function does not take
+                return None
+            return built(base | values)
+        return built(p).as_user_model(label, digest, rebuild)
+
+    first = build(params)
+    n, N = first.n, first.dim
+
+    def initial(p):
+        defaults = build(p).defaults
+        q0 = (0.0,) * n if not defaults or defaults[0] is None else tuple(float(x) for x in defaults[0])
+        v0 = (0.0,) * N if not defaults or len(defaults) < 2 or defaults[1] is None else \
+            tuple(float(x) for x in defaults[1])
+        return q0, v0
+
+    q0, v0 = initial(params)
+    R0 = first.defaults[2] if first.defaults and len(first.defaults) > 2 else None
+    doc = (inspect.getdoc(function) or "").strip() if not isinstance(function, System) else ""
+    return ModelSpec(
+        name=label, description=doc.splitlines()[0] if doc else f"the user's system {first.name!r}", build=build,
+        params=params, coordinates=tuple(first.coordinates), q0=q0, v0=v0,
+        R0=None if R0 is None else tuple(float(x) for x in R0), default_ic=initial if params else None,
+        notes=doc, origin=(label, digest),
+    )
 
 
 def model_names() -> list[str]:

@@ -129,9 +129,9 @@ def simulate(
 
     **Differentiation.** `jax.grad`, `jax.jacrev` and `jax.jacfwd` of a function of the solution
     work with respect to `q0`, `v0`, `h`, `t0` and the system's parameters (a System is a pytree:
-    its parameters are array leaves of its functions, e.g. `jax.tree_util.Partial` arguments; a
-    model's are reached by building the system inside the differentiated function, see the
-    systems guide). Under a transformation the run uses static trip counts in checkpointed blocks
+    its named parameters, :attr:`~gnipy.System.args`, are array leaves, replaced by
+    `system.with_args(m=m)` inside the differentiated function; so are `jax.tree_util.Partial`
+    arguments of its functions; see the systems guide). Under a transformation the run uses static trip counts in checkpointed blocks
     and the implicit steps' solves are differentiated by the implicit function theorem; `steps`
     must then be given (or `t_final` with a concrete `h`). Inside `jax.jit` the values of the
     initial condition cannot be checked (shapes are); a failed step raises at run time.

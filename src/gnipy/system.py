@@ -32,11 +32,34 @@ from .spaces import Point
 from .errors import InputError
 from .inputs import finite_vector, flag, format_scientific, real_array, require_float64
 from .system_arguments import (check_functions, configuration_space, dimension, inputs_count, provenance,
-                               velocity_names)
+                               scalar_args, system_args, velocity_names)
 from .system_checks import (check_affine_field, check_constraint_forms, check_mechanical_type, check_metric,
                             lagrangian_derivatives, metric_derivatives, validation_values)
 
 __all__ = ["System"]
+
+
+def _takes(f, count: int) -> bool:
+    """Whether `f` takes the named parameters as its `count`-th positional argument: it takes `*args`,
+    or it needs `count` positional arguments (it cannot be called with one fewer). False when its
+    signature cannot be read: a force is then called without them."""
+    import inspect
+
+    try:
+        signature = inspect.signature(f)
+    except (TypeError, ValueError):
+        return False
+    if any(p.kind is p.VAR_POSITIONAL for p in signature.parameters.values()):
+        return True
+    try:
+        signature.bind(*range(count))
+    except TypeError:
+        return False
+    try:
+        signature.bind(*range(count - 1))
+    except TypeError:
+        return True
+    return False
 
 
 class System(eqx.Module):
@@ -67,7 +90,8 @@ class System(eqx.Module):
         coordinates: names of the coordinates x (default `q0, q1, ...`).
         velocities: names of the N velocity components (default `d<coordinate>` then the group's).
         name: a short name used in reports and files.
-        params: parameters of the system, for provenance (a dict of floats).
+        params: parameters of the system, for provenance (a dict of floats; default: the scalar
+            entries of `args`).
         defaults: optional default initial condition `(q0, v0)` or `(q0, v0, R0)`.
         force: optional generalized force `F(q, v, u, t)` / `F(x, v, u, t)` / `F(x, R, v, u, t)`
             -> (N,), a covector in the velocity coordinates (on $\\mathbb{R}^n\\times G$ its group
@@ -75,6 +99,14 @@ class System(eqx.Module):
             `"right"`); `u` the inputs (a vector of length `inputs`, empty when there are none),
             `t` the time. See :mod:`gnipy.forcing` for how the methods discretize it.
         inputs: the number m of inputs u (given to :func:`gnipy.simulate` as `controls=`).
+        args: named parameters that every function receives as its last argument (as diffrax's
+            `args`): `l(q, v, args)`, `mu(q, args)`, `Y(q, args)`, `F(q, v, u, t, args)` (on
+            $\\mathbb{R}^n \\times G$ after the same leading arguments as above), with `args` a dict of
+            float64 arrays, e.g. `args["m"]`. They are pytree leaves of the System: `jax.grad`
+            reaches them (:meth:`with_args`), systems that differ only in them share one
+            compilation and run as one batch, and sweeps, `fit` and control set them by name.
+            Default None: the functions take no such argument (parameters closed over, or as
+            `jax.tree_util.Partial` arguments, keep working).
 
     Raises:
         InputError: on inconsistent dimensions or names.
@@ -92,12 +124,26 @@ class System(eqx.Module):
     #: whatever its `name`: the model's registered invariants and measured default method apply
     #: to the systems the zoo builds only
     model: str | None = eqx.field(static=True)
+    #: for a user's system loaded by reference (:mod:`gnipy.user_systems`), `(reference, digest)`:
+    #: how to rebuild it and the SHA-256 of its source, recorded by streamed runs and sweeps; None
+    #: otherwise
+    origin: tuple[str, str | None] | None = eqx.field(static=True)
     params: tuple[tuple[str, float], ...] = eqx.field(static=True)
     defaults: tuple | None = eqx.field(static=True)
     orientation_note: str = eqx.field(static=True)
     force: Callable[..., Any] | None
     drive: Any
     inputs: int = eqx.field(static=True)
+    #: for the systems a model builds (the zoo's, a user's function), how to build the system again
+    #: from the named parameters' values: `rebuild(values) -> System | None` (None: it cannot), so
+    #: that :meth:`with_args` keeps the default initial condition of the new values; None otherwise
+    rebuild: Callable[..., Any] | None = eqx.field(static=True, default=None)
+    #: whether the force receives :attr:`args` last: as every function does when given to the
+    #: constructor; a force added by :meth:`with_force`, when it takes one more argument
+    force_args: bool = eqx.field(static=True, default=False)
+    #: the named parameters the functions receive as their last argument (a dict of float64
+    #: arrays, pytree leaves), or None for functions that take none (their parameters closed over)
+    args: Any = None
 
     def __init__(
         self,
@@ -118,6 +164,7 @@ class System(eqx.Module):
         orientation_note: str | None = None,
         force: Callable[..., Any] | None = None,
         inputs: int = 0,
+        args: Any = None,
     ):
         check_functions(lagrangian, constraints, affine, force)
         n, coordinates = dimension(n, coordinates, group)
@@ -131,6 +178,12 @@ class System(eqx.Module):
         self.velocities = velocity_names(velocities, coordinates, group_names, space.dim)
         self.name = str(name)
         self.model = None
+        self.origin = None
+        self.rebuild = None
+        self.args = system_args(args)
+        self.force_args = self.args is not None and force is not None
+        if params is None and self.args is not None:
+            params = scalar_args(self.args)
         self.params, self.defaults = provenance(params, defaults)
         self.orientation_note = "" if orientation_note is None else str(orientation_note)
         self.inputs = inputs_count(force, inputs)
@@ -191,9 +244,55 @@ class System(eqx.Module):
             return (b,)
         return (b.x, b.R) if self.depends_on_orientation else (b.x,)
 
+    def _leading(self) -> tuple[str, ...]:
+        """The names of the functions' leading arguments (the base point)."""
+        if self.group is None:
+            return ("q",)
+        return ("x", "R") if self.depends_on_orientation else ("x",)
+
+    def _call(self, f, *xs):
+        """`f(*xs)`, or `f(*xs, args)` for a system with named parameters (:attr:`args`)."""
+        return f(*xs) if self.args is None else f(*xs, self.args)
+
+    def _call_force(self, *xs):
+        """The force at `xs`, with the named parameters last when it takes them (:attr:`force_args`)."""
+        return self.force(*xs, self.args) if self.force_args else self.force(*xs)
+
+    def with_args(self, **values) -> "System":
+        """A copy with the named parameters `values` replaced (:attr:`args`), e.g. a mass being
+        differentiated: `jax.grad(lambda m: loss(gnipy.simulate(system.with_args(m=m), q0, v0, ...)))`.
+        Unknown names raise InputError; the provenance `params` follow (a traced value is recorded
+        as NaN, :func:`gnipy.inputs.provenance_number`). The default initial condition follows the
+        new values on a model's systems (the zoo's, a user's function: :attr:`rebuild`); on others,
+        and for traced values, it is dropped, and a run asks for `q0` and `v0`."""
+        if not isinstance(self.args, dict):
+            raise InputError("args: this system has no named parameters (System(..., args={...}))")
+        unknown = [k for k in values if k not in self.args]
+        if unknown:
+            raise InputError(f"args: unknown parameter {unknown[0]!r} (known: {', '.join(self.args)})")
+        for k, v in values.items():  # the same shapes: the functions, and a batch's structure, expect them
+            if jnp.shape(v) != jnp.shape(self.args[k]):
+                raise InputError(f"args: parameter {k!r} has shape {jnp.shape(self.args[k])}, got a value of "
+                                 f"shape {jnp.shape(v)}")
+        new_args = system_args({**self.args, **values})
+        params = dict(self.params)
+        params.update(provenance(scalar_args(new_args), None)[0])
+        new = eqx.tree_at(lambda s: s.args, self, new_args)
+        object.__setattr__(new, "params", provenance(params, None)[0])
+        if self.defaults is not None or self.orientation_note:
+            # the default initial condition (and the note on R) were made for the old values: those of
+            # the new ones where the model can build them, else none (a run then asks for q0 and v0)
+            rebuilt = None
+            if self.rebuild is not None and not any(isinstance(x, jax.core.Tracer)
+                                                    for x in jax.tree_util.tree_leaves(new_args)):
+                rebuilt = self.rebuild({k: float(v) for k, v in scalar_args(new_args).items()})
+            object.__setattr__(new, "defaults", None if rebuilt is None else rebuilt.defaults)
+            object.__setattr__(new, "orientation_note", "" if rebuilt is None else rebuilt.orientation_note)
+        return new
+
     def L(self, b, v):
         """The Lagrangian $l(b, v)$ at a base point."""
-        return self.lagrangian(*self._args(b), v)
+        return self._call(self.lagrangian, *self._args(b), v)
 
     def metric(self, b):
         """The kinetic-energy metric $\\mathbb{G}(b) = \\partial^2 l / \\partial v^2$ (N×N)."""
@@ -220,14 +319,14 @@ class System(eqx.Module):
 
     def mu(self, b):
         """Constraint one-forms $\\mu(b)$ as an (m, N) array."""
-        return jnp.atleast_2d(jnp.asarray(self.constraints(*self._args(b))))
+        return jnp.atleast_2d(jnp.asarray(self._call(self.constraints, *self._args(b))))
 
     def Y(self, b):
         """Affine part $Y(b)$ (zero for linear constraints)."""
         if self.affine is None:
             dtype = jnp.result_type(self.space.coordinates(b)) if self.n else jnp.float64
             return jnp.zeros(self.dim, dtype=dtype)
-        return jnp.asarray(self.affine(*self._args(b))).reshape(self.dim)
+        return jnp.asarray(self._call(self.affine, *self._args(b))).reshape(self.dim)
 
     def Pi(self, b):
         """The one-form $\\Pi = \\mathbb{G} Y$ of paper §6."""
@@ -261,7 +360,7 @@ class System(eqx.Module):
             return jnp.zeros_like(v)
         t = self.drive.t if t is None else t
         u = self.drive.u(t)
-        return jnp.asarray(self.force(*self._args(b), v, u, t), dtype=v.dtype).reshape(v.shape)
+        return jnp.asarray(self._call_force(*self._args(b), v, u, t), dtype=v.dtype).reshape(v.shape)
 
     def external_force_continuous(self, b, v, t):
         """$F(b, v, u(t), t)$ with the input held over the step that contains `t` (the
@@ -269,12 +368,14 @@ class System(eqx.Module):
         if self.force is None:
             return jnp.zeros_like(v)
         u = self.drive.u_continuous(t)
-        return jnp.asarray(self.force(*self._args(b), v, u, t), dtype=v.dtype).reshape(v.shape)
+        return jnp.asarray(self._call_force(*self._args(b), v, u, t), dtype=v.dtype).reshape(v.shape)
 
     def with_force(self, force: Callable[..., Any], inputs: int = 0) -> "System":
         """A copy of this system with the generalized force `force` and `inputs` inputs (see the
-        constructor), e.g. a torque on a zoo model: `make_system("chaplygin-sleigh").with_force(
-        lambda q, v, u, t: jnp.array([0.0, 0.0, u[0]]), inputs=1)`."""
+        constructor), e.g. a torque on a closed-over sleigh: `system.with_force(lambda q, v, u, t:
+        jnp.array([0.0, 0.0, u[0]]), inputs=1)`. On a system with named parameters (:attr:`args`,
+        as the zoo's models) a force that takes one more argument receives them last,
+        `F(q, v, u, t, args)`; `F(q, v, u, t)` keeps working."""
         import dataclasses
 
         if not callable(force):
@@ -287,11 +388,12 @@ class System(eqx.Module):
         for f in dataclasses.fields(self):
             object.__setattr__(new, f.name, getattr(self, f.name))
         object.__setattr__(new, "force", force)
+        object.__setattr__(new, "force_args", self.args is not None and _takes(force, len(self._leading()) + 4))
         object.__setattr__(new, "inputs", int(inputs))
         object.__setattr__(new, "drive", Drive.make(inputs=int(inputs)))
         return new
 
-    def as_model(self, model: str) -> "System":
+    def as_model(self, model: str, rebuild: Callable[..., Any] | None = None) -> "System":
         """This system recorded as the zoo model `model` (what the zoo's builds return,
         :func:`gnipy.registry.register`): the model's registered invariants and measured default
         method (:func:`gnipy.get_model`) then apply to it. A System written by hand is no model's,
@@ -302,6 +404,21 @@ class System(eqx.Module):
         for f in dataclasses.fields(self):
             object.__setattr__(new, f.name, getattr(self, f.name))
         object.__setattr__(new, "model", str(model))
+        object.__setattr__(new, "rebuild", rebuild)
+        return new
+
+    def as_user_model(self, reference: str, digest: str | None, rebuild: Callable[..., Any] | None = None
+                      ) -> "System":
+        """This system recorded as built by the user's function `reference` (`FILE.py:NAME` or
+        `module:NAME`, :mod:`gnipy.user_systems`) from a source of SHA-256 `digest` (and
+        :attr:`rebuild`, how to build it again)."""
+        import dataclasses
+
+        new = object.__new__(type(self))
+        for f in dataclasses.fields(self):
+            object.__setattr__(new, f.name, getattr(self, f.name))
+        object.__setattr__(new, "origin", (str(reference), None if digest is None else str(digest)))
+        object.__setattr__(new, "rebuild", rebuild)
         return new
 
     def driven(self, drive) -> "System":
@@ -323,7 +440,8 @@ class System(eqx.Module):
         return eqx.tree_at(lambda s: s.drive, self, self.drive.shifted(dt))
 
     def without_metadata(self) -> "System":
-        """A copy without the provenance fields `params`, `defaults` and `orientation_note`.
+        """A copy without the provenance fields `params`, `origin`, `rebuild`, `defaults` and
+        `orientation_note`.
 
         This is what compiled code receives: systems that differ only in parameter values then
         share one compilation, and can be stacked into a batch (their parameters are array
@@ -335,6 +453,8 @@ class System(eqx.Module):
         for f in dataclasses.fields(self):
             object.__setattr__(new, f.name, getattr(self, f.name))
         object.__setattr__(new, "params", ())
+        object.__setattr__(new, "origin", None)
+        object.__setattr__(new, "rebuild", None)
         object.__setattr__(new, "defaults", None)
         object.__setattr__(new, "orientation_note", "")
         return new
@@ -416,13 +536,14 @@ class System(eqx.Module):
 
     def _check_force(self, b0, v0):
         N = self.dim
+        form = f"F({', '.join(self._leading())}, v, u, t{', args' if self.force_args else ''})"
         try:
-            F = np.asarray(self.force(*self._args(b0), jnp.asarray(v0, jnp.float64),
-                                      jnp.zeros(self.inputs), jnp.asarray(0.0)))
+            F = np.asarray(self._call_force(*self._args(b0), jnp.asarray(v0, jnp.float64),
+                                            jnp.zeros(self.inputs), jnp.asarray(0.0)))
         except Exception as e:  # the user's function failed: say where
-            raise InputError(f"force: evaluating F(q, v, u, t) failed at q0 (u = 0, t = 0): {e}") from e
+            raise InputError(f"force: evaluating {form} failed at q0 (u = 0, t = 0): {e}") from e
         if F.size != N:
-            raise InputError(f"force: F(q, v, u, t) must return {N} components (one per velocity), got shape {F.shape}")
+            raise InputError(f"force: {form} must return {N} components (one per velocity), got shape {F.shape}")
         if not np.all(np.isfinite(F)):
             raise InputError("force: F(q0, v0, 0, 0) is not finite")
 

@@ -6,7 +6,7 @@ default initial condition) and the inputs of a force. Each error names its argum
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import jax
 import jax.numpy as jnp
@@ -16,7 +16,8 @@ from .errors import InputError
 from .inputs import provenance_number
 from .spaces import EuclideanSpace, GroupSpace
 
-__all__ = ["check_functions", "dimension", "configuration_space", "velocity_names", "provenance", "inputs_count"]
+__all__ = ["check_functions", "dimension", "configuration_space", "velocity_names", "provenance", "inputs_count",
+           "Args", "system_args", "scalar_args"]
 
 
 def check_functions(lagrangian, constraints, affine, force) -> None:
@@ -102,6 +103,60 @@ def provenance(params, defaults) -> tuple[tuple, tuple | None]:
                          if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(d))
                          else tuple(float(x) for x in np.ravel(d)) for d in defaults)
     return params, defaults
+
+
+@jax.tree_util.register_pytree_node_class
+class Args(dict):
+    """A System's named parameters (:attr:`gnipy.System.args`): a dict of float64 arrays, the
+    functions read `args["m"]`. A pytree whose leaves are the values (keys in sorted order); hashed
+    and compared by identity, as functions are, so that a System holding it can be hashed (e.g. a
+    bound method of it under `jax.jit`) and never compares arrays element-wise."""
+
+    __hash__ = object.__hash__
+    __eq__ = object.__eq__
+    __ne__ = object.__ne__
+
+    def tree_flatten(self):
+        keys = tuple(sorted(self))
+        return tuple(self[k] for k in keys), keys
+
+    @classmethod
+    def tree_unflatten(cls, keys, children):
+        return cls(zip(keys, children))
+
+
+def system_args(args) -> dict | None:
+    """The named parameters `args` of a System (a mapping of names to numbers or arrays) as a dict of
+    float64 arrays, checked (finite unless traced); None stays None."""
+    from .inputs import is_text_or_bool
+
+    if args is None:
+        return None
+    if not isinstance(args, Mapping):
+        raise InputError(f"args: expected a mapping of parameter names to numbers or arrays, got "
+                         f"{type(args).__name__}")
+    out = Args()
+    for k, v in args.items():
+        if not isinstance(k, str) or not k.isidentifier():
+            raise InputError(f"args: parameter names must be Python names, got {k!r}")
+        if is_text_or_bool(v):
+            raise InputError(f"args: parameter {k!r} must be a number or an array of numbers, got {v!r}")
+        if isinstance(v, jax.core.Tracer):
+            out[k] = v
+            continue
+        try:  # checked in NumPy: inside a trace (jax.jit) jnp would make even a constant a tracer
+            a = np.asarray(v, dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise InputError(f"args: parameter {k!r} must be a number or an array of numbers, got {v!r}") from e
+        if not np.all(np.isfinite(a)):
+            raise InputError(f"args: parameter {k!r} must be finite, got {v!r}")
+        out[k] = jnp.asarray(a)
+    return Args(out)
+
+
+def scalar_args(args) -> dict:
+    """The scalar entries of named parameters (what the provenance `params` record of them)."""
+    return {k: v for k, v in (args or {}).items() if jnp.ndim(v) == 0}
 
 
 def inputs_count(force, inputs) -> int:

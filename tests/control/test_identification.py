@@ -11,6 +11,7 @@ estimated quantities, observed variables, observation times) reuses one compilat
 data are made by runs that save as many nodes as the fitted runs.
 """
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -242,7 +243,12 @@ def test_bad_input_is_refused_naming_the_argument(xy, truth):
                                           q0=Q0, v0=V0, sigma=SIGMA)),
         ("params: unknown parameter 'b'", lambda: fit(MODEL, obs, params={"b": 1.0}, h=H, q0=Q0, v0=V0)),
         ("fixed: ['a'] also in params", lambda: fit(MODEL, obs, params=GUESS, fixed={"a": 1.0}, h=H)),
-        ("params: a System's parameters", lambda: fit(gnipy.make_system(MODEL), obs, params=GUESS, h=H)),
+        # a System estimates only its named parameters (args; the zoo's sleigh: test_user_systems.py)
+        ("params: a System's parameters cannot be estimated here unless they are its args", lambda: fit(
+            gnipy.System(lambda q, v: 0.5 * v @ v, lambda q: jnp.array([[0.0, 0.0, 1.0]]), coordinates=("x", "y", "t")),
+            obs, params=GUESS, h=H)),
+        ("params: unknown parameter 'b' of the System", lambda: fit(gnipy.make_system(MODEL), obs, params={"b": 1.0},
+                                                                    h=H)),
         ("initial: unknown entries", lambda: fit(MODEL, obs, initial=("R0",), h=H, q0=Q0, v0=V0)),
         ("initial: unknown component 'z'", lambda: fit(MODEL, obs, initial={"q0": ["z"]}, h=H, q0=Q0, v0=V0)),
         ("params/initial: nothing to estimate", lambda: fit(MODEL, obs, h=H, q0=Q0, v0=V0)),

@@ -34,7 +34,8 @@ def test_a_system_named_like_a_zoo_model_inherits_neither_invariants_nor_default
     one runs the fallback and is told of no registered invariant."""
     spec = gnipy.get_model("rotating-table-ball")
     zoo = spec.system()
-    own = gnipy.System(zoo.lagrangian, zoo.constraints, zoo.affine, coordinates=zoo.coordinates, name=zoo.name)
+    own = gnipy.System(zoo.lagrangian, zoo.constraints, zoo.affine, coordinates=zoo.coordinates, name=zoo.name,
+                       args=zoo.args)
     q0, v0 = spec.initial_condition(spec.resolve_params())
     kw = dict(q0=q0, v0=v0, h=0.01, steps=50)
     from_zoo, by_hand = gnipy.simulate(zoo, **kw), gnipy.simulate(own, **kw)

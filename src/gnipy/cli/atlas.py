@@ -18,8 +18,10 @@ __all__ = ["atlas", "parse_models"]
 
 
 def parse_models(text: str) -> list[str]:
-    """`--models a,b`: zoo model names, without repeats."""
+    """`--models a,b`: zoo model names or the user's systems (`FILE.py:NAME`, `module:NAME`, loaded
+    here and named by their canonical reference), without repeats."""
     import gnipy
+    from gnipy.user_systems import is_reference
 
     known = gnipy.model_names()
     names = []
@@ -27,8 +29,14 @@ def parse_models(text: str) -> list[str]:
         name = part.strip()
         if not name:
             continue
-        if name not in known:
-            raise UsageError("--models", f"unknown model {name!r} (known: {', '.join(known)})")
+        if is_reference(name):
+            try:
+                name = gnipy.get_model(name).name
+            except gnipy.InputError as e:
+                raise UsageError("--models", str(e).partition(":")[2].strip()) from None
+        elif name not in known:
+            raise UsageError("--models", f"unknown model {name!r} (known: {', '.join(known)}; or the user's "
+                             "system as FILE.py:NAME)")
         if name not in names:
             names.append(name)
     if not names:
@@ -45,8 +53,9 @@ def atlas(
     quick: bool = typer.Option(False, "--quick", help="Short runs (2000 steps) of three models (unless --models "
                                "names others): about 3 minutes on 2 cores; full: 10^5-10^6 steps of every model, "
                                "up to 30 minutes."),
-    models: str | None = typer.Option(None, "--models", help="Comma-separated model names (default: every model; "
-                                      "with --quick, three of them).", show_default=False),
+    models: str | None = typer.Option(None, "--models", help="Comma-separated model names, or your own systems "
+                                      "as FILE.py:NAME or module:NAME (default: every zoo model; with --quick, "
+                                      "three of them).", show_default=False),
     methods: str | None = typer.Option(None, "--methods", "-m", help="Comma-separated method names (default: "
                                        "every method but the reference).", show_default=False),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace the atlas's files in a folder gnipy did not "

@@ -155,6 +155,15 @@ def load_config(path: Path) -> dict[str, Any]:
         if key in out:
             raise UsageError("--config", f"{where}: key {raw_key!r} given twice (with dashes and underscores)")
         out[key] = config_value(where, raw_key, CONFIG_KEYS[key][1], value, base)
+        if key == "model" and isinstance(out[key], str):
+            # a model of the user's own: only a .py file beside the config file (gnipy.user_systems)
+            from gnipy.errors import InputError
+            from gnipy.user_systems import data_file_reference
+
+            try:
+                out[key] = data_file_reference(out[key], base, "model")
+            except InputError as e:
+                raise UsageError("--config", f"{where}: {e}") from None
     return out
 
 

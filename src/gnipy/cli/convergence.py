@@ -30,7 +30,11 @@ _WHAT = {"state": "max(|q − q*|, |v − v*|)", "q": "|q − q*|", "v": "|v −
 
 @app.command()
 def convergence(
-    model: str = typer.Argument(..., help="Model name (see `gni models`).", show_default=False, metavar="MODEL"),
+    model: str = typer.Argument(
+        ..., help="Model name (see `gni models`), or your own system: FILE.py:NAME or module:NAME, "
+        "NAME a function returning a gnipy.System (its number-valued keyword parameters are what --set "
+        "reaches).",
+        show_default=False, metavar="MODEL"),
     methods_: str = typer.Option(
         "gni-trapezoid", "--methods", "-m", help="Comma-separated method names (see `gni methods`)."
     ),

@@ -23,7 +23,7 @@ from .parsing import parse_R0, prepare
 from .held import hold
 from .paths import check_output, check_plot, same_file
 from .progress import Progress, busy
-from .summary import attrs_for, run_report, streamed_report
+from .summary import attrs_for, origin_attrs, run_report, streamed_report
 
 __all__ = ["PROGRESS_STEPS", "run", "run_streamed", "simulate_model", "write_plot"]
 
@@ -35,7 +35,10 @@ PROGRESS_STEPS = 10_000
 @app.command()
 def run(
     model: str | None = typer.Argument(
-        None, help="Model name (see `gni models`); or `model` in --config.", show_default=False, metavar="MODEL"
+        None, help="Model name (see `gni models`), or your own system: FILE.py:NAME or module:NAME, "
+        "NAME a function returning a gnipy.System (its number-valued keyword parameters are what --set "
+        "reaches); or `model` in --config.",
+        show_default=False, metavar="MODEL"
     ),
     method: str | None = typer.Option(
         None, "--method", "-m", help="Method name (see `gni methods`). [default: the model's, see `gni models`]", show_default=False
@@ -351,7 +354,7 @@ def run_streamed(spec, params, method, q0, v0, R0, h, steps, t_final, project, s
 
     system = spec.build(params)
     _, v0_used = system.check(q0, v0, R0=R0, project_v0=project)
-    extra = dict(extra, v0=[float(x) for x in v0_used])
+    extra = dict(extra, v0=[float(x) for x in v0_used], **origin_attrs(spec))
     t0 = time.perf_counter()
     total = steps if steps is not None else round(float(t_final) / float(h))
     with Progress("run", total, "steps", description=f"{spec.name} with {method}") as progress:

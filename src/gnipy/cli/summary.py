@@ -85,6 +85,14 @@ def streamed_report(spec, params, method: str, h, result, seconds: float, out) -
     con.print(f"written: {safe(out)}", markup=False)
 
 
+def origin_attrs(spec) -> dict[str, str]:
+    """For a user's system (:func:`gnipy.registry.model_from_function`), the file attributes
+    `model_reference` (how to rebuild it) and `model_source_sha256`; none for a zoo model."""
+    if spec.origin is None:
+        return {}
+    return {"model_reference": spec.origin[0], "model_source_sha256": spec.origin[1] or ""}
+
+
 def attrs_for(spec, params, sol, q0, v0, exact, drifts, extra: dict[str, Any]) -> dict[str, Any]:
     """The attributes `gni run` adds to a result file: the initial condition, the coordinates, the
     invariant drifts and the errors against the exact solution, and `extra`."""
@@ -95,6 +103,7 @@ def attrs_for(spec, params, sol, q0, v0, exact, drifts, extra: dict[str, Any]) -
         "t_final": float(sol.t[-1]),
         **extra,
     }
+    attrs.update(origin_attrs(spec))
     for name, d in drifts.items():
         attrs[f"invariant_drift_{name}"] = d
     if exact is not None:

@@ -91,7 +91,11 @@ def sweep_report(report, spec: dict[str, Any]) -> None:
 
 @app.command()
 def sweep(
-    model: str = typer.Argument(..., help="Model name (see `gni models`).", show_default=False, metavar="MODEL"),
+    model: str = typer.Argument(
+        ..., help="Model name (see `gni models`), or your own system: FILE.py:NAME or module:NAME, "
+        "NAME a function returning a gnipy.System (its number-valued keyword parameters are what --set "
+        "reaches).",
+        show_default=False, metavar="MODEL"),
     grid: list[str] | None = typer.Option(
         None, "--grid", "-g", help="A grid axis NAME=linspace(START, STOP, COUNT), or its short form "
         "NAME=START:STOP:COUNT (the same values: COUNT values, not a step); NAME is a parameter, "

@@ -26,7 +26,7 @@ from ..system import System
 from .memory import check_fit_memory
 from .observations import Observations, UnnamedObservations, as_observations, sigma_array
 
-__all__ = ["ModelBuild", "FitModel", "FitStart", "FitData", "step_grid", "parameter_tables", "progress_reporter",
+__all__ = ["ArgsBuild", "ModelBuild", "FitModel", "FitStart", "FitData", "step_grid", "parameter_tables", "progress_reporter",
            "check_fit_method", "fit_model", "fit_start", "fit_data", "initial_vector", "initial_selection",
            "observed_columns", "grid_steps"]
 
@@ -128,6 +128,19 @@ class ModelBuild:
         return get_model(self.name).default_ic(dict(get_model(self.name).resolve_params(params)))
 
 
+@dataclasses.dataclass(frozen=True, eq=False)
+class ArgsBuild:
+    """The System with some of its named parameters (:attr:`gnipy.System.args`) replaced: how
+    :func:`gnipy.fit` estimates them without rebuilding it. Hashed by identity (a System holds
+    arrays): each :func:`gnipy.fit` call makes its own, and so compiles its fit once."""
+
+    system: System
+
+    def __call__(self, params):
+        """The System with `params` (name -> value) as its args."""
+        return self.system.with_args(**params)
+
+
 @dataclasses.dataclass(frozen=True)
 class FitModel:
     """The system of a fit (:func:`fit_model`).
@@ -154,9 +167,18 @@ def fit_model(system, param_names, guesses, fixed, q0, v0) -> FitModel:
     if isinstance(system, str):
         return _zoo_model(system, param_names, guesses, fixed, q0, v0)
     if isinstance(system, System):
+        if (param_names or fixed) and system.args is not None:
+            # its named parameters (System(args=...)) are estimated in place: no rebuilding
+            unknown = [k for k in (*param_names, *fixed) if k not in system.args]
+            if unknown:
+                raise InputError(f"params: unknown parameter {unknown[0]!r} of the System (its args: "
+                                 f"{', '.join(system.args)})")
+            build = ArgsBuild(system)
+            return FitModel(build=build, system=_built(build, param_names, guesses, fixed), given=None,
+                            follow_ic=False)
         if param_names or fixed:
-            raise InputError("params: a System's parameters cannot be estimated here; pass a model name or a "
-                             "build(params) function")
+            raise InputError("params: a System's parameters cannot be estimated here unless they are its args "
+                             "(System(..., args={...})); pass a model name, FILE.py:NAME or a build(params) function")
         return FitModel(build=None, system=system, given=system, follow_ic=False)
     if callable(system):
         return FitModel(build=system, system=_built(system, param_names, guesses, fixed), given=None, follow_ic=False)

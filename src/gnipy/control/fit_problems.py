@@ -125,7 +125,7 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
         raise InputError(f"problem: unknown section(s) {quoted_names(unknown)}; expected {', '.join(sorted(_FIT_SECTIONS))}")
     title = entry_text("name", data.get("name", name))
     description = entry_text("description", data.get("description", "")).strip()
-    spec, fixed_all = entry_model(data)
+    spec, fixed_all = entry_model(data, base)
     fixed = entry_params(spec, data["system"].get("params"), "system.params")
     params, initial = _estimate_section(data, spec, fixed)
     # the system at the initial guess: the names and sizes below are checked against it

@@ -241,11 +241,13 @@ def fit(
     the estimate (see the module docstring for the formulas and the treatment of `v0`).
 
     Arguments:
-        system: a zoo model's name (built with the estimated `params` and the `fixed` ones, the
-            others at their defaults); or a function `build(params) -> System` of a dict of the
+        system: a zoo model's name, or the user's system as `"FILE.py:NAME"` / `"module:NAME"`
+            (:func:`gnipy.get_model`), built with the estimated `params` and the `fixed` ones, the
+            others at their defaults; or a function `build(params) -> System` of a dict of the
             parameters (estimated and fixed, as JAX scalars: the System's functions must use them
-            as arrays, e.g. `jax.tree_util.Partial` arguments); or a :class:`~gnipy.System`
-            when only the initial condition is estimated.
+            as arrays, e.g. as its `args`); or a :class:`~gnipy.System`: its named parameters
+            (`args`) are estimated in place (`system.with_args`, no rebuilding), else only the
+            initial condition is.
         observations: an :class:`Observations` (any coordinates and velocities, missing values
             as NaN, optional `sigma`); a tuple `(times, values, variables)`, or `(times, values)`
             with one column per coordinate; a :class:`~gnipy.Solution` or an `xarray.Dataset`

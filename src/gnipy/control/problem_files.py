@@ -222,16 +222,22 @@ def entry_params(spec, table, where: str) -> dict[str, float]:
     return {k: entry_number(f"{where}.{k}", v) for k, v in table.items()}
 
 
-def entry_model(data):
-    """`(spec, params)` of `[system]`: the model and its parameters (the defaults updated)."""
+def entry_model(data, base: Path | None = None):
+    """`(spec, params)` of `[system]`: the model (a zoo model's name, or a reference to the user's
+    function `FILE.py:NAME` with FILE in `base`, the problem file's folder, or below it:
+    :func:`gnipy.user_systems.data_file_reference`) and its parameters (the defaults updated)."""
     from ..registry import get_model
+    from ..user_systems import data_file_reference, is_reference
 
     system_sec = entry_table(data, "system")
     refuse_unknown_keys(system_sec, "system", {"model", "params"})
     model = system_sec.get("model")
     if not isinstance(model, str):
-        raise InputError(f"system.model: expected a model name (see `gni models`), got {describe_entry(model)}")
+        raise InputError(f"system.model: expected a model name (see `gni models`) or FILE.py:NAME, got "
+                         f"{describe_entry(model)}")
     try:
+        if is_reference(model):  # only a .py file beside the problem file (gnipy.user_systems)
+            model = data_file_reference(model, Path(".") if base is None else base, "system.model")
         spec = get_model(model)
     except (KeyError, ValueError, InputError) as e:
         raise InputError(f"system.model: {str(e).strip(chr(39))}") from None

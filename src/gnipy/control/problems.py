@@ -217,13 +217,13 @@ def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlP
 
     if isinstance(source, str) and source in WORKED_PROBLEMS:
         source = WORKED_PROBLEMS[source]
-    data, text, _, name = read_problem(source, name, f"a worked problem's name ({', '.join(WORKED_PROBLEMS)})")
+    data, text, folder, name = read_problem(source, name, f"a worked problem's name ({', '.join(WORKED_PROBLEMS)})")
     unknown = set(data) - _SECTIONS
     if unknown:
         raise InputError(f"problem: unknown section(s) {quoted_names(unknown)}; expected {', '.join(sorted(_SECTIONS))}")
     title = entry_text("name", data.get("name", name))
     description = entry_text("description", data.get("description", "")).strip()
-    spec, params = entry_model(data)
+    spec, params = entry_model(data, folder)
     base = build_model_system(spec, params, "system.params")
     F, m, input_names = input_force(base, entry_table(data, "inputs"))
     system = base.with_force(F, inputs=m)

@@ -388,7 +388,8 @@ def default_methods_source(result) -> str:
 
     entries = dict(default_methods.DEFAULT_METHODS)
     for m in result.models:
-        entries[m.model] = m.recommended
+        if ":" not in m.model:  # the zoo's record only: a user's system (FILE.py:NAME) is not one of its models
+            entries[m.model] = m.recommended
     lines = ['"""' + (default_methods.__doc__ or "").strip() + '\n"""', "",
              "from __future__ import annotations", "",
              "from ..registry import FALLBACK_METHOD, set_default_methods", "",

@@ -159,7 +159,7 @@ def bare(system: System) -> System:
         system.lagrangian, system.constraints, system.affine, n=system.n, group=group,
         retraction=system.space.retraction if group is not None else "cayley",
         depends_on_orientation=system.depends_on_orientation, reconstruction=system.reconstruction or "left",
-        name="theorem-table",
+        name="theorem-table", args=system.args, params={},
     )
 
 

@@ -18,6 +18,6 @@ from . import (  # noqa: F401  (registration)
     veselova,
     vertical_disk,
 )
-from ..registry import ModelSpec, get_model, make_system, model_names, register
+from ..registry import ModelSpec, get_model, make_system, model_from_function, model_names, register
 
-__all__ = ["ModelSpec", "get_model", "make_system", "model_names", "register"]
+__all__ = ["ModelSpec", "get_model", "make_system", "model_from_function", "model_names", "register"]

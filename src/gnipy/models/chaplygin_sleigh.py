@@ -43,7 +43,6 @@ Default initial condition: $q_0 = (0, 0, 0)$, $v_0 = (1, a, 1)$ (on the constrai
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..system import System
@@ -54,14 +53,15 @@ __all__ = ["MODEL", "exact_body_velocities", "exact_heading", "body_velocities"]
 COORDINATES = ("x", "y", "theta")
 
 
-def _lagrangian(m, I, q, v):
+def _lagrangian(q, v, p):
+    m, I = p["m"], p["I"]
     dx, dy, dtheta = v
     return 0.5 * m * (dx**2 + dy**2) + 0.5 * I * dtheta**2
 
 
-def _constraints(a, q):
+def _constraints(q, p):
     th = q[2]
-    return jnp.stack([-jnp.sin(th), jnp.cos(th), -a * jnp.ones_like(th)])[None, :]
+    return jnp.stack([-jnp.sin(th), jnp.cos(th), -p["a"] * jnp.ones_like(th)])[None, :]
 
 
 def _default_ic(p):
@@ -70,10 +70,11 @@ def _default_ic(p):
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["m"]), jnp.asarray(p["I"])),
-        jtu.Partial(_constraints, jnp.asarray(p["a"])),
+        _lagrangian,
+        _constraints,
         coordinates=COORDINATES,
         name="chaplygin-sleigh",
+        args=p,
         params=p,
         defaults=_default_ic(p),
     )

@@ -26,13 +26,12 @@ $(\\dot x, \\dot y) = R(\\theta)(u, a\\omega)$.
 **Invariant.** The energy (`energy`, a function `f(params, q, v)`).
 
 Same parameters as `chaplygin-sleigh` ($m = I = 1$, $a = 0.5$). Default initial condition:
-$g_0 = $ identity (contact point at the origin, heading 0), $v_0 = (1, 0, 1)$.
+$g_0$ the identity (contact point at the origin, heading 0), $v_0 = (1, 0, 1)$.
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..lie_groups import SE2
@@ -45,12 +44,13 @@ __all__ = ["MODEL", "exact"]
 VELOCITIES = ("vx", "vy", "omega")
 
 
-def _lagrangian(m, I, a, x, v):
+def _lagrangian(x, v, p):
+    m, I, a = p["m"], p["I"], p["a"]
     vx, vy, w = v
     return 0.5 * m * (vx**2 + (vy + a * w) ** 2) + 0.5 * I * w**2
 
 
-def _constraints(x):
+def _constraints(x, p):
     return jnp.array([[0.0, 1.0, 0.0]])
 
 
@@ -61,13 +61,14 @@ def _energy(p, q, v):
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["m"]), jnp.asarray(p["I"]), jnp.asarray(p["a"])),
+        _lagrangian,
         _constraints,
         n=0,
         group=SE2(),
         coordinates=(),
         velocities=VELOCITIES,
         name="chaplygin-sleigh-se2",
+        args=p,
         params=p,
         defaults=((), (1.0, 0.0, 1.0)),
     )

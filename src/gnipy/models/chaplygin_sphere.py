@@ -29,7 +29,7 @@ so $\\mu(R) = \\begin{pmatrix} 1 & 0 & -r R_{2,:}\\\\ 0 & 1 & r R_{1,:}\\end{pma
 
 - *Angular momentum about the contact point.* $K_A = R I\\Omega + m\\,r e_3\\times v_c$ (space frame).
   Its rate is $\\tau_A - v_A\\times m v_c$; the contact forces act at the contact point $A$ and
-  gravity acts along $r e_3 = $ (centre $-$ A), so $\\tau_A = 0$; $v_A = v_c$ (A is always under the
+  gravity acts along $r e_3$ (the centre minus A), so $\\tau_A = 0$; $v_A = v_c$ (A is always under the
   centre). So $K_A$ is constant in space, on a fixed *and* on a turning table. In the body frame
   $M = R^T K_A = I\\Omega + m r\\,\\gamma\\times R^T v_c$, which obeys $\\dot M = M\\times\\Omega$; on a
   fixed table $R^Tv_c = r\\,\\Omega\\times\\gamma$ and $M = I\\Omega + m r^2\\gamma\\times(\\Omega\\times\\gamma)$,
@@ -43,14 +43,13 @@ so $\\mu(R) = \\begin{pmatrix} 1 & 0 & -r R_{2,:}\\\\ 0 & 1 & r R_{1,:}\\end{pma
 
 Default parameters $m = r = 1$, $(I_1, I_2, I_3) = (0.3, 0.4, 0.5)$ (a realizable ball:
 $I_1 + I_2 + I_3 = 2\\int|\\rho|^2dm \\le 2mr^2$ and the triangle inequalities hold), $\\Omega_t = 0$.
-Default initial condition: $q_0 = (0, 0)$, $R_0 = $ identity, $\\Omega_0 = (1, 0.5, 2)$ and
+Default initial condition: $q_0 = (0, 0)$, $R_0$ the identity, $\\Omega_0 = (1, 0.5, 2)$ and
 $(\\dot x, \\dot y)$ from the constraints: $v_0 = (0.5, -1, 1, 0.5, 2)$ for the default parameters.
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 
 from ..lie_groups import SO3
 from ..system import System
@@ -97,9 +96,18 @@ def _inertia(p):
     return jnp.asarray([p["I1"], p["I2"], p["I3"]])
 
 
-def _lagrangian(m, I, x, R, v):
+def _lagrangian(x, R, v, p):
+    m, I = p["m"], _inertia(p)
     # one weighted sum rather than slices of v: fewer XLA kernels per step (as in `rolling_ball`)
     return 0.5 * jnp.sum(jnp.concatenate([jnp.stack([m, m]), I]) * v * v)
+
+
+def _constraints(x, R, p):
+    return rolling_constraints(p["r"], x, R)
+
+
+def _affine(x, R, p):
+    return table_drift(p["Omega"], x, R)
 
 
 def contact_momentum_space(p, q, v, R):
@@ -141,15 +149,16 @@ def _default_ic(p):
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["m"]), _inertia(p)),
-        jtu.Partial(rolling_constraints, jnp.asarray(p["r"])),
-        jtu.Partial(table_drift, jnp.asarray(p["Omega"])),
+        _lagrangian,
+        _constraints,
+        _affine,
         n=2,
         group=SO3(),
         depends_on_orientation=True,
         coordinates=COORDINATES,
         velocities=VELOCITIES,
         name="chaplygin-sphere",
+        args=p,
         params=p,
         defaults=_default_ic(p),
     )

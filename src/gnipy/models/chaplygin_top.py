@@ -37,7 +37,6 @@ rocks), $\\Omega_0 = (0.3, -0.2, 2)$, and $(\\dot x, \\dot y)$ from the constrai
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..lie_groups import SO3
@@ -87,9 +86,17 @@ def _parts(p, q, v, R):
     return T, V, c, cdot, I
 
 
-def _lagrangian(p, x, R, v):
+def _lagrangian(x, R, v, p):
     T, V, *_ = _parts(p, x, v, R)
     return T - V
+
+
+def _constraints(x, R, p):
+    return rolling_constraints(p["r"], x, R)
+
+
+def _affine(x, R, p):
+    return table_drift(p["Omega"], x, R)
 
 
 def _jacobi(p, q, v, R):
@@ -106,17 +113,17 @@ def _default_ic(p):
 
 
 def _build(p):
-    pj = {k: jnp.asarray(v) for k, v in p.items()}
     return System(
-        jtu.Partial(_lagrangian, pj),
-        jtu.Partial(rolling_constraints, pj["r"]),
-        jtu.Partial(table_drift, pj["Omega"]),
+        _lagrangian,
+        _constraints,
+        _affine,
         n=2,
         group=SO3(),
         depends_on_orientation=True,
         coordinates=COORDINATES,
         velocities=VELOCITIES,
         name="chaplygin-top",
+        args=p,
         params=p,
         defaults=(*_default_ic(p), R0),
     )

@@ -13,7 +13,6 @@ $\\dot q_0 = (-1, 1, 1)$ ($H = 3.15$, $H_y = 1$) is not their experimental set-u
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 
 from ..system import System
 from ..registry import ModelSpec, register
@@ -33,12 +32,23 @@ def constraints(q):
     return jnp.stack([jnp.ones_like(y), jnp.zeros_like(y), y])[None, :]
 
 
+def lagrangian_args(q, v, p):
+    """:func:`lagrangian` with the coupling read from the named parameters (`p["epsilon"]`)."""
+    return lagrangian(p["epsilon"], q, v)
+
+
+def constraints_args(q, p):
+    """:func:`constraints`, taking the named parameters (unused) last."""
+    return constraints(q)
+
+
 def _build(p):
     return System(
-        jtu.Partial(lagrangian, jnp.asarray(p["epsilon"])),
-        constraints,
+        lagrangian_args,
+        constraints_args,
         coordinates=("x", "y", "z"),
         name="contact-oscillator",
+        args=p,
         params=p,
         defaults=MODEL.initial_condition(p),
     )

@@ -41,7 +41,6 @@ carries an unused `perturbation_size = 0.2` whose role (if any, e.g. S = 0.2 cos
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..system import System
@@ -64,13 +63,14 @@ def grad_S(q):
     return jnp.stack([jnp.zeros_like(z), jnp.zeros_like(z), -jnp.sin(z)])
 
 
-def _lagrangian(eps, q, v):
+def _lagrangian(q, v, p):
+    eps = p["epsilon"]
     x, _, z = q[0], q[1], q[2]
     u, r = v[:3], q[:3]
     return 0.5 * (u @ u) + kaluza_klein_term(grad_S(r), v) - 0.5 * (r @ r + eps * x**2 * z**2)
 
 
-def _constraints(q):
+def _constraints(q, p):
     return lift_constraints(_base_constraints(q[:3]))
 
 
@@ -81,10 +81,11 @@ def _default_ic(p):
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["epsilon"])),
+        _lagrangian,
         _constraints,
         coordinates=("x", "y", "z", "w"),
         name="contact-oscillator-gauge",
+        args=p,
         params=p,
         defaults=_default_ic(p),
     )

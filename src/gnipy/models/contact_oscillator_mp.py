@@ -36,13 +36,11 @@ from __future__ import annotations
 
 import math
 
-import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..system import System
 from ..registry import ModelSpec, register
-from .contact_oscillator import constraints, lagrangian, total_energy, y_energy
+from .contact_oscillator import constraints_args, lagrangian_args, total_energy, y_energy
 
 __all__ = ["MODEL", "Z0_GRID", "Z0_DEFAULT", "ENERGY", "ENERGY_Y", "setup_initial_condition", "poincare_step"]
 
@@ -82,10 +80,11 @@ def _default_ic(p):
 
 def _build(p):
     return System(
-        jtu.Partial(lagrangian, jnp.asarray(p["epsilon"])),
-        constraints,
+        lagrangian_args,
+        constraints_args,
         coordinates=("x", "y", "z"),
         name="contact-oscillator-mp",
+        args=p,
         params=p,
         defaults=_default_ic(p),
     )

@@ -36,7 +36,6 @@ Default initial condition: $q_0 = (0, 0, 0)$, $v_0 = (0, 0, 1)$.
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..system import System
@@ -48,24 +47,24 @@ __all__ = ["MODEL", "exact"]
 COORDINATES = ("x", "y", "phi")
 
 
-def _lagrangian(m, J, g, alpha, q, v):
+def _lagrangian(q, v, p):
+    m, J, g, alpha = p["m"], p["J"], p["g"], p["alpha"]
     dx, dy, dphi = v
     return 0.5 * m * (dx**2 + dy**2) + 0.5 * J * dphi**2 + m * g * jnp.sin(alpha) * q[0]
 
 
-def _constraints(q):
+def _constraints(q, p):
     phi = q[2]
     return jnp.stack([jnp.sin(phi), -jnp.cos(phi), jnp.zeros_like(phi)])[None, :]
 
 
 def _build(p):
     return System(
-        jtu.Partial(
-            _lagrangian, jnp.asarray(p["m"]), jnp.asarray(p["J"]), jnp.asarray(p["g"]), jnp.asarray(p["alpha"])
-        ),
+        _lagrangian,
         _constraints,
         coordinates=COORDINATES,
         name="knife-edge",
+        args=p,
         params=p,
         defaults=MODEL.initial_condition(p),
     )

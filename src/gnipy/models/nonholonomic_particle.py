@@ -8,7 +8,6 @@ oscillator: $y(t) = y_0\\cos\\sqrt k t + (\\dot y_0/\\sqrt k)\\sin\\sqrt k t$. T
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..system import System
@@ -28,12 +27,21 @@ def constraints(q):
     return jnp.stack([-q[1], jnp.zeros_like(q[1]), jnp.ones_like(q[1])])[None, :]
 
 
+def _lagrangian(q, v, p):
+    return lagrangian(p["k"], q, v)
+
+
+def _constraints(q, p):
+    return constraints(q)
+
+
 def _build(p):
     return System(
-        jtu.Partial(lagrangian, jnp.asarray(p["k"])),
-        constraints,
+        _lagrangian,
+        _constraints,
         coordinates=("x", "y", "z"),
         name="nonholonomic-particle",
+        args=p,
         params=p,
         defaults=MODEL.initial_condition(p),
     )

@@ -39,7 +39,6 @@ weaker (documented in the models guide).
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..system import System
@@ -61,13 +60,14 @@ def grad_S(q):
     return jnp.stack([-jnp.sin(x), jnp.zeros_like(x), jnp.zeros_like(x)])
 
 
-def _lagrangian(k, q, v):
+def _lagrangian(q, v, p):
+    k = p["k"]
     x, y = q[0], q[1]
     u = v[:3]
     return 0.5 * (u @ u) + kaluza_klein_term(grad_S(q[:3]), v) - 0.5 * k * (x**2 + y**2)
 
 
-def _constraints(q):
+def _constraints(q, p):
     return lift_constraints(_base_constraints(q[:3]))
 
 
@@ -80,10 +80,11 @@ def _default_ic(p):
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["k"])),
+        _lagrangian,
         _constraints,
         coordinates=("x", "y", "z", "w"),
         name="nonholonomic-particle-gauge",
+        args=p,
         params=p,
         defaults=_default_ic(p),
     )

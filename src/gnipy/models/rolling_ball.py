@@ -70,7 +70,6 @@ from __future__ import annotations
 
 import jax
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..inputs import provenance_number
@@ -96,14 +95,16 @@ EXAMPLE_2 = {
 }
 
 
-def _lagrangian(m, inertia, x, v):
+def _lagrangian(x, v, p):
+    m, inertia = p["m"], jnp.asarray([p["I1"], p["I2"], p["I3"]])
     # ½ m(ẋ² + ẏ²) + ½ Σ I_i ω_i² as one weighted sum: slicing v into parts gives XLA several small
     # kernels per gradient in every Newton iteration (measured: 24 fewer kernels per GNI step)
     diag = jnp.concatenate([jnp.stack([m, m]), inertia])
     return 0.5 * jnp.sum(diag * v * v)
 
 
-def _constraints(r, x):
+def _constraints(x, p):
+    r = p["r"]
     one, zero = jnp.ones_like(x[0]), jnp.zeros_like(x[0])
     return jnp.stack(
         [
@@ -113,7 +114,8 @@ def _constraints(r, x):
     )
 
 
-def _affine(Omega, x):
+def _affine(x, p):
+    Omega = p["Omega"]
     zero = jnp.zeros_like(x[0])
     return jnp.stack([-Omega * x[1], Omega * x[0], zero, zero, zero])
 
@@ -158,9 +160,9 @@ def build_system(p, *, retraction="cayley", defaults=None, reconstruction="right
         known = {k: provenance_number(v) for k, v in p.items()}
         note = orientation_note(known) if reconstruction == "right" else None
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["m"]), jnp.asarray([p["I1"], p["I2"], p["I3"]])),
-        jtu.Partial(_constraints, jnp.asarray(p["r"])),
-        jtu.Partial(_affine, jnp.asarray(p["Omega"])),
+        _lagrangian,
+        _constraints,
+        _affine,
         n=2,
         group=SO3(),
         retraction=retraction,
@@ -168,6 +170,7 @@ def build_system(p, *, retraction="cayley", defaults=None, reconstruction="right
         coordinates=COORDINATES,
         velocities=VELOCITIES,
         name="rolling-ball",
+        args=p,
         params=p,
         defaults=(None if traced else _default_ic(p)) if defaults is None else defaults,
         orientation_note=(note if traced else orientation_note(p)) if reconstruction == "right" else

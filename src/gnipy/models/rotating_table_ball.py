@@ -43,7 +43,6 @@ the constraints: $v_0 = (1, 1, 0, 2, 0)$ for the default parameters.
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..system import System
@@ -55,11 +54,13 @@ __all__ = ["MODEL", "exact"]
 COORDINATES = ("x", "y", "theta1", "theta2", "theta3")
 
 
-def _lagrangian(m, I, q, v):
+def _lagrangian(q, v, p):
+    m, I = p["m"], p["I"]
     return 0.5 * m * (v[0] ** 2 + v[1] ** 2) + 0.5 * I * (v[2:] @ v[2:])
 
 
-def _constraints(r, q):
+def _constraints(q, p):
+    r = p["r"]
     one, zero = jnp.ones_like(q[0]), jnp.zeros_like(q[0])
     return jnp.stack(
         [
@@ -69,7 +70,8 @@ def _constraints(r, q):
     )
 
 
-def _affine(Omega, q):
+def _affine(q, p):
+    Omega = p["Omega"]
     zero = jnp.zeros_like(q[0])
     return jnp.stack([-Omega * q[1], Omega * q[0], zero, zero, zero])
 
@@ -82,11 +84,12 @@ def _default_ic(p):
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["m"]), jnp.asarray(p["I"])),
-        jtu.Partial(_constraints, jnp.asarray(p["r"])),
-        jtu.Partial(_affine, jnp.asarray(p["Omega"])),
+        _lagrangian,
+        _constraints,
+        _affine,
         coordinates=COORDINATES,
         name="rotating-table-ball",
+        args=p,
         params=p,
         defaults=_default_ic(p),
     )

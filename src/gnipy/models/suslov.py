@@ -41,14 +41,13 @@ steady rotation. When $b_1 = b_2 = 0$, $\\Omega$ is constant. The attitude $R$ h
 here; :func:`exact` returns $\\Omega$ (and an empty $q$).
 
 Defaults: $I = \\begin{pmatrix} 2 & 0.3 & 0.6\\\\ 0.3 & 3 & -0.5\\\\ 0.6 & -0.5 & 4\\end{pmatrix}$,
-$a = e_3$, $R_0 = $ identity, $\\Omega_0 = w - \\frac{\\langle a, w\\rangle}{|a|^2}a$ with
+$a = e_3$, $R_0$ the identity, $\\Omega_0 = w - \\frac{\\langle a, w\\rangle}{|a|^2}a$ with
 $w = (1, 0.5, 0.3)$: $\\Omega_0 = (1, 0.5, 0)$ for $a = e_3$.
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..lie_groups import SO3
@@ -73,12 +72,19 @@ def _a(p):
     return np.array([p["a1"], p["a2"], p["a3"]], dtype=np.float64)
 
 
-def _lagrangian(I, x, v):
-    return 0.5 * v @ I @ v
+def _inertia_tensor(p):
+    """:func:`inertia_tensor` traceable (jnp), for the System's functions."""
+    return jnp.asarray(
+        [[p["I11"], p["I12"], p["I13"]], [p["I12"], p["I22"], p["I23"]], [p["I13"], p["I23"], p["I33"]]]
+    )
 
 
-def _constraints(a, x):
-    return a[None, :]
+def _lagrangian(x, v, p):
+    return 0.5 * v @ _inertia_tensor(p) @ v
+
+
+def _constraints(x, p):
+    return jnp.asarray([p["a1"], p["a2"], p["a3"]])[None, :]
 
 
 def _energy(p, q, v):
@@ -94,13 +100,14 @@ def _default_ic(p):
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(inertia_tensor(p))),
-        jtu.Partial(_constraints, jnp.asarray(_a(p))),
+        _lagrangian,
+        _constraints,
         n=0,
         group=SO3(),
         coordinates=(),
         velocities=VELOCITIES,
         name="suslov",
+        args=p,
         params=p,
         defaults=_default_ic(p),
     )

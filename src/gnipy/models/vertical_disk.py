@@ -30,7 +30,6 @@ Default initial condition: $q_0 = (0, 0, 0, 0)$, $v_0 = (r, 0, 1, 1)$ (= (1, 0, 
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 import numpy as np
 
 from ..system import System
@@ -42,12 +41,14 @@ __all__ = ["MODEL", "exact"]
 COORDINATES = ("x", "y", "phi", "theta")
 
 
-def _lagrangian(m, I_flip, I_rot, q, v):
+def _lagrangian(q, v, p):
+    m, I_flip, I_rot = p["m"], p["I_flip"], p["I_rot"]
     dx, dy, dphi, dtheta = v
     return 0.5 * m * (dx**2 + dy**2) + 0.5 * I_flip * dphi**2 + 0.5 * I_rot * dtheta**2
 
 
-def _constraints(r, q):
+def _constraints(q, p):
+    r = p["r"]
     phi = q[2]
     one, zero = jnp.ones_like(phi), jnp.zeros_like(phi)
     return jnp.stack(
@@ -64,10 +65,11 @@ def _default_ic(p):
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, jnp.asarray(p["m"]), jnp.asarray(p["I_flip"]), jnp.asarray(p["I_rot"])),
-        jtu.Partial(_constraints, jnp.asarray(p["r"])),
+        _lagrangian,
+        _constraints,
         coordinates=COORDINATES,
         name="vertical-disk",
+        args=p,
         params=p,
         defaults=_default_ic(p),
     )

@@ -15,17 +15,16 @@ The equations are $\\dot M = M\\times\\Omega + \\lambda\\gamma$, $\\dot\\gamma =
 - The energy $E = \\tfrac12\\langle M, \\Omega\\rangle$ (`energy`).
 - $F = |M|^2 - \\langle M, \\gamma\\rangle^2$ (`F`):
   $\\frac{d}{dt}|M|^2 = 2\\langle M, M\\times\\Omega + \\lambda\\gamma\\rangle = 2\\lambda\\langle M, \\gamma\\rangle$,
-  and $\\frac{d}{dt}\\langle M, \\gamma\\rangle = \\langle M\\times\\Omega, \\gamma\\rangle + \\lambda|\\gamma|^2
-  + \\langle M, \\gamma\\times\\Omega\\rangle = \\lambda$ (the two triple products cancel), so
+  and $\\frac{d}{dt}\\langle M, \\gamma\\rangle = \\langle M\\times\\Omega, \\gamma\\rangle +
+  \\lambda|\\gamma|^2 + \\langle M, \\gamma\\times\\Omega\\rangle = \\lambda$ (the two triple products cancel), so
   $\\frac{d}{dt}\\langle M, \\gamma\\rangle^2 = 2\\lambda\\langle M, \\gamma\\rangle$ as well.
 
-Defaults: $(I_1, I_2, I_3) = (1, 2, 3)$, $R_0 = $ identity ($\\gamma_0 = e_3$), $\\Omega_0 = (1, 0.5, 0)$.
+Defaults: $(I_1, I_2, I_3) = (1, 2, 3)$, $R_0$ the identity ($\\gamma_0 = e_3$), $\\Omega_0 = (1, 0.5, 0)$.
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
-import jax.tree_util as jtu
 
 from ..lie_groups import SO3
 from ..system import System
@@ -40,11 +39,11 @@ def _inertia(p):
     return jnp.asarray([p["I1"], p["I2"], p["I3"]])
 
 
-def _lagrangian(I, x, R, v):
-    return 0.5 * jnp.sum(I * v**2)
+def _lagrangian(x, R, v, p):
+    return 0.5 * jnp.sum(_inertia(p) * v**2)
 
 
-def _constraints(x, R):
+def _constraints(x, R, p):
     return R[2][None, :]  # γ = Rᵀe₃
 
 
@@ -61,7 +60,7 @@ def _F(p, q, v, R):
 
 def _build(p):
     return System(
-        jtu.Partial(_lagrangian, _inertia(p)),
+        _lagrangian,
         _constraints,
         n=0,
         group=SO3(),
@@ -69,6 +68,7 @@ def _build(p):
         coordinates=(),
         velocities=VELOCITIES,
         name="veselova",
+        args=p,
         params=p,
         defaults=((), (1.0, 0.5, 0.0)),
     )

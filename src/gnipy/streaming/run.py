@@ -232,6 +232,14 @@ def _checked_run(system, method, q0, v0, R0, *, h, steps, t_final, save_every, c
         "q0": np.asarray(system.space.coordinates(b0)).tolist(), "v0": np.asarray(v0).tolist(),
         "R0": None if system.group is None else np.asarray(system.space.orientation(b0)).ravel().tolist(),
     }
+    if system.origin is not None:  # a user's system: how to rebuild it, and its source's SHA-256
+        spec["origin"] = {"reference": system.origin[0], "source_sha256": system.origin[1]}
+    arrays = {k: np.asarray(v, dtype=np.float64) for k, v in (system.args or {}).items() if np.ndim(v) > 0}
+    if arrays:  # named parameters that are arrays (the scalars are in params): their values' SHA-256
+        digest = hashlib.sha256()
+        for k in sorted(arrays):
+            digest.update(f"{k}{arrays[k].shape}".encode() + np.ascontiguousarray(arrays[k]).tobytes())
+        spec["array_args_sha256"] = "sha256:" + digest.hexdigest()
     canonical = json.loads(json.dumps(spec))
     spec_text = json.dumps(canonical, sort_keys=True, separators=(",", ":"))
     spec_hash = "sha256:" + hashlib.sha256(spec_text.encode()).hexdigest()
@@ -336,6 +344,12 @@ def _check_stored_spec(parts: Path, canonical: dict) -> None:
                 f"resume: the interrupted run in {parts} has a different {key} "
                 f"({stored.get(key)!r}, requested {value!r}); rerun with resume=False to start afresh"
             )
+    extra = sorted(set(stored) - set(canonical))
+    if extra:  # e.g. the interrupted run was of a user's system (origin), this one of another
+        raise OutputError(
+            f"resume: the interrupted run in {parts} has a different spec (it records {extra[0]!r}, this run "
+            "does not); rerun with resume=False to start afresh"
+        )
 
 
 # ------------------------------------------------------------------------------------------

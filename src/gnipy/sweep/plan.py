@@ -198,6 +198,8 @@ def make_plan(model, grid, *, method, h, steps, t_final, save_every, set_params,
         "chunk_size": layout.size,
         "gnipy_version": __version__,
     }
+    if spec.origin is not None:  # a user's system: the SHA-256 of its source (the workers check it)
+        sweep_spec["model_source"] = spec.origin[1]
     m, orientation = _preflight(sweep_spec, axes)
     times = h * saved_steps(steps, save_every).astype(np.float64)
     return Plan(sweep_spec, tuple(axes), layout, times, coordinates, velocities, m, k, orientation, store_bytes)
@@ -210,7 +212,7 @@ def _model_and_method(model, method) -> tuple[Any, str]:
     from ..registry import default_method_for
 
     if not isinstance(model, str):
-        raise SweepError(f"model: expected a model name, got {model!r}")
+        raise SweepError(f"model: expected a model name or a reference FILE.py:NAME, got {model!r}")
     spec = get_model(model)  # InputError "model: unknown model ..."
     if method is None:  # the model's measured default
         method = default_method_for(model)
@@ -262,7 +264,26 @@ def _preflight(sweep_spec, axes) -> tuple[int, str]:
         b0 = check_member(s, sweep_spec, columns, i, int(idx[i]), q0, v0, R0)
         method.check(s, b0)
         m = s.num_constraints(b0)
+    if isinstance(systems, list) and len(systems) > 1:
+        _check_batchable(systems, sweep_spec["model"])
     return m, describe_orientations(systems if isinstance(systems, list) else [systems])
+
+
+def _check_batchable(systems, model: str) -> None:
+    """The members' systems run as one batch (their parameters are array leaves), else a SweepError
+    that says how to write the model so that they do."""
+    from ..ensembles import stack_systems
+
+    try:
+        stack_systems(systems)
+    except InputError as e:
+        why = str(e).partition(", but ")[2].partition(". Build")[0] or str(e)
+        raise SweepError(
+            f"grid: the members of {model!r} for different parameter values cannot run as one batch ({why}). "
+            "Write its functions once, at module level, taking the parameters as their last argument, and "
+            "return gnipy.System(l, mu, ..., args=dict(m=m, ...)): then l(q, v, args) reads args['m'] and "
+            "the members differ only in arrays (see the user guide, 'Parameters as arguments')"
+        ) from None
 
 
 def members_of(spec) -> int:

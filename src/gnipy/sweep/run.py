@@ -155,7 +155,11 @@ def run_sweep(
     """Run a parameter sweep on a dask.distributed cluster and write it to a zarr store.
 
     Arguments:
-        model: a model name (see :func:`gnipy.model_names`).
+        model: a model name (see :func:`gnipy.model_names`), or the user's system as
+            `"path/to/file.py:NAME"` or `"package.module:NAME"` (:func:`gnipy.get_model`; the workers
+            load it again, and refuse a file changed since the sweep was planned). Sweeping its
+            parameters needs a System whose functions take them as `args`
+            (:class:`gnipy.System`), so that the members run as one batch.
         grid: the grid axes: `"NAME=linspace(START, STOP, COUNT)"` or `"NAME=START:STOP:COUNT"`
             strings, :class:`GridAxis` objects, or a mapping `{name: (start, stop, count)}`; NAME
             is a parameter, `q0.<coordinate>` or `v0.<velocity>`. The sweep is their Cartesian

@@ -22,10 +22,14 @@ def member_inputs(job: Mapping[str, Any], columns: Mapping[str, np.ndarray], siz
     from ..models import get_model
 
     spec = get_model(job["model"])
+    if spec.origin is not None and job.get("model_source") != spec.origin[1]:
+        raise SweepError(f"model: {job['model']!r} changed since the sweep was planned (its source's SHA-256 is "
+                         f"{spec.origin[1]}, the sweep's {job.get('model_source')}); sweep again with the file "
+                         "as it is now, into another output path or with overwrite=True")
     base = dict(job["params"])
     pcols = {k: np.asarray(v, dtype=np.float64) for k, v in columns.items() if not k.startswith(("q0.", "v0."))}
     if pcols:
-        systems = model_systems(job["model"], **base, **pcols)
+        systems = model_systems(spec, **base, **pcols)  # the spec checked above: not loaded again
         first = systems[0]
     else:
         systems = first = spec.build(dict(spec.params) | base)
