@@ -17,32 +17,67 @@ def test_site_builds_strict(tmp_path):
     pytest.importorskip("mkdocs")
     pytest.importorskip("mkdocstrings_handlers.python")
     site = tmp_path / "site"
+    # built with the network unreachable: every socket connection and name lookup of the build fails
+    offline = (
+        "import socket, runpy, sys\n"
+        "def unreachable(*args, **kwargs):\n"
+        "    raise OSError(101, 'Network is unreachable (tests/test_docs.py)')\n"
+        "socket.socket.connect = socket.socket.connect_ex = unreachable\n"
+        "socket.create_connection = socket.getaddrinfo = socket.gethostbyname = unreachable\n"
+        "sys.argv = ['mkdocs', 'build', '--strict', '--config-file', sys.argv[1], '--site-dir', sys.argv[2]]\n"
+        "runpy.run_module('mkdocs', run_name='__main__')\n"
+    )
     res = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "--config-file", str(ROOT / "mkdocs.yml"),
-         "--site-dir", str(site)],
+        [sys.executable, "-c", offline, str(ROOT / "mkdocs.yml"), str(site)],
         cwd=ROOT, check=False, capture_output=True, text=True, timeout=300,
     )
     assert res.returncode == 0, res.stdout + res.stderr
     assert "WARNING" not in res.stderr, res.stderr
+    pages = {str(page.relative_to(site)): page.read_text(encoding="utf-8") for page in sorted(site.rglob("*.html"))}
+    # the site works offline: no page loads a script or a stylesheet from elsewhere
+    external = re.compile(r"<(?:script|link)\b[^>]*\b(?:src|href)=[\"'](?:[a-z]+:)?//", re.I)
+    assert [name for name, text in pages.items() if external.search(text)] == []
+    # ... its maths is MathML, typeset when the site was built (docs/_hooks/math_mathml.py): no TeX
+    # is left for a script to typeset
+    raw_tex = re.compile(r'class="arithmatex">\s*\\[(\[]')
+    assert [name for name, text in pages.items() if raw_tex.search(text)] == []
+    theory = pages["theory/index.html"]
+    assert theory.count("<math") > 20 and "mathvariant" in theory
+    # ... and its code is coloured by Pygments at build time, with the stylesheet in the site
+    assert '<span class="kn">import</span>' in pages["user-guide/systems/index.html"]
+    assert (site / "css" / "pygments.css").is_file()
+    assert [name for name, text in pages.items() if "\x00" in text] == []
     for page in ["index.html", "getting-started/index.html", "theory/index.html", "conventions/index.html",
                  "user-guide/cli/index.html",
                  "api/gnipy/index.html", "api/plots/index.html", "api/io/index.html", "api/lie_groups/index.html",
                  "api/retractions/index.html", "api/integrators/index.html", "api/models/index.html"]:
         assert (site / page).is_file(), page
-    # the API pages hold the generated reference, not just their headings
+    # the API pages hold the generated reference, not just their headings; signatures are formatted
+    # one parameter a line (Black), not cut at the page's edge
     api = (site / "api" / "gnipy" / "index.html").read_text()
     for name in ["gnipy.System", "gnipy.simulate.simulate", "gnipy.Solution", "gnipy.get_model"]:
         assert f'id="{name}"' in api, name
-    assert 'id="gnipy.plots.plot_convergence"' in (site / "api" / "plots" / "index.html").read_text()
-    assert 'id="gnipy.io.write_netcdf"' in (site / "api" / "io" / "index.html").read_text()
+    assert re.search(r"simulate</span><span class=\"p\">\(</span>\n\s+<span class=\"n\">system</span>", api), \
+        "the signature of simulate is not formatted one parameter a line"
+    # a page per public module (docs/_hooks/module_pages.py), listed on api/modules/
+    modules = site / "api" / "modules"
+    assert 'id="gnipy.plots.plot_convergence"' in (modules / "gnipy.plots" / "index.html").read_text()
+    assert 'id="gnipy.io.write_netcdf"' in (modules / "gnipy.io" / "index.html").read_text()
+    listed = set(re.findall(r'href="(gnipy[\w.]*)/"', (modules / "index.html").read_text()))
+    sources = {".".join(["gnipy", *p.relative_to(ROOT / "src" / "gnipy").with_suffix("").parts]).removesuffix(".__init__")
+               for p in (ROOT / "src" / "gnipy").rglob("*.py")
+               if "cli" not in p.relative_to(ROOT / "src" / "gnipy").parts and p.name != "__main__.py"}
+    assert listed == sources - {"gnipy"}, sorted(listed ^ (sources - {"gnipy"}))
+    assert all((modules / name / "index.html").is_file() for name in listed)
     # no Sphinx role is left as text (docs/_hooks/sphinx_roles.py turns them into cross-references)
     roles = re.compile(r":(?:py:)?(?:mod|class|func|meth|data|attr|exc|obj|const|term):")
     literal = [str(page.relative_to(site)) for page in sorted(site.rglob("index.html"))
                if roles.search(page.read_text(errors="replace"))]
     assert literal == [], literal
     # ... a link where the object has an entry (`:mod:`gnipy.forcing`` in a docstring of gnipy's page)
-    assert '<a class="autorefs autorefs-internal" href="../control/#gnipy.forcing"><code>gnipy.forcing</code></a>' in api
-    # the maths of every page, the docstrings of the API pages included, reached MathJax intact
+    assert ('<a class="autorefs autorefs-internal" href="../modules/gnipy.forcing/#gnipy.forcing"><code>gnipy.forcing'
+            '</code></a>') in api
+    # the maths of every page, the docstrings of the API pages included, reached the typesetter intact
     mangled = [f"{page.relative_to(site)}: {problem}" for page in sorted(site.rglob("index.html"))
                for problem in rendered_math_problems(page.read_text())]
     assert mangled == [], "\n".join(mangled)
@@ -76,7 +111,7 @@ def test_getting_started_repeats_the_readme_quick_start():
 
 
 # ---------------------------------------------------------------------------------------------
-# Maths on the pages. MathJax typesets what pymdownx.arithmatex protects: `$...$` inline and
+# Maths on the pages. The build typesets (as MathML) what pymdownx.arithmatex protects: `$...$` inline and
 # `$$...$$` display blocks. Anything else is Markdown, where `*` and `_` are emphasis: plain-text
 # maths such as "p̄ = P*p⁺ + Q*Π" or "(b_k, p⁺_k): reflect to get p⁻_k; ... x_{k+1}" renders as
 # "P<em>p⁺ + Q</em>Π" and "p⁺<em k_1>k): ... x</em>" (attr_list even reads "{k+1}" as attributes).

@@ -1,1 +1,1 @@
-"""The paper's experiments, reproducible by one call each: figures (:mod:`.figures`)."""
+"""The paper's experiments, reproducible by one call each: figures (:mod:`~gnipy.experiments.figures`)."""

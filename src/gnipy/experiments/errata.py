@@ -1,12 +1,12 @@
 """The paper's errata (docs/conventions.md, "Errata"), each measured by running gnipy: the printed
 form fails and the corrected one holds.
 
-:func:`errata_rows` -> list of :class:`~.records.Erratum`:
+:func:`errata_rows` -> list of :class:`~gnipy.experiments.records.Erratum`:
 
 - the sign of Π in (GNIredb-aff)/(RBb): the GNI on example 2 of §7.4 with Π → −Π against the five
   explicit equations of §7.4 (:func:`five_equations`) and the rolling constraints;
 - Remark 5.1's two-step equation ($q_{k+1} - 2q_k + q_{k+1}$ printed), on RATTLE/SHAKE runs of the
-  particle order study (:mod:`.particle_study`);
+  particle order study (:mod:`~gnipy.experiments.particle_study`);
 - §7.4's model with unequal moments is not the physical Chaplygin sphere: continuous solutions
   (:class:`gnipy.ContinuousReference` through `gnipy.simulate(system, "reference", ...)`) of
   `rolling-ball` and `chaplygin-sphere` from the same start;

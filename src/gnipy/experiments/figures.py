@@ -20,8 +20,8 @@ Figure 2 (the h/2 run saves every second node), and all runs of Figure 3 that co
 paper's start (`state0=`, the GNI state at node 1). The slopes are :func:`gnipy.analysis.fitted_order`
 with `stop_at_minimum=True` (no point past the smallest error: round-off, not truncation).
 
-**Layout.** Figures 1 and 2 live here, Figure 3 in :mod:`.figure3`, what they share (the runs,
-slopes, error measures, progress feed and writer) in :mod:`.figure_tools`.
+**Layout.** Figures 1 and 2 live here, Figure 3 in :mod:`~gnipy.experiments.figure3`, what they share (the runs,
+slopes, error measures, progress feed and writer) in :mod:`~gnipy.experiments.figure_tools`.
 
 **Progress.** `progress(advance, description)` is called as work proceeds; the advances of one
 figure add up to 1.0 (the caller scales them to its bar).

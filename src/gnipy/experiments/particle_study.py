@@ -8,7 +8,7 @@ is the largest $|q - q_\\mathrm{ref}|$ at t = 0, 0.5, 1, 1.5, 2 against the cont
 :func:`gnipy.analysis.fitted_order` over the points above round-off (1e-11, at least three). The
 expected order of each method is its `order` (the one statement of it, on the method).
 
-Every run is one :func:`gnipy.simulate` call that saves every node (:func:`~.records.all_nodes`):
+Every run is one :func:`gnipy.simulate` call that saves every node (:func:`~gnipy.experiments.records.all_nodes`):
 the theorem table also checks the constraints and the equality of the explicit schemes with the
 GNI at all nodes, and the errata read the two-step equation of Remark 5.1 off them. All runs take
 the steps of the finest h (the nodes after t = T are dropped), so that they save as many nodes and

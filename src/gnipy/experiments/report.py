@@ -8,8 +8,8 @@ table with pass/fail, and the errata. Files are written atomically (a temporary 
 folder, then `os.replace`: :func:`gnipy.files.atomic_write_text`), so a reader never sees half a
 report, and a failed write (a full disk) leaves an earlier report as it was.
 
-**Output folders** (shared by the figures of :mod:`.figures` and :mod:`.struggles`). A folder that
-does not exist is created with gnipy's marker (:func:`gnipy.files.make_owned_dir`); in such a folder
+**Output folders** (shared by the figures of :mod:`~gnipy.experiments.figures` and
+:mod:`~gnipy.experiments.struggles`). A folder that does not exist is created with gnipy's marker (:func:`gnipy.files.make_owned_dir`); in such a folder
 gnipy replaces its own files on a rerun. In a folder gnipy did not create, an existing file of the
 same name is replaced only when asked (`overwrite=True`, `gni reproduce --overwrite`, or inside
 :func:`overwriting`); a symbolic link or special file is never written through.

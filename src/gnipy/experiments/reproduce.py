@@ -1,5 +1,5 @@
 """Reproduce the paper in one call: figures 1–3, the theorem table, the errata, where the GNI
-struggles (measured failures beyond the paper, :mod:`.struggles`), and the report.
+struggles (measured failures beyond the paper, :mod:`~gnipy.experiments.struggles`), and the report.
 
 :func:`reproduce` runs every stage with a rich progress display (one bar per stage, fed by the
 stages' `progress(advance, description)` callbacks), writes `report.md` and the self-contained
@@ -35,8 +35,8 @@ __all__ = ["reproduce", "ReproductionResult", "run_reproduction", "check_output_
 
 FIGURE_NAMES = ("figure_1", "figure_2", "figure_3")
 
-#: The files a reproduction writes into its folder (the figures of :mod:`.figures` and
-#: :mod:`.struggles`, PNG and PDF, and the report).
+#: The files a reproduction writes into its folder (the figures of :mod:`~gnipy.experiments.figures` and
+#: :mod:`~gnipy.experiments.struggles`, PNG and PDF, and the report).
 OUTPUT_FILES = tuple(
     f"{stem}.{ext}"
     for stem in ("figure1", "figure2", "figure3", "struggles_sleigh", "struggles_suslov", "struggles_oscillator")
@@ -127,7 +127,7 @@ class _SimpleFigure:
 
 
 def _figure_functions() -> dict[str, Callable | BaseException]:
-    """`figure_1` .. `figure_3` from :mod:`.figures`, imported lazily (or the import error)."""
+    """`figure_1` .. `figure_3` from :mod:`~gnipy.experiments.figures`, imported lazily (or the import error)."""
     try:
         from . import figures
     except Exception as e:  # the module may be missing or broken: report it, run the rest

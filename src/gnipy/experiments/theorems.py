@@ -9,20 +9,20 @@ Two calls, both `(quick, progress=None)`:
     ((EuAHam), (EuBHam): 1), RATTLE ((nonholonomicRATTLE), [SDD2]: 2), the composition
     $F_A^{h/2}\\circ F_B^{h/2}$ (remark after Thm 5.2: 2), the GNI with the Euler A, Euler B,
     trapezoid and midpoint discrete Lagrangians (1, 1, 2, 2), on the nonholonomic particle against
-    the continuous reference (:mod:`.particle_study`; the expected order is the method's `order`);
+    the continuous reference (:mod:`~gnipy.experiments.particle_study`; the expected order is the method's `order`);
   * Theorem 5.2: $F_A^h\\circ F_B^{-h} = \\mathrm{Id}$, residual over random constrained states
-    (:mod:`.identities`);
+    (:mod:`~gnipy.experiments.identities`);
   * §4 (after (GNIloc)) and §6: the reported momentum of every GNI variant satisfies the
     constraints exactly;
   * §4 (end, [SDD1]): on SO(3) with a bi-invariant metric, an attitude-dependent distribution and
     a left-invariant $l_d$, the GNI conserves the energy: relative drift of $|p^+_k|$ over
-    $10^4$ (quick) or $10^5$ steps (:mod:`.identities`);
+    $10^4$ (quick) or $10^5$ steps (:mod:`~gnipy.experiments.identities`);
   * §5: the explicit schemes (EuAHam), (EuBHam), (nonholonomicRATTLE) are the GNI with the Euler A,
     Euler B and trapezoid $l_d$ (equal node by node).
 
 - :func:`errata_rows` -> list of :class:`Erratum`: the misprints and readings of the paper
   (docs/conventions.md, "Errata"), each with a measurement that shows the printed form failing and
-  the corrected one holding (:mod:`.errata`).
+  the corrected one holding (:mod:`~gnipy.experiments.errata`).
 
 Every run is a :func:`gnipy.simulate` call (the continuous reference too: `"reference"`). The
 particle study is computed once per `quick` and shared by the table and the errata.

@@ -16,7 +16,7 @@ through :mod:`gnipy.private_cache`, and what is trusted is exactly this: the fol
 following a link, if it is a directory owned by the current user that its group and others cannot
 write (a missing one is created with mode 0700); in it, the per-user secret `.key` (32 random
 bytes, mode 0600, the user's); and an entry `<key>.o`, a regular file of the user with one link,
-holding the object code then `HMAC-SHA256(secret, key + b"\0" + object code)`. The key is the
+holding the object code then `HMAC-SHA256(secret, key + b"\\0" + object code)`. The key is the
 SHA-256 of the program (its LLVM IR, the llvmlite version and the CPU's name and features), so an
 entry loads only for the program it was compiled from, and only if this user's gnipy wrote it.
 An entry that does not authenticate (damaged, truncated, another program's, planted, or written
