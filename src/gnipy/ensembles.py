@@ -27,11 +27,11 @@ from .compilation import jit
 from .sharding import member_devices, pad_members, shard_map
 from .spaces import Point
 from .errors import InputError
-from .inputs import refuse_text_or_bool
+from .inputs import real_array, refuse_text_or_bool
 from .run_arguments import member_initial_conditions
 from .solution import Solution
 from .stepping import run_nodes
-from .system import System, real_array
+from .system import System
 
 __all__ = ["stack_systems", "model_systems", "broadcast_initial_conditions", "check_batch", "member_initial_conditions",
            "member_params"]

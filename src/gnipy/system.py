@@ -26,40 +26,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .compilation import jit
-from .spaces import Point
-
+from . import system_checks as checks
 from .errors import InputError
-from .inputs import finite_vector, flag, format_scientific, real_array, require_float64
 from .system_arguments import (check_functions, configuration_space, dimension, inputs_count, provenance,
-                               scalar_args, system_args, velocity_names)
-from .system_checks import (check_affine_field, check_constraint_forms, check_mechanical_type, check_metric,
-                            lagrangian_derivatives, metric_derivatives, validation_values)
+                               scalar_args, system_args, takes_args_last, velocity_names)
+from .system_checks import check_mechanical_type, project_velocity  # noqa: F401 - imported from here
 
 __all__ = ["System"]
-
-
-def _takes(f, count: int) -> bool:
-    """Whether `f` takes the named parameters as its `count`-th positional argument: it takes `*args`,
-    or it needs `count` positional arguments (it cannot be called with one fewer). False when its
-    signature cannot be read: a force is then called without them."""
-    import inspect
-
-    try:
-        signature = inspect.signature(f)
-    except (TypeError, ValueError):
-        return False
-    if any(p.kind is p.VAR_POSITIONAL for p in signature.parameters.values()):
-        return True
-    try:
-        signature.bind(*range(count))
-    except TypeError:
-        return False
-    try:
-        signature.bind(*range(count - 1))
-    except TypeError:
-        return True
-    return False
 
 
 class System(eqx.Module):
@@ -277,18 +250,14 @@ class System(eqx.Module):
         new_args = system_args({**self.args, **values})
         params = dict(self.params)
         params.update(provenance(scalar_args(new_args), None)[0])
-        new = eqx.tree_at(lambda s: s.args, self, new_args)
-        object.__setattr__(new, "params", provenance(params, None)[0])
-        if self.defaults is not None or self.orientation_note:
-            # the default initial condition (and the note on R) were made for the old values: those of
-            # the new ones where the model can build them, else none (a run then asks for q0 and v0)
-            rebuilt = None
-            if self.rebuild is not None and not any(isinstance(x, jax.core.Tracer)
-                                                    for x in jax.tree_util.tree_leaves(new_args)):
-                rebuilt = self.rebuild({k: float(v) for k, v in scalar_args(new_args).items()})
-            object.__setattr__(new, "defaults", None if rebuilt is None else rebuilt.defaults)
-            object.__setattr__(new, "orientation_note", "" if rebuilt is None else rebuilt.orientation_note)
-        return new
+        # the default initial condition (and the note on R) were made for the old values: those of
+        # the new ones where the model can build them, else none (a run then asks for q0 and v0)
+        rebuilt = None
+        if self.rebuild is not None and not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(new_args)):
+            rebuilt = self.rebuild({k: float(v) for k, v in scalar_args(new_args).items()})
+        return self._replaced(args=new_args, params=provenance(params, None)[0],
+                              defaults=None if rebuilt is None else rebuilt.defaults,
+                              orientation_note="" if rebuilt is None else rebuilt.orientation_note)
 
     def L(self, b, v):
         """The Lagrangian $l(b, v)$ at a base point."""
@@ -376,50 +345,28 @@ class System(eqx.Module):
         jnp.array([0.0, 0.0, u[0]]), inputs=1)`. On a system with named parameters (:attr:`args`,
         as the zoo's models) a force that takes one more argument receives them last,
         `F(q, v, u, t, args)`; `F(q, v, u, t)` keeps working."""
-        import dataclasses
-
         if not callable(force):
             raise InputError(f"force: expected a callable F(q, v, u, t), got {type(force).__name__}")
         if isinstance(inputs, bool) or int(inputs) != inputs or inputs < 0:
             raise InputError(f"inputs: expected a non-negative integer, got {inputs!r}")
         from .forcing import Drive
 
-        new = object.__new__(type(self))
-        for f in dataclasses.fields(self):
-            object.__setattr__(new, f.name, getattr(self, f.name))
-        object.__setattr__(new, "force", force)
-        object.__setattr__(new, "force_args", self.args is not None and _takes(force, len(self._leading()) + 4))
-        object.__setattr__(new, "inputs", int(inputs))
-        object.__setattr__(new, "drive", Drive.make(inputs=int(inputs)))
-        return new
+        return self._replaced(force=force, inputs=int(inputs), drive=Drive.make(inputs=int(inputs)),
+                              force_args=self.args is not None and takes_args_last(force, len(self._leading()) + 4))
 
     def as_model(self, model: str, rebuild: Callable[..., Any] | None = None) -> "System":
         """This system recorded as the zoo model `model` (what the zoo's builds return,
         :func:`gnipy.registry.register`): the model's registered invariants and measured default
         method (:func:`gnipy.get_model`) then apply to it. A System written by hand is no model's,
         whatever its `name`."""
-        import dataclasses
-
-        new = object.__new__(type(self))
-        for f in dataclasses.fields(self):
-            object.__setattr__(new, f.name, getattr(self, f.name))
-        object.__setattr__(new, "model", str(model))
-        object.__setattr__(new, "rebuild", rebuild)
-        return new
+        return self._replaced(model=str(model), rebuild=rebuild)
 
     def as_user_model(self, reference: str, digest: str | None, rebuild: Callable[..., Any] | None = None
                       ) -> "System":
         """This system recorded as built by the user's function `reference` (`FILE.py:NAME` or
         `module:NAME`, :mod:`gnipy.user_systems`) from a source of SHA-256 `digest` (and
         :attr:`rebuild`, how to build it again)."""
-        import dataclasses
-
-        new = object.__new__(type(self))
-        for f in dataclasses.fields(self):
-            object.__setattr__(new, f.name, getattr(self, f.name))
-        object.__setattr__(new, "origin", (str(reference), None if digest is None else str(digest)))
-        object.__setattr__(new, "rebuild", rebuild)
-        return new
+        return self._replaced(origin=(str(reference), None if digest is None else str(digest)), rebuild=rebuild)
 
     def driven(self, drive) -> "System":
         """A copy of this system with the :class:`gnipy.forcing.Drive` `drive` (its inputs)."""
@@ -445,18 +392,17 @@ class System(eqx.Module):
 
         This is what compiled code receives: systems that differ only in parameter values then
         share one compilation, and can be stacked into a batch (their parameters are array
-        leaves of the functions, e.g. `jax.tree_util.Partial` arguments).
+        leaves: its `args`, or `jax.tree_util.Partial` arguments of its functions).
         """
+        return self._replaced(params=(), origin=None, rebuild=None, defaults=None, orientation_note="")
+
+    def _replaced(self, **fields) -> "System":
+        """A copy with `fields` set (static ones too, which `eqx.tree_at` cannot set)."""
         import dataclasses
 
         new = object.__new__(type(self))
         for f in dataclasses.fields(self):
-            object.__setattr__(new, f.name, getattr(self, f.name))
-        object.__setattr__(new, "params", ())
-        object.__setattr__(new, "origin", None)
-        object.__setattr__(new, "rebuild", None)
-        object.__setattr__(new, "defaults", None)
-        object.__setattr__(new, "orientation_note", "")
+            object.__setattr__(new, f.name, fields.get(f.name, getattr(self, f.name)))
         return new
 
     # ----------------------------------------------------------------------------------------
@@ -469,25 +415,7 @@ class System(eqx.Module):
     def initial_point(self, q0, R0=None):
         """The validated base point from coordinates `q0` and (on $\\mathbb{R}^n\\times G$) an
         orientation `R0` (default: the identity)."""
-        x0 = finite_vector("q0", q0, self.n)
-        if self.group is None:
-            if R0 is not None:
-                raise InputError("R0: this system has no group part")
-            return jnp.asarray(x0)
-        k = self.group.matrix_size
-        if R0 is None:
-            R = np.eye(k)  # the identity of every matrix group (NumPy: no device dispatch)
-        else:
-            R = real_array("R0", R0, f"a {k}x{k} group matrix")
-            if R.size == k * k:
-                R = R.reshape(k, k)
-            if R.shape != (k, k):
-                raise InputError(f"R0: expected a {k}x{k} group matrix, got shape {R.shape}")
-            if not np.all(np.isfinite(R)):
-                raise InputError("R0: contains NaN or infinite values")
-            if not self.group.is_element(R):  # e.g. a rotation matrix on SO(3)
-                raise InputError(f"R0: {self.group.why_not_element(R)}")
-        return Point(jnp.asarray(x0), jnp.asarray(R))
+        return checks.initial_point(self, q0, R0)
 
     def check(self, q0, v0=None, *, R0=None, project_v0: bool = False, tol: float = 1e-10):
         """Validate the system at the initial point and return `(b0, v0)` (float64).
@@ -508,74 +436,13 @@ class System(eqx.Module):
         Raises:
             InputError: naming the argument and the problem.
         """
-        require_float64()
-        project_v0 = flag("project_v0", project_v0)
-        b0 = self.initial_point(q0, R0)
-        if v0 is not None:
-            v0 = finite_vector("v0", v0, self.dim)
-        vals = self._validation_values(b0)
-        self._check_mechanical_values(vals, tol=1e-9)
-        check_metric(vals["G"], tol)
-        N = self.dim
-        mu = check_constraint_forms(vals["mu"], N)
-        Y = check_affine_field(vals["Y"], N)
-        if self.force is not None:
-            self._check_force(b0, np.zeros(N) if v0 is None else v0)
-        if v0 is None:
-            return b0, None
-        res = mu @ (v0 - Y)
-        scale = max(1.0, float(np.max(np.abs(v0))), float(np.max(np.abs(Y))))
-        if np.max(np.abs(res)) > tol * scale:
-            if not project_v0:
-                raise InputError(
-                    "v0: the initial velocity violates the constraints mu(q0)(v0 - Y(q0)) = 0 "
-                    f"(residual {format_scientific(np.max(np.abs(res)))}); pass project_v0=True to project it"
-                )
-            v0 = np.asarray(_project_velocity(self.without_metadata(), b0, jnp.asarray(v0)))
-        return b0, v0
-
-    def _check_force(self, b0, v0):
-        N = self.dim
-        form = f"F({', '.join(self._leading())}, v, u, t{', args' if self.force_args else ''})"
-        try:
-            F = np.asarray(self._call_force(*self._args(b0), jnp.asarray(v0, jnp.float64),
-                                            jnp.zeros(self.inputs), jnp.asarray(0.0)))
-        except Exception as e:  # the user's function failed: say where
-            raise InputError(f"force: evaluating {form} failed at q0 (u = 0, t = 0): {e}") from e
-        if F.size != N:
-            raise InputError(f"force: {form} must return {N} components (one per velocity), got shape {F.shape}")
-        if not np.all(np.isfinite(F)):
-            raise InputError("force: F(q0, v0, 0, 0) is not finite")
-
-    _SAMPLES = 3
-
-    def _validation_values(self, b0) -> dict:
-        """Everything the checks need, in one compiled evaluation (op by op, the derivatives cost
-        seconds of small compilations): l, G, V and ∂l/∂v(0) at `b0` and at nearby points, and
-        G, μ, Y at `b0`. A failure of the user's functions becomes a InputError."""
-        rng = np.random.default_rng(0)
-        N = self.dim
-        ws = 0.1 * rng.standard_normal((self._SAMPLES, N))
-        ws[0] = 0.0
-        vs = rng.standard_normal((self._SAMPLES, N))
-        try:
-            out = validation_values(self.without_metadata(), b0, jnp.asarray(ws), jnp.asarray(vs))
-        except InputError:
-            raise
-        except Exception as e:  # the user's function failed while being traced: say where
-            raise InputError(f"lagrangian/constraints/affine: evaluating the system's functions failed: {e}") from e
-        out = {k: np.asarray(v) for k, v in out.items()}
-        out["vs"] = vs
-        return out
-
-    def _check_mechanical_values(self, vals, *, tol: float):
-        check_mechanical_type(vals, self._SAMPLES, tol=tol)
+        return checks.check_system(self, q0, v0, R0=R0, project_v0=project_v0, tol=tol)
 
     def check_mechanical(self, b0, *, tol: float = 1e-9, samples: int = 3):
         """Raise :class:`InputError` unless `l(b, v) = ½vᵀG(b)v − V(b)` at and near `b0`
         (`samples` points: `b0` and random nearby ones; compiled once per system structure)."""
-        del samples  # fixed at _SAMPLES so that the compiled check is shared
-        self._check_mechanical_values(self._validation_values(b0), tol=tol)
+        del samples  # fixed at gnipy.system_checks.SAMPLES so that the compiled check is shared
+        check_mechanical_type(checks.validation_values_at(self, b0), checks.SAMPLES, tol=tol)
 
     def has_constant_metric(self, b0) -> bool:
         """Whether the metric does not depend on the base point (exact zero derivative at samples).
@@ -583,23 +450,13 @@ class System(eqx.Module):
         Automatic differentiation returns an exact zero for a metric that does not depend on the
         base point, and a nonzero value almost surely at random points otherwise.
         """
-        rng = np.random.default_rng(1)
-        ws = jnp.asarray(0.3 * rng.standard_normal((2, self.dim)))
-        dG = np.asarray(metric_derivatives(self.without_metadata(), b0, ws))
-        return not np.any(dG != 0.0)
+        return checks.has_constant_metric(self, b0)
 
     def _default_point(self):
         """The base point of the default initial condition (`defaults`), or the origin (and the
         identity orientation) where the system has none: where probes such as
         :meth:`lagrangian_depends_on` and the methods' `check` look at it."""
-        defaults = self.defaults or ()
-        concrete = all(d is None or all(isinstance(x, float) for x in d) for d in defaults)
-        x0 = defaults[0] if defaults and concrete and defaults[0] is not None else np.zeros(self.n)
-        R0 = defaults[2] if len(defaults) > 2 and concrete and defaults[2] is not None else None
-        try:
-            return self.initial_point(np.asarray(x0), None if R0 is None else np.asarray(R0))
-        except InputError:
-            return self.initial_point(np.zeros(self.n))
+        return checks.default_point(self)
 
     def lagrangian_depends_on(self, part: str = "configuration") -> bool:
         """Whether $l(b, v)$ depends on the base point: `"configuration"`, on any of its coordinates
@@ -612,19 +469,7 @@ class System(eqx.Module):
         `jax.grad`) has no values to test: it is said to depend on them.
         It decides which methods are symmetric on the system (:meth:`gnipy.integrators.base.Integrator.symmetric_on`).
         """
-        if part not in ("configuration", "orientation"):
-            raise InputError(f"part: expected 'configuration' or 'orientation', got {part!r}")
-        if part == "orientation" and (self.group is None or not self.depends_on_orientation):
-            return False
-        core = self.without_metadata()
-        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(core)):
-            return True
-        rng = np.random.default_rng(2)
-        ws = 0.3 * rng.standard_normal((3, self.dim))
-        vs = rng.standard_normal((3, self.dim))
-        with jax.ensure_compile_time_eval():  # also when called while tracing (a traced h): values known
-            d = np.asarray(lagrangian_derivatives(core, self._default_point(), ws, vs))
-        return bool(np.any(d[:, self.n:] != 0.0 if part == "orientation" else d != 0.0))
+        return checks.lagrangian_depends_on(self, part)
 
 
 def describe_orientations(systems) -> str:
@@ -639,16 +484,3 @@ def describe_orientations(systems) -> str:
     notes = list(dict.fromkeys(s.orientation_note for s in systems if s.orientation_note))
     base = systems[0].without_metadata().orientation_description
     return f"{base}; depending on the member: " + " | ".join(notes)
-
-
-@jit
-def _project_velocity(system, b, v):
-    return project_velocity(system, b, v)
-
-
-def project_velocity(system: System, b, v):
-    """$\\mathbb{G}$-orthogonal projection of v onto the affine constraint space: $P v + Q Y$."""
-    from .projectors import projectors
-
-    P, Q = projectors(system.metric(b), system.mu(b))
-    return P @ v + Q @ system.Y(b)

@@ -17,7 +17,7 @@ from .inputs import provenance_number
 from .spaces import EuclideanSpace, GroupSpace
 
 __all__ = ["check_functions", "dimension", "configuration_space", "velocity_names", "provenance", "inputs_count",
-           "Args", "system_args", "scalar_args"]
+           "Args", "system_args", "scalar_args", "takes_args_last"]
 
 
 def check_functions(lagrangian, constraints, affine, force) -> None:
@@ -152,6 +152,29 @@ def system_args(args) -> dict | None:
             raise InputError(f"args: parameter {k!r} must be finite, got {v!r}")
         out[k] = jnp.asarray(a)
     return Args(out)
+
+
+def takes_args_last(f, count: int) -> bool:
+    """Whether `f` takes the named parameters as its `count`-th positional argument: it takes `*args`,
+    or it needs `count` positional arguments (it cannot be called with one fewer). False when its
+    signature cannot be read: a force is then called without them."""
+    import inspect
+
+    try:
+        signature = inspect.signature(f)
+    except (TypeError, ValueError):
+        return False
+    if any(p.kind is p.VAR_POSITIONAL for p in signature.parameters.values()):
+        return True
+    try:
+        signature.bind(*range(count))
+    except TypeError:
+        return False
+    try:
+        signature.bind(*range(count - 1))
+    except TypeError:
+        return True
+    return False
 
 
 def scalar_args(args) -> dict:

@@ -13,7 +13,12 @@ import numpy as np
 
 from .compilation import jit
 from .errors import InputError
-from .inputs import format_scientific
+from .inputs import finite_vector, flag, format_scientific, real_array, require_float64
+from .spaces import Point
+
+#: The sample points of the mechanical-type check (b0 and nearby points): fixed, so that its
+#: compiled evaluation is shared by every system of a shape.
+SAMPLES = 3
 
 
 def check_metric(G, tol: float) -> None:
@@ -119,3 +124,144 @@ def lagrangian_derivatives(system, b0, ws, vs):
         return jax.grad(lambda u: system.L(system.space.move(b, u), v))(jnp.zeros(system.dim))
 
     return jax.vmap(one)(ws, vs)
+
+
+# ------------------------------------------------------------------------------------------------
+# The checks of a System (its methods delegate here; `system` is a gnipy.System)
+# ------------------------------------------------------------------------------------------------
+def initial_point(system, q0, R0=None):
+    """:meth:`gnipy.System.initial_point`: the validated base point of `q0` (and `R0`)."""
+    x0 = finite_vector("q0", q0, system.n)
+    if system.group is None:
+        if R0 is not None:
+            raise InputError("R0: this system has no group part")
+        return jnp.asarray(x0)
+    k = system.group.matrix_size
+    if R0 is None:
+        R = np.eye(k)  # the identity of every matrix group (NumPy: no device dispatch)
+    else:
+        R = real_array("R0", R0, f"a {k}x{k} group matrix")
+        if R.size == k * k:
+            R = R.reshape(k, k)
+        if R.shape != (k, k):
+            raise InputError(f"R0: expected a {k}x{k} group matrix, got shape {R.shape}")
+        if not np.all(np.isfinite(R)):
+            raise InputError("R0: contains NaN or infinite values")
+        if not system.group.is_element(R):  # e.g. a rotation matrix on SO(3)
+            raise InputError(f"R0: {system.group.why_not_element(R)}")
+    return Point(jnp.asarray(x0), jnp.asarray(R))
+
+
+def check_system(system, q0, v0=None, *, R0=None, project_v0: bool = False, tol: float = 1e-10):
+    """:meth:`gnipy.System.check`: `(b0, v0)`, every check passed (see there)."""
+    require_float64()
+    project_v0 = flag("project_v0", project_v0)
+    b0 = initial_point(system, q0, R0)
+    if v0 is not None:
+        v0 = finite_vector("v0", v0, system.dim)
+    vals = validation_values_at(system, b0)
+    check_mechanical_type(vals, SAMPLES, tol=1e-9)
+    check_metric(vals["G"], tol)
+    N = system.dim
+    mu = check_constraint_forms(vals["mu"], N)
+    Y = check_affine_field(vals["Y"], N)
+    if system.force is not None:
+        check_force(system, b0, np.zeros(N) if v0 is None else v0)
+    if v0 is None:
+        return b0, None
+    res = mu @ (v0 - Y)
+    scale = max(1.0, float(np.max(np.abs(v0))), float(np.max(np.abs(Y))))
+    if np.max(np.abs(res)) > tol * scale:
+        if not project_v0:
+            raise InputError(
+                "v0: the initial velocity violates the constraints mu(q0)(v0 - Y(q0)) = 0 "
+                f"(residual {format_scientific(np.max(np.abs(res)))}); pass project_v0=True to project it"
+            )
+        v0 = np.asarray(_project_velocity(system.without_metadata(), b0, jnp.asarray(v0)))
+    return b0, v0
+
+
+def check_force(system, b0, v0) -> None:
+    """The force at `b0`, `v0` (u = 0, t = 0) evaluates to N finite components."""
+    N = system.dim
+    form = f"F({', '.join(system._leading())}, v, u, t{', args' if system.force_args else ''})"
+    try:
+        F = np.asarray(system._call_force(*system._args(b0), jnp.asarray(v0, jnp.float64),
+                                          jnp.zeros(system.inputs), jnp.asarray(0.0)))
+    except Exception as e:  # the user's function failed: say where
+        raise InputError(f"force: evaluating {form} failed at q0 (u = 0, t = 0): {e}") from e
+    if F.size != N:
+        raise InputError(f"force: {form} must return {N} components (one per velocity), got shape {F.shape}")
+    if not np.all(np.isfinite(F)):
+        raise InputError("force: F(q0, v0, 0, 0) is not finite")
+
+
+def validation_values_at(system, b0) -> dict:
+    """Everything the checks need, in one compiled evaluation (op by op, the derivatives cost
+    seconds of small compilations): l, G, V and ∂l/∂v(0) at `b0` and at nearby points, and G, μ,
+    Y at `b0`. A failure of the user's functions becomes an InputError."""
+    rng = np.random.default_rng(0)
+    N = system.dim
+    ws = 0.1 * rng.standard_normal((SAMPLES, N))
+    ws[0] = 0.0
+    vs = rng.standard_normal((SAMPLES, N))
+    try:
+        out = validation_values(system.without_metadata(), b0, jnp.asarray(ws), jnp.asarray(vs))
+    except InputError:
+        raise
+    except Exception as e:  # the user's function failed while being traced: say where
+        raise InputError(f"lagrangian/constraints/affine: evaluating the system's functions failed: {e}") from e
+    out = {k: np.asarray(v) for k, v in out.items()}
+    out["vs"] = vs
+    return out
+
+
+def has_constant_metric(system, b0) -> bool:
+    """:meth:`gnipy.System.has_constant_metric`."""
+    rng = np.random.default_rng(1)
+    ws = jnp.asarray(0.3 * rng.standard_normal((2, system.dim)))
+    dG = np.asarray(metric_derivatives(system.without_metadata(), b0, ws))
+    return not np.any(dG != 0.0)
+
+
+def default_point(system):
+    """The base point of the system's default initial condition, else of the origin (and the
+    identity orientation)."""
+    defaults = system.defaults or ()
+    concrete = all(d is None or all(isinstance(x, float) for x in d) for d in defaults)
+    x0 = defaults[0] if defaults and concrete and defaults[0] is not None else np.zeros(system.n)
+    R0 = defaults[2] if len(defaults) > 2 and concrete and defaults[2] is not None else None
+    try:
+        return initial_point(system, np.asarray(x0), None if R0 is None else np.asarray(R0))
+    except InputError:
+        return initial_point(system, np.zeros(system.n))
+
+
+def lagrangian_depends_on(system, part: str = "configuration") -> bool:
+    """:meth:`gnipy.System.lagrangian_depends_on`."""
+    if part not in ("configuration", "orientation"):
+        raise InputError(f"part: expected 'configuration' or 'orientation', got {part!r}")
+    if part == "orientation" and (system.group is None or not system.depends_on_orientation):
+        return False
+    core = system.without_metadata()
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(core)):
+        return True
+    rng = np.random.default_rng(2)
+    ws = 0.3 * rng.standard_normal((3, system.dim))
+    vs = rng.standard_normal((3, system.dim))
+    with jax.ensure_compile_time_eval():  # also when called while tracing (a traced h): values known
+        d = np.asarray(lagrangian_derivatives(core, default_point(system), ws, vs))
+    return bool(np.any(d[:, system.n:] != 0.0 if part == "orientation" else d != 0.0))
+
+
+@jit
+def _project_velocity(system, b, v):
+    return project_velocity(system, b, v)
+
+
+def project_velocity(system, b, v):
+    """$\\mathbb{G}$-orthogonal projection of v onto the affine constraint space: $P v + Q Y$."""
+    from .projectors import projectors
+
+    P, Q = projectors(system.metric(b), system.mu(b))
+    return P @ v + Q @ system.Y(b)
