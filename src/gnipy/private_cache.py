@@ -54,7 +54,7 @@ import warnings
 from pathlib import Path
 
 from .files import clean_stale_temporaries, temporary_name
-from .text import safe
+from .text import safe, user_name, writers
 
 __all__ = [
     "CacheWarning",
@@ -111,27 +111,13 @@ def _supported() -> str | None:
     return None
 
 
-def _user(uid: int) -> str:
-    try:
-        import pwd
-
-        return f"user {pwd.getpwuid(uid).pw_name} (uid {uid})"
-    except (ImportError, KeyError):
-        return f"uid {uid}"
-
-
-def _writers(mode: int) -> str:
-    who = [name for bit, name in ((0o020, "its group"), (0o002, "others")) if mode & bit]
-    return " and ".join(who)
-
-
 def _ownership_problem(st: os.stat_result, what: str) -> str | None:
     """Why a file or folder with status `st` is not the user's alone (None if it is)."""
     euid = os.geteuid()
     if st.st_uid != euid:
-        return f"{what} belongs to {_user(st.st_uid)}, not to you ({_user(euid)})"
+        return f"{what} belongs to {user_name(st.st_uid)}, not to you ({user_name(euid)})"
     if st.st_mode & 0o022:
-        return f"{what} is writable by {_writers(st.st_mode)} (mode {stat.S_IMODE(st.st_mode):04o})"
+        return f"{what} is writable by {writers(st.st_mode)} (mode {stat.S_IMODE(st.st_mode):04o})"
     return None
 
 
@@ -296,8 +282,8 @@ def _read_secret(dir_fd: int) -> bytes | None:
         if not stat.S_ISREG(st.st_mode):
             raise CacheRefused(f"its secret file {SECRET_NAME} is {_kind(st)}, not a regular file")
         if st.st_uid != os.geteuid():
-            raise CacheRefused(f"its secret file {SECRET_NAME} belongs to {_user(st.st_uid)}, not to you "
-                               f"({_user(os.geteuid())}); remove it and gnipy makes a new one")
+            raise CacheRefused(f"its secret file {SECRET_NAME} belongs to {user_name(st.st_uid)}, not to you "
+                               f"({user_name(os.geteuid())}); remove it and gnipy makes a new one")
         if st.st_mode & 0o077:
             raise CacheRefused(f"its secret file {SECRET_NAME} may be read or written by others (mode "
                                f"{stat.S_IMODE(st.st_mode):04o}, not 0600); remove it and gnipy makes a new one")

@@ -16,6 +16,7 @@ import jax
 
 from .errors import InputError
 from .system import System
+from .system_checks import default_point
 from .text import safe
 from .user_systems import is_reference, load, user_code_error
 
@@ -361,21 +362,6 @@ def default_method_for(system_name: str | None, system: System | None = None, b0
     return first
 
 
-def _default_point(system: System):
-    """The base point of the system's documented initial condition (where it has concrete values),
-    else of the origin (the identity on the group)."""
-    import numpy as np
-
-    defaults = system.defaults or ()
-    concrete = all(d is None or all(isinstance(x, float) for x in d) for d in defaults)
-    x0 = np.asarray(defaults[0]) if defaults and concrete and defaults[0] is not None else np.zeros(system.n)
-    R0 = np.asarray(defaults[2]) if len(defaults) > 2 and concrete and defaults[2] is not None else None
-    try:
-        return system.initial_point(x0, R0)
-    except InputError:
-        return system.initial_point(np.zeros(system.n))
-
-
 def _can_run(name: str, system: System, b0=None) -> bool:
     """Whether the method called `name` accepts `system`: its `check` raises no MethodError (anything
     else it raises, e.g. on parameters traced by `jax.grad`, is left to the run, which checks again;
@@ -386,7 +372,7 @@ def _can_run(name: str, system: System, b0=None) -> bool:
         return True
     method = _METHOD_LOOKUP(name)
     try:
-        method.check(system, _default_point(system) if b0 is None else b0)
+        method.check(system, default_point(system) if b0 is None else b0)
     except MethodError:
         return False
     except Exception:

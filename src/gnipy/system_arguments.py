@@ -151,7 +151,7 @@ def system_args(args) -> dict | None:
         if not np.all(np.isfinite(a)):
             raise InputError(f"args: parameter {k!r} must be finite, got {v!r}")
         out[k] = jnp.asarray(a)
-    return Args(out)
+    return out
 
 
 def takes_args_last(f, count: int) -> bool:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import re
 
-__all__ = ["safe"]
+__all__ = ["safe", "user_name", "writers"]
 
 # control characters (C0, DEL, C1), lone surrogates (undecodable bytes of a path), and the
 # invisible characters that reorder or break lines on a terminal
@@ -26,3 +26,18 @@ def safe(text) -> str:
     """`text` for a terminal: control characters as visible escapes (`\\x1b`, `\\n`, `\\x07`, ...).
     Print the result without markup (rich `Text`, or `markup=False`)."""
     return _UNSAFE.sub(_escape_char, str(text))
+
+
+def user_name(uid: int) -> str:
+    """A user id as people read it: `user NAME (uid N)`, or `uid N` where it has no name."""
+    try:
+        import pwd
+
+        return f"user {pwd.getpwuid(uid).pw_name} (uid {uid})"
+    except (ImportError, KeyError):
+        return f"uid {uid}"
+
+
+def writers(mode: int) -> str:
+    """Who besides the owner may write a file of permission bits `mode`: "its group", "others"."""
+    return " and ".join(name for bit, name in ((0o020, "its group"), (0o002, "others")) if mode & bit)

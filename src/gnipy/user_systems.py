@@ -56,7 +56,7 @@ from pathlib import Path
 from typing import Any
 
 from .errors import InputError
-from .text import safe
+from .text import safe, user_name, writers
 
 __all__ = ["MAX_SOURCE_BYTES", "Loaded", "is_reference", "split_reference", "data_file_reference", "private_group",
            "user_code_error", "load"]
@@ -125,15 +125,6 @@ def data_file_reference(text: str, folder: Path, key: str) -> str:
     return f"{Path(folder) / inside}:{name}"
 
 
-def _who(uid: int) -> str:
-    try:
-        import pwd
-
-        return f"user {pwd.getpwuid(uid).pw_name!r}"
-    except (ImportError, KeyError):
-        return f"uid {uid}"
-
-
 def private_group(gid: int) -> bool:
     """Whether the group `gid` is the user's private group (a user-private-group system, umask 002:
     the user's primary group, named as the user, with no other members), whose write permission
@@ -153,11 +144,10 @@ def _trust_problem(st: os.stat_result, what: str, *, folder: bool = False) -> st
     """Why `what` (status `st`) could have been written by someone other than the user or root."""
     euid = os.geteuid()
     if st.st_uid not in (euid, 0):
-        return f"{what} belongs to {_who(st.st_uid)}, not to you ({_who(euid)}) or root"
+        return f"{what} belongs to {user_name(st.st_uid)}, not to you ({user_name(euid)}) or root"
     mode = st.st_mode & ~0o020 if st.st_mode & 0o020 and private_group(st.st_gid) else st.st_mode
     if mode & 0o022 and not (folder and mode & stat.S_ISVTX):
-        writers = " and ".join(w for bit, w in ((0o020, "its group"), (0o002, "others")) if mode & bit)
-        return f"{what} is writable by {writers} (mode {stat.S_IMODE(st.st_mode):04o})"
+        return f"{what} is writable by {writers(mode)} (mode {stat.S_IMODE(st.st_mode):04o})"
     return None
 
 
