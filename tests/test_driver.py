@@ -95,3 +95,40 @@ def test_member_summary_reports_its_own_iterations():
     assert per.shape == (2, 2) and per[:, 0].sum() == int(sol.iterations[0])
     for i in range(2):
         assert tuple(np.asarray(sol.member(i).iterations)) == tuple(per[i])
+
+
+def test_node_buckets_cover_each_count_with_at_most_a_quarter_more():
+    from gnipy.preparation import node_bucket
+
+    assert [node_bucket(n) for n in (0, 1, 16, 17, 20, 21, 1000, 1024, 1025)] == [16, 16, 16, 20, 20, 24, 1024, 1024, 1280]
+    for n in range(17, 5000):
+        assert n <= node_bucket(n) <= 1.25 * n, n
+
+
+def test_node_counts_in_one_bucket_share_a_program_and_equal_an_exact_one(monkeypatch):
+    """Runs saving 11, 14 and 16 nodes share one program (16 nodes, the extra ones of no steps cut);
+    their nodes, and those of a run whose shortened last step's node is saved (a program of its
+    own), are those of programs compiled for exactly their counts, bit for bit."""
+    from gnipy import preparation
+    from gnipy.assembly import _NODE_DIAGNOSTICS
+
+    sleigh = gnipy.make_system("chaplygin-sleigh")
+
+    def runs():
+        return [gnipy.simulate(sleigh, "gni-midpoint", h=0.01, steps=100, save_every=10),  # 11 nodes
+                gnipy.simulate(sleigh, "gni-midpoint", h=0.01, steps=130, save_every=10),  # 14
+                gnipy.simulate(sleigh, "gni-midpoint", h=0.01, steps=150, save_every=10),  # 16
+                gnipy.simulate(sleigh, "gni-midpoint", h=0.01, t_final=1.305, save_every=10)]  # 15, the last at 1.305
+
+    def run_programs():
+        return sum(key[0] == "run" for key in preparation._PROGRAMS)
+
+    before = run_programs()
+    bucketed = runs()
+    assert run_programs() - before == 2
+    assert [len(s.t) for s in bucketed] == [11, 14, 16, 15] and float(bucketed[3].t[-1]) == 1.305
+    monkeypatch.setattr(preparation, "node_bucket", lambda n: n)
+    for a, b in zip(bucketed, runs(), strict=True):
+        for name in ("t", "q", "v", "p", "energy", "constraint_residual", *_NODE_DIAGNOSTICS):
+            np.testing.assert_array_equal(np.asarray(getattr(a, name)), np.asarray(getattr(b, name)), err_msg=name)
+    assert run_programs() - before == 5  # 11, 14 and 15 exactly; 16 is its own bucket's program

@@ -3,8 +3,8 @@ and stepped by the one loop (:mod:`gnipy.stepping`), the result assembled (:clas
 
 Repeated calls are cheap: what depends only on the system, the method and the initial condition
 (the checks, the method's preparation, the diagnostics' sentences) is kept per call signature
-(:mod:`gnipy.preparation`), and the compiled programs are shared between runs that save as many
-nodes. Under a JAX transformation (`jax.grad`, `jax.jacrev`, `jax.jacfwd`, `jax.jit`;
+(:mod:`gnipy.preparation`), and the compiled programs are shared between runs whose numbers of
+saved nodes fall in one bucket (:func:`gnipy.preparation.node_bucket`). Under a JAX transformation (`jax.grad`, `jax.jacrev`, `jax.jacfwd`, `jax.jit`;
 :mod:`gnipy.transformed`) the run is differentiable: the loop has static trip counts in blocks
 (checkpointed for long runs) and the implicit steps are differentiated by the implicit function
 theorem. Batches of initial conditions or systems run vmapped (:mod:`gnipy.ensembles`).
@@ -136,8 +136,9 @@ def simulate(
     must then be given (or `t_final` with a concrete `h`). Inside `jax.jit` the values of the
     initial condition cannot be checked (shapes are); a failed step raises at run time.
 
-    Runs that save as many nodes share their compiled program (the step count, h and the
-    parameter values are traced): convergence studies and parameter scans compile once.
+    Runs whose numbers of saved nodes fall in one bucket (16 or fewer; then quarter octaves,
+    :func:`gnipy.preparation.node_bucket`) share their compiled program (the step count, h and
+    the parameter values are traced): convergence studies and parameter scans compile once.
 
     Raises:
         InputError: bad arguments or initial conditions (the message names the argument and,

@@ -4,7 +4,8 @@
 Two compiled forms of the same loop over one method's `step`:
 
 - :func:`run_nodes` (the default): between saved nodes a `fori_loop` whose trip count is traced,
-  so runs that save as many nodes share one compilation whatever their step counts and h;
+  so runs that save as many nodes share one compilation whatever their step counts and h (and
+  :mod:`gnipy.preparation` pads the node count to a bucket, so that nearby counts share it too);
 - :func:`run_nodes_checkpointed` (under a JAX transformation: `jax.grad`, `jax.jacrev`,
   `jax.jacfwd`, `jax.jit` of a simulation): static trip counts (reverse mode cannot differentiate
   a loop of unknown length) in blocks of at most L steps. When reverse mode would keep more than
@@ -180,7 +181,7 @@ def _concat(obs, last):
 
 
 def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool, save_final: bool,
-              save_states: bool = False, progress: bool = False, progress_stride=1, monitor0=None):
+              save_states: bool = False, progress: bool = False, progress_stride=1, monitor0=None, nodes=None):
     """Run from `state0`, observing after each `lengths[i]` steps, then `tail` steps more and (with
     `partial`) one shortened step of `h_last`, observed if `save_final`.
 
@@ -190,6 +191,11 @@ def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool
 
     With `monitor0` (:func:`gnipy.monitor.initial`), every node is checked as the loop runs and
     the result's `monitor` holds the verdicts of the whole run (:mod:`gnipy.monitor`).
+
+    With `nodes` (traced), only the first `nodes` entries of `lengths` are the run's; the others
+    are zeros (steps of no length, whose nodes repeat the last one), so that runs saving
+    different numbers of nodes share a program (:func:`gnipy.preparation.node_bucket`). The
+    shortened last step's node, when saved, is then the entry `nodes` rather than the last.
 
     Returns:
         A dict: `b, v, p` (saved nodes), `hidden` (the GNI family's p⁺ − p̄, else None), `states`
@@ -223,7 +229,11 @@ def run_nodes(method, system, state0, h, lengths, tail, h_last, *, partial: bool
     if partial:
         carry = _final_step(method, system, carry, h, h_last)
         if save_final:
-            obs = _concat(obs, observe(carry[0], h_last))
+            last = observe(carry[0], h_last)
+            obs = _concat(obs, last)
+            if nodes is not None:  # the node after the run's own blocks, not after the zeros
+                obs = jax.tree_util.tree_map(lambda a, x: jax.lax.dynamic_update_index_in_dim(a, x, nodes, 0),
+                                             obs, last)
     return _finish(method, system, carry, obs, h, h_last, partial)
 
 
