@@ -100,7 +100,8 @@ def test_member_summary_reports_its_own_iterations():
 def test_node_buckets_cover_each_count_with_at_most_a_quarter_more():
     from gnipy.preparation import node_bucket
 
-    assert [node_bucket(n) for n in (0, 1, 16, 17, 20, 21, 1000, 1024, 1025)] == [16, 16, 16, 20, 20, 24, 1024, 1024, 1280]
+    counts = (0, 1, 16, 17, 20, 21, 1000, 1024, 1025)
+    assert [node_bucket(n) for n in counts] == [16, 16, 16, 20, 20, 24, 1024, 1024, 1280]
     for n in range(17, 5000):
         assert n <= node_bucket(n) <= 1.25 * n, n
 

@@ -7,9 +7,9 @@ value) checks nothing again (:meth:`gnipy.System.check`, `method.check`, `method
 once) and calls its compiled programs directly: the arrays of the method and system are
 flattened once, and the programs are `jax.jit` functions shared by every run whose method and
 system have the same structure (the non-array parts, compared as equinox's `filter_jit` compares
-them) and whose numbers of saved nodes fall in one bucket (:func:`node_bucket`). `equinox.filter_jit` would partition and hash the whole
-method and system on every call (about 0.3 ms each time, measured), which is why this module
-dispatches by hand.
+them) and whose numbers of saved nodes fall in one bucket (:func:`node_bucket`).
+`equinox.filter_jit` would partition and hash the whole method and system on every call (about
+0.3 ms each time, measured), which is why this module dispatches by hand.
 """
 
 from __future__ import annotations
