@@ -58,7 +58,7 @@ _METHODS: dict[str, tuple[str, Callable[[], object]]] = {
     "euler-ab": ("composition Euler A(h/2) ∘ Euler B(h/2)",
                  _lazy(".integrators.paper_schemes", "EulerABComposition")),
     "shake": ("nonholonomic SHAKE, two-step form (Remark 5.1, (Afin))",
-              _lazy(".integrators.paper_schemes", "Shake")),
+              _lazy(".integrators.shake", "Shake")),
     "rattle": ("nonholonomic RATTLE, explicit (nonholonomicRATTLE), affine §6.1",
                _lazy(".integrators.paper_schemes", "Rattle")),
     "rat": ("reduced RATTLE algorithm (RAT) of §7.2 on R^n × G, constant metric", _lazy(".integrators.reduced_rattle", "ReducedRattle")),

@@ -5,8 +5,9 @@ from .comparators import DiscreteLagrangeDAlembert, McLachlanPerlmutter
 from .composition import COMPOSITIONS, Composition
 from .discrete_gradient import DiscreteGradient, DiscreteGradientState
 from .gni import GNI, GNIState
-from .paper_schemes import EulerABComposition, NonholonomicEulerA, NonholonomicEulerB, Rattle, Shake
+from .paper_schemes import EulerABComposition, NonholonomicEulerA, NonholonomicEulerB, Rattle
 from .reversal import ForwardOnly, Reversed
+from .shake import Shake
 
 __all__ = [
     "Integrator",

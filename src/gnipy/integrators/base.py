@@ -22,7 +22,7 @@ from ..linalg import solve_spd
 from ..errors import MethodError
 
 __all__ = ["Integrator", "StepInfo", "MethodError", "solve_step", "implicit_solve", "newton", "default_root_finder",
-           "momentum_constraint_scale"]
+           "momentum_constraint_scale", "all_finite", "explicit_step_info"]
 
 
 class StepInfo(NamedTuple):
@@ -31,6 +31,18 @@ class StepInfo(NamedTuple):
     ok: jax.Array
     iterations: jax.Array
     residual: jax.Array
+
+
+def all_finite(*arrays) -> jax.Array:
+    """Whether every entry of the given arrays (None skipped) is finite."""
+    return jnp.all(jnp.stack([jnp.all(jnp.isfinite(a)) for a in arrays if a is not None]))
+
+
+def explicit_step_info(*arrays) -> StepInfo:
+    """The :class:`StepInfo` of an explicit step whose new state is `arrays` (None skipped): it
+    succeeded if they are finite; no iterations, residual 0."""
+    dtype = jnp.result_type(*[a for a in arrays if a is not None])
+    return StepInfo(all_finite(*arrays), jnp.asarray(0, dtype=jnp.int32), jnp.asarray(0.0, dtype=dtype))
 
 
 def default_root_finder():
