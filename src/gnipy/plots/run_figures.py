@@ -1,104 +1,17 @@
-"""Plots of simulations and convergence studies (matplotlib, no display needed).
-
-Every function takes either a :class:`~gnipy.Solution` or the `xarray.Dataset` of a result file
-(`Solution.to_xarray()`, or `xarray.open_dataset("run.nc")` on a file that `gni run` wrote), so a
-file can be plotted long after the run:
-
-    import xarray as xr
-    from gnipy import plots
-
-    plots.plot_solution(xr.open_dataset("disk.nc"), "disk.png")
-
-The figures are `matplotlib.figure.Figure` objects created without `pyplot`: nothing is shown,
-no global figure state is kept, and no interactive backend is needed (PNG, PDF and SVG output
-go through Agg). Functions that draw on one panel take an optional `ax`; without it they create a
-figure of their own and return the axes.
-"""
+"""The figures of a run (its configuration path, energy error, constraint residual, hidden
+momentum, and all of them together: :func:`plot_solution`) and of a convergence study
+(:func:`plot_convergence`)."""
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from .extras import require
-from .analysis.orders import ROUND_OFF, fit_points, fitted_order
-
-__all__ = [
-    "as_dataset",
-    "plot_path",
-    "plot_energy_error",
-    "plot_constraint_residual",
-    "plot_hidden_momentum",
-    "plot_solution",
-    "plot_convergence",
-    "plot_controls",
-    "plot_control",
-    "plot_fit",
-    "fitted_order",
-    "fit_points",
-    "ROUND_OFF",
-]
-
-
-# Residuals that are exactly zero are drawn at this level on the logarithmic axis.
-_ZERO_LEVEL = 1e-18
-
-
-def as_dataset(obj):
-    """The `xarray.Dataset` of a :class:`~gnipy.Solution` (via `to_xarray`), or `obj` itself.
-
-    A result file of the earlier layout (the times in a variable `t`, `time` the node index) is
-    returned in the present one (:func:`gnipy.io.upgrade_layout`).
-
-    Raises:
-        TypeError: `obj` is neither a Solution nor a Dataset.
-        ValueError: the Dataset has no times (a float coordinate `time`, or a variable `t`): it is
-            not a gnipy result.
-    """
-    xr = require("xarray", extra="plots")
-
-    from .io import upgrade_layout
-    from .solution import Solution
-
-    if isinstance(obj, Solution):
-        return obj.to_xarray()
-    if isinstance(obj, xr.Dataset):
-        obj = upgrade_layout(obj)
-        if "time" not in obj.coords or obj["time"].dtype.kind != "f":
-            raise ValueError("the dataset has no times (coordinate 'time'): not a gnipy result file")
-        return obj
-    raise TypeError(f"expected a gnipy.Solution or an xarray.Dataset, got {type(obj).__name__}")
-
-
-def _new_axes(ax, figsize=(5.5, 4.5)):
-    if ax is not None:
-        return ax
-    Figure = require("matplotlib.figure", extra="plots").Figure
-
-    fig = Figure(figsize=figsize, layout="constrained")
-    return fig.add_subplot()
-
-
-def _title(ds, what: str) -> str:
-    model = ds.attrs.get("model")
-    method = ds.attrs.get("method")
-    head = ", ".join(str(x) for x in (model, method) if x)
-    return f"{head}: {what}" if head else what
-
-
-def _names(ds, dim: str, n: int, prefix: str) -> list[str]:
-    if dim in ds.coords and ds.sizes.get(dim, -1) == n:
-        return [str(x) for x in ds[dim].values]
-    return [f"{prefix}{i}" for i in range(n)]
-
-
-def _is_se2(R: np.ndarray) -> bool:
-    """A (T, 3, 3) array of SE(2) matrices (last row 0, 0, 1)?"""
-    return R.ndim == 3 and R.shape[1:] == (3, 3) and np.allclose(R[:, 2, :], [0.0, 0.0, 1.0], atol=1e-12)
+from ..analysis.orders import ROUND_OFF, fitted_order
+from ..extras import require
+from .figure_parts import ZERO_LEVEL, as_dataset, is_se2, item_names, new_axes, panel_title, save_figure
 
 
 def plot_path(obj, ax=None):
@@ -122,10 +35,10 @@ def plot_path(obj, ax=None):
         The axes.
     """
     ds = as_dataset(obj)
-    ax = _new_axes(ax)
+    ax = new_axes(ax)
     t = np.asarray(ds["time"].values, dtype=float)
     q = np.asarray(ds["q"].values, dtype=float) if "q" in ds else np.zeros((len(t), 0))
-    names = _names(ds, "coordinate", q.shape[-1], "q")
+    names = item_names(ds, "coordinate", q.shape[-1], "q")
     equal = False
     if q.shape[-1] >= 2:
         x, y, xl, yl = q[:, 0], q[:, 1], names[0], names[1]
@@ -136,7 +49,7 @@ def plot_path(obj, ax=None):
         what = f"{names[0]}(t)"
     elif "R" in ds:
         R = np.asarray(ds["R"].values, dtype=float)
-        if _is_se2(R):
+        if is_se2(R):
             x, y, xl, yl = R[:, 0, 2], R[:, 1, 2], "x", "y"
             what, equal = "position in the plane", True
         else:
@@ -144,7 +57,7 @@ def plot_path(obj, ax=None):
             what, equal = "body axis R e₃ (seen from above)", True
     else:
         ax.text(0.5, 0.5, "no configuration coordinates", ha="center", va="center", transform=ax.transAxes)
-        ax.set_title(_title(ds, "configuration path"))
+        ax.set_title(panel_title(ds, "configuration path"))
         return ax
     ax.plot(x, y, lw=1.2)
     ax.plot(x[:1], y[:1], "o", color="C2", label="start")
@@ -160,7 +73,7 @@ def plot_path(obj, ax=None):
         if min(spans) > 0 and max(spans) <= 4 * min(spans):
             ax.set_aspect("equal", adjustable="box")
     ax.legend(loc="best", fontsize="small")
-    ax.set_title(_title(ds, what), fontsize="medium")
+    ax.set_title(panel_title(ds, what), fontsize="medium")
     ax.grid(True, alpha=0.3)
     return ax
 
@@ -179,14 +92,14 @@ def plot_energy_error(obj, ax=None):
         The axes.
     """
     ds = as_dataset(obj)
-    ax = _new_axes(ax)
+    ax = new_axes(ax)
     t = np.asarray(ds["time"].values, dtype=float)
     e = np.asarray(ds["energy"].values, dtype=float)
     ax.plot(t, e - e[0], lw=1.2)
     ax.set_xlabel("t")
     ax.set_ylabel("E − E₀")
     ax.ticklabel_format(axis="y", style="sci", scilimits=(-3, 3))
-    ax.set_title(_title(ds, "energy error"), fontsize="medium")
+    ax.set_title(panel_title(ds, "energy error"), fontsize="medium")
     ax.grid(True, alpha=0.3)
     return ax
 
@@ -205,14 +118,14 @@ def plot_constraint_residual(obj, ax=None):
         The axes.
     """
     ds = as_dataset(obj)
-    ax = _new_axes(ax)
+    ax = new_axes(ax)
     t = np.asarray(ds["time"].values, dtype=float)
     r = np.asarray(ds["constraint_residual"].values, dtype=float)
     r = np.abs(r).max(axis=-1) if r.ndim == 2 and r.shape[-1] else np.zeros_like(t)
-    ax.semilogy(t, np.maximum(r, _ZERO_LEVEL), lw=1.2)
+    ax.semilogy(t, np.maximum(r, ZERO_LEVEL), lw=1.2)
     ax.set_xlabel("t")
     ax.set_ylabel("max |μ(q)(v − Y)|")
-    ax.set_title(_title(ds, "constraint residual"), fontsize="medium")
+    ax.set_title(panel_title(ds, "constraint residual"), fontsize="medium")
     ax.grid(True, which="both", alpha=0.3)
     return ax
 
@@ -230,12 +143,12 @@ def plot_hidden_momentum(obj, ax=None):
     Returns:
         The axes.
     """
-    from .diagnostics import hidden_momentum_band
+    from ..diagnostics import hidden_momentum_band
 
     ds = as_dataset(obj)
     if "hidden_momentum" not in ds:
         raise ValueError("plot_hidden_momentum: the run has no hidden momentum (only the GNI family carries one)")
-    ax = _new_axes(ax)
+    ax = new_axes(ax)
     t = np.asarray(ds["time"].values, dtype=float)
     r = np.asarray(ds["hidden_momentum"].values, dtype=float)
     e = (np.asarray(ds["hidden_momentum_expected"].values, dtype=float) if "hidden_momentum_expected" in ds
@@ -245,7 +158,7 @@ def plot_hidden_momentum(obj, ax=None):
     r = np.where(np.isposinf(r) & np.isposinf(e), np.nan, np.where(np.isnan(r), np.inf, r))
     finite = np.isfinite(r)
     top = 10.0 * (float(np.max(r[finite])) if finite.any() else 1.0)
-    ax.semilogy(t, np.where(finite, np.maximum(r, _ZERO_LEVEL), np.nan), lw=1.1, label="|p⁺ − p̄| / |p̄|")
+    ax.semilogy(t, np.where(finite, np.maximum(r, ZERO_LEVEL), np.nan), lw=1.1, label="|p⁺ − p̄| / |p̄|")
     if np.any(np.isposinf(r)):
         ax.semilogy(t[np.isposinf(r)], np.full(int(np.sum(np.isposinf(r))), top), "^", color="C3",
                     label="infinite or NaN (out of band)")
@@ -254,7 +167,7 @@ def plot_hidden_momentum(obj, ax=None):
                     label="its O(h) band")
     ax.set_xlabel("t")
     ax.set_ylabel("|p⁺ − p̄| / |p̄|")
-    ax.set_title(_title(ds, "hidden momentum"), fontsize="medium")
+    ax.set_title(panel_title(ds, "hidden momentum"), fontsize="medium")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(loc="best", fontsize="small")
     return ax
@@ -328,7 +241,7 @@ def plot_solution(obj, path=None, *, title: str | None = None, overwrite: bool =
     if title:
         fig.suptitle(title)
     if path is not None:
-        _save(fig, path, overwrite)
+        save_figure(fig, path, overwrite)
     return fig
 
 
@@ -363,7 +276,7 @@ def plot_convergence(
     Returns:
         The `matplotlib.figure.Figure`.
     """
-    ax = _new_axes(ax, figsize=(6.5, 5))
+    ax = new_axes(ax, figsize=(6.5, 5))
     fig = ax.figure
     all_h, all_e = [], []
     for i, (name, err) in enumerate(errors.items()):
@@ -402,167 +315,5 @@ def plot_convergence(
     if title:
         ax.set_title(title, fontsize="medium")
     if path is not None:
-        _save(fig, path, overwrite)
+        save_figure(fig, path, overwrite)
     return fig
-
-
-def _control_dataset(obj):
-    """The result Dataset of a controlled run: a :class:`gnipy.control.ControlResult` (its
-    solution and controls), or a Dataset with the inputs `u` (a file of `gni control`)."""
-    xr = require("xarray", extra="plots")
-
-    if hasattr(obj, "controls") and hasattr(obj, "solution"):
-        ds = obj.solution.to_xarray()
-        K, m = np.shape(obj.controls)
-        ds["u"] = xr.DataArray(np.asarray(obj.controls, dtype=float), dims=("control_step", "input"))
-        t = np.asarray(ds["time"].values, dtype=float)
-        names = list(getattr(obj, "input_names", ()) or [f"u{j}" for j in range(m)])
-        return ds.assign_coords(control_step=np.arange(K), input=names,
-                                control_time=("control_step", t[:K]))
-    ds = as_dataset(obj)
-    if "u" not in ds:
-        raise ValueError("not a controlled run: the Dataset has no inputs u (a file of gni control)")
-    return ds
-
-
-def plot_controls(obj, ax=None):
-    """The inputs $u_k$ against time, drawn as held over each step.
-
-    Arguments:
-        obj: a :class:`gnipy.control.ControlResult`, or the Dataset of a `gni control` file.
-        ax: the matplotlib axes to draw on (default: a new figure).
-
-    Returns:
-        The axes.
-    """
-    ds = _control_dataset(obj)
-    ax = _new_axes(ax)
-    t = np.asarray(ds["time"].values, dtype=float)
-    u = np.asarray(ds["u"].values, dtype=float)
-    names = [str(n) for n in ds["input"].values] if "input" in ds.coords else [f"u{j}" for j in range(u.shape[1])]
-    K = u.shape[0]
-    for j in range(u.shape[1]):
-        ax.step(t[: K + 1], np.append(u[:, j], u[-1, j]), where="post", lw=1.2, label=names[j])
-    ax.set_xlabel("t")
-    ax.set_ylabel("input")
-    ax.legend(loc="best", fontsize="small")
-    ax.set_title("inputs (held over each step)", fontsize="medium")
-    ax.grid(True, alpha=0.3)
-    return ax
-
-
-def plot_control(obj, path=None, *, title: str | None = None, overwrite: bool = False):
-    """The figure of a controlled run: the configuration path, the inputs, the velocities and, on
-    $\\mathbb{R}^n\\times G$, the angle turned by the orientation, $|\\log(R_0^{-1}R(t))|$.
-
-    Arguments:
-        obj: a :class:`gnipy.control.ControlResult`, or the Dataset of a `gni control` file.
-        path: where to save it (None: not saved); written atomically.
-        title: the figure title (default: model, method, steps).
-        overwrite: replace an existing regular file at `path`.
-
-    Returns:
-        The `matplotlib.figure.Figure`.
-    """
-    Figure = require("matplotlib.figure", extra="plots").Figure
-
-    ds = _control_dataset(obj)
-    has_R = "R" in ds and np.asarray(ds["R"].values).shape[-1] == 3 and not _is_se2(np.asarray(ds["R"].values))
-    fig = Figure(figsize=(5 * (4 if has_R else 3), 4.4), layout="constrained")
-    axes = fig.subplots(1, 4 if has_R else 3)
-    plot_path(ds, axes[0])
-    axes[0].set_title("configuration path", fontsize="medium")
-    plot_controls(ds, axes[1])
-    t = np.asarray(ds["time"].values, dtype=float)
-    v = np.asarray(ds["v"].values, dtype=float)
-    for j, name in enumerate(_names(ds, "velocity", v.shape[-1], "v")):
-        axes[2].plot(t, v[:, j], lw=1.1, label=name)
-    axes[2].set_xlabel("t")
-    axes[2].set_ylabel("velocity")
-    axes[2].legend(loc="best", fontsize="small")
-    axes[2].set_title("velocities", fontsize="medium")
-    axes[2].grid(True, alpha=0.3)
-    if has_R:
-        R = np.asarray(ds["R"].values, dtype=float)
-        rel = np.einsum("ji,tjk->tik", R[0], R)
-        angle = np.degrees(np.arccos(np.clip((np.trace(rel, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)))
-        axes[3].plot(t, angle, lw=1.2)
-        axes[3].set_xlabel("t")
-        axes[3].set_ylabel("degrees")
-        axes[3].set_title("angle turned, |log(R₀ᵀR)|", fontsize="medium")
-        axes[3].grid(True, alpha=0.3)
-    if title is None:
-        a = ds.attrs
-        parts = [str(a[k]) for k in ("control_problem", "model", "method") if a.get(k)]
-        parts.append(f"{np.asarray(ds['u']).shape[0]} steps")
-        title = ", ".join(parts)
-    if title:
-        fig.suptitle(title)
-    if path is not None:
-        _save(fig, path, overwrite)
-    return fig
-
-
-def plot_fit(result, path=None, *, title: str | None = None, overwrite: bool = False):
-    """The figure of a fit (:func:`gnipy.fit`): each observed variable, observed (points) and
-    fitted (the fitted run's nodes), and the residuals model − observed against time (divided by
-    sigma when it was given).
-
-    Arguments:
-        result: a :class:`gnipy.control.FitResult`.
-        path: where to save it (None: not saved); written atomically.
-        title: the figure title (default: the system, method and reduced chi²).
-        overwrite: replace an existing regular file at `path`.
-
-    Returns:
-        The `matplotlib.figure.Figure`.
-    """
-    Figure = require("matplotlib.figure", extra="plots").Figure
-
-    obs = result.observations
-    sol = result.solution
-    names = list(obs.variables)
-    coords, vels = list(sol.coordinates), list(sol.velocities)
-    t_obs = np.asarray(obs.times, dtype=float)
-    t = np.asarray(sol.t, dtype=float)
-    k = len(names)
-    fig = Figure(figsize=(4.6 * (k + 1), 4.2), layout="constrained")
-    axes = fig.subplots(1, k + 1)
-    for j, name in enumerate(names):
-        ax = axes[j]
-        model = np.asarray(sol.q)[:, coords.index(name)] if name in coords else np.asarray(sol.v)[:, vels.index(name)]
-        ax.plot(t, model, lw=1.2, label="fitted")
-        ax.plot(t_obs, np.asarray(obs.values, dtype=float)[:, j], ".", ms=4, color="C3", label="observed")
-        ax.set_xlabel("t")
-        ax.set_title(name, fontsize="medium")
-        ax.legend(loc="best", fontsize="small")
-        ax.grid(True, alpha=0.3)
-    ax = axes[-1]
-    res = np.asarray(result.residuals, dtype=float)
-    weighted = None
-    if result.sigma_known:  # sigma given to fit() or held by the observations: the weighted residuals
-        w = np.asarray(result.weighted_residuals(), dtype=float)
-        if w.size == res.size:
-            weighted = np.where(np.isnan(res), np.nan, w.reshape(res.shape))
-    for j, name in enumerate(names):
-        ax.plot(t_obs, res[:, j] if weighted is None else weighted[:, j], ".", ms=4, label=name)
-    ax.axhline(0.0, color="k", lw=0.8)
-    ax.set_xlabel("t")
-    ax.set_title("residuals (model − observed)" + (" / sigma" if weighted is not None else ""), fontsize="medium")
-    ax.legend(loc="best", fontsize="small")
-    ax.grid(True, alpha=0.3)
-    if title is None:
-        title = f"fit of {sol.system} with {result.method}: reduced chi² = {result.reduced_chi2:.3g}"
-    if title:
-        fig.suptitle(title)
-    if path is not None:
-        _save(fig, path, overwrite)
-    return fig
-
-
-def _save(fig, path, overwrite: bool = False) -> Path:
-    """Write `fig` to `path` atomically (the old file stays whole if writing fails; never through a
-    link or into a special file): :func:`gnipy.files.atomic_savefig`."""
-    from .files import atomic_savefig
-
-    return atomic_savefig(fig, Path(os.fspath(path)), overwrite=overwrite, argument="path", dpi=110)
