@@ -113,6 +113,9 @@ def test_node_counts_in_one_bucket_share_a_program_and_equal_an_exact_one(monkey
     from gnipy import preparation
     from gnipy.assembly import _NODE_DIAGNOSTICS
 
+    # the process's compiled programs and prepared runs set aside: earlier tests may have compiled these
+    monkeypatch.setattr(preparation, "_PROGRAMS", {})
+    monkeypatch.setattr(preparation, "_CACHE", {})
     sleigh = gnipy.make_system("chaplygin-sleigh")
 
     def runs():

@@ -25,6 +25,7 @@ import numpy as np
 
 from ..analysis.orders import ROUND_OFF, fitted_order
 from ..integrators import paper_schemes as ps
+from ..integrators.base import explicit_step_info
 from ..methods import get_method
 from ..models import get_model
 from ..simulate import simulate
@@ -58,7 +59,7 @@ class LiteralEulerABComposition(ps.EulerABComposition):
 
     def step(self, system, state, h):
         new = ps.euler_a_map(system, ps.euler_b_map(system, state, 0.5 * h), 0.5 * h)
-        return new, ps._explicit_info(*new)
+        return new, explicit_step_info(*new)
 
 
 #: Where the paper states each method's order (the order itself is the method's `order`).
