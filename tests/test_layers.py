@@ -202,6 +202,45 @@ def test_no_module_imports_a_private_name_of_another():
     assert private == [], "private names imported from another module:\n" + "\n".join(private)
 
 
+def _module_aliases(module: str) -> dict[str, str]:
+    """The names under which `module` binds other gnipy modules (`from ..integrators import
+    paper_schemes as ps`: `ps`; `import gnipy.io as gio`: `gio`; `from . import monitor`: `monitor`)."""
+    path = MODULES[module]
+    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+    out = {}
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"), str(path))):
+        if isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name in MODULES and alias.asname:
+                    out[alias.asname] = alias.name
+        elif isinstance(node, ast.ImportFrom):
+            base = (".".join(package[: len(package) - (node.level - 1)] + ([node.module] if node.module else []))
+                    if node.level else node.module or "")
+            for alias in node.names:
+                if f"{base}.{alias.name}" in MODULES:
+                    out[alias.asname or alias.name] = f"{base}.{alias.name}"
+    return out
+
+
+def test_no_module_reads_a_private_name_of_another_through_the_module():
+    """`ps._helper` where `ps` is another gnipy module: as private as `from ... import _helper`."""
+    private = []
+    for m in MODULES:
+        aliases = {a: t for a, t in _module_aliases(m).items() if t != m}
+        tree = ast.parse(MODULES[m].read_text(encoding="utf-8"), str(MODULES[m]))
+        for node in ast.walk(tree):
+            if (isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name) and node.value.id in aliases
+                    and node.attr.startswith("_") and not node.attr.startswith("__")):
+                private.append(f"{MODULES[m].relative_to(ROOT)}:{node.lineno}: {node.value.id}.{node.attr} "
+                               f"({aliases[node.value.id]})")
+    assert private == [], "private names of another module read through it:\n" + "\n".join(private)
+
+
+def test_the_module_aliases_are_found():
+    assert _module_aliases("gnipy.experiments.particle_study")["ps"] == "gnipy.integrators.paper_schemes"
+    assert _module_aliases("gnipy.simulate")["monitor"] == "gnipy.monitor"
+
+
 def test_every_module_has_a_layer():
     units = {_unit(m) for m in MODULES}
     assert units - set(LAYER) == set(), "add the new modules to LAYERS"

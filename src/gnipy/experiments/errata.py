@@ -319,7 +319,7 @@ def errata_rows(quick: bool, progress: Progress = None) -> list[Erratum]:
     """
     # the particle study is shared with theorem_table (cached): when it has not run yet, the
     # first erratum that needs it (Remark 5.1) runs it
-    remark_weight = 0.5 if quick in ps_study._STUDY else 10.0
+    remark_weight = 0.5 if ps_study.study_done(quick) else 10.0
     steps = [("sign", _erratum_sign, 4.0), ("remark", _erratum_remark_5_1, remark_weight), ("sphere", _erratum_sphere, 3.0),
              ("composition", _erratum_composition, 0.5), ("ratc", _erratum_ratc, 0.2 if quick else 6.0)]
     work = Work(progress, {key: w for key, _, w in steps})

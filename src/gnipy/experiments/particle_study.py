@@ -32,8 +32,8 @@ from ..simulate import simulate
 from ..system import System
 from .records import all_nodes
 
-__all__ = ["LiteralEulerABComposition", "particle_study", "paper_method", "particle", "spring_ball", "ORDER_REFS",
-           "T_ORDER", "SAVES"]
+__all__ = ["LiteralEulerABComposition", "particle_study", "study_done", "paper_method", "particle", "spring_ball",
+           "ORDER_REFS", "T_ORDER", "SAVES"]
 
 
 def paper_method(name: str):
@@ -115,6 +115,11 @@ def spring_ball():
     w = np.array([0.3, -0.2, 0.5])
     v0 = np.array([_B["r"] * w[1] - _B["Omega"] * q0[1], -_B["r"] * w[0] + _B["Omega"] * q0[0], *w])
     return s, q0, v0
+
+
+def study_done(quick: bool) -> bool:
+    """Whether :func:`particle_study` has already run (and is kept) for `quick` in this process."""
+    return quick in _STUDY
 
 
 def particle_study(quick: bool, tick: Callable[[str], None] = lambda d: None) -> dict:
