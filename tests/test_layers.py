@@ -24,7 +24,7 @@ ROOT = Path(gnipy.__file__).parent
 LAYERS = [
     # foundations: errors, small solves, the files' schema, input checks, files, the native cache
     ["version", "errors", "text", "linalg", "schema"],
-    ["inputs", "files", "resources", "sharding", "solution_text", "extras"],
+    ["inputs", "files", "resources", "sharding", "solution_text", "extras", "private_folder"],
     ["private_cache", "file_attributes", "user_systems"],
     ["compilation"],
     # 1. Lie groups and retractions

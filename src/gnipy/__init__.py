@@ -55,7 +55,7 @@ from .saveat import SaveAt  # noqa: E402
 from .errors import (InputError, MethodError, OutputBusy, OutputError, QualitativeFailure,  # noqa: E402
                      QualitativeFailureWarning, SolverFailure)
 from .extras import MissingExtra  # noqa: E402
-from .private_cache import CacheWarning  # noqa: E402
+from .private_folder import CacheWarning  # noqa: E402
 from .spaces import EuclideanSpace, GroupSpace, Point  # noqa: E402
 from .system import System  # noqa: E402
 

@@ -26,9 +26,9 @@ The directory is `$GNIPY_CACHE_DIR` if set, else `~/.cache/gnipy/jax`.
 
 **Trust.** JAX loads the executables it finds there and runs them, and gnipy cannot authenticate
 JAX's entries (JAX reads and writes them itself, by path). So the directory is used only if it is
-private (:func:`gnipy.private_cache.private_directory`): a directory, not a link, owned by the
+private (:func:`gnipy.private_folder.private_directory`): a directory, not a link, owned by the
 current user and writable by no one else (a missing one is created with mode 0700). Another
-directory is refused with a :class:`~gnipy.private_cache.CacheWarning`, and the cache stays off.
+directory is refused with a :class:`~gnipy.private_folder.CacheWarning`, and the cache stays off.
 What remains trusted is that no one but the user (or root) writes into a directory only the user
 can write, and that its path keeps naming it while JAX uses it.
 """
@@ -39,7 +39,7 @@ import functools
 import os
 from pathlib import Path
 
-from .private_cache import CacheRefused, private_directory, warn_refused
+from .private_folder import CacheRefused, private_directory, warn_refused
 
 __all__ = [
     "COMPILER_OPTIONS",
@@ -116,7 +116,7 @@ def enable_compilation_cache(path=None, *, min_compile_seconds: float = 0.2) -> 
 
     JAX's entries are executables that JAX loads and runs; gnipy cannot authenticate them (JAX
     reads and writes them itself), so the only protection is that the directory is the user's
-    alone: it is checked as :func:`gnipy.private_cache.private_directory` does, and a missing one
+    alone: it is checked as :func:`gnipy.private_folder.private_directory` does, and a missing one
     is created with mode 0700.
 
     Arguments:
@@ -126,7 +126,7 @@ def enable_compilation_cache(path=None, *, min_compile_seconds: float = 0.2) -> 
     Returns:
         The directory used, or None when the directory cannot be created, or is refused because it
         is not private: a symbolic link, another user's, or writable by its group or others (with a
-        :class:`~gnipy.private_cache.CacheWarning`). The cache is an optimisation: nothing fails
+        :class:`~gnipy.private_folder.CacheWarning`). The cache is an optimisation: nothing fails
         without it.
     """
     import jax

@@ -4,13 +4,8 @@ A cache that is loaded from disk is code gnipy runs (the native backend's object
 compiled executables), so a cache folder is used only if no one but the current user (and root)
 could have written what is in it:
 
-**The folder** (:func:`private_directory`) is opened once, without following a link
-(`O_DIRECTORY | O_NOFOLLOW`), and the open folder is checked: a directory owned by the effective
-user (`os.geteuid()`) that neither its group nor others may write (`mode & 0o022 == 0`). Every
-later step goes through that open folder (`dir_fd`, `O_NOFOLLOW`), so renaming or replacing a
-component of the path after the check cannot send gnipy elsewhere. A missing folder is created
-with mode 0700 (and so are the missing folders above it). The folders above the cache folder are
-not checked: whoever can rename them can move the folder, but cannot write into it.
+**The folder** is :func:`gnipy.private_folder.private_directory`'s: the user's alone, opened
+without following a link, and every file in it opened through it (`dir_fd`, `O_NOFOLLOW`).
 
 **The secret.** A private folder used by :class:`PrivateCache` holds a per-user secret,
 :data:`SECRET_NAME`: 32 random bytes, created with mode 0600 and whole (written to a temporary
@@ -32,9 +27,8 @@ to. Entries are written whole: a temporary file `.NAME.gnipy-PID-HEX.tmp` (the c
 Ctrl-C) the temporary file is removed, and the temporaries of processes that died are removed by
 the next write.
 
-**Refusals** are not errors (a cache is an optimisation): the caller works without the disk and
-:func:`warn_refused` emits one :class:`CacheWarning` per process and folder, which says which
-folder, why, and what to do.
+**Refusals** are not errors (a cache is an optimisation): the caller works without the disk, with
+one :class:`~gnipy.private_folder.CacheWarning` per process and folder (:func:`~gnipy.private_folder.warn_refused`).
 
 What this does not protect against: someone who already has the user's rights (or root's) can
 change the folder, the secret and the entries, and gnipy itself.
@@ -49,21 +43,17 @@ import os
 import re
 import secrets
 import stat
-import threading
-import warnings
 from pathlib import Path
 
 from .files import clean_stale_temporaries, temporary_name
-from .text import safe, user_name, writers
+from .private_folder import (CREATE_FLAGS, READ_FLAGS, CacheRefused, CacheWarning, kind_of, ownership_problem,
+                             private_directory, stat_no_follow, warn_refused)
+from .text import user_name
 
 __all__ = [
-    "CacheWarning",
-    "CacheRefused",
     "SECRET_NAME",
     "MAX_ENTRY_BYTES",
     "TAG_BYTES",
-    "private_directory",
-    "warn_refused",
     "PrivateCache",
     "open_private_cache",
 ]
@@ -77,173 +67,12 @@ TAG_BYTES = 32
 #: The largest entry read (larger files are not ours: they are not read at all).
 MAX_ENTRY_BYTES = 256 * 1024 * 1024
 
-_O_NOFOLLOW = getattr(os, "O_NOFOLLOW", 0)
-_O_DIRECTORY = getattr(os, "O_DIRECTORY", 0)
-_O_CLOEXEC = getattr(os, "O_CLOEXEC", 0)
-_O_NONBLOCK = getattr(os, "O_NONBLOCK", 0)  # a FIFO put in place of a file must not block the open
-_DIR_FLAGS = os.O_RDONLY | _O_DIRECTORY | _O_NOFOLLOW | _O_CLOEXEC
-_READ_FLAGS = os.O_RDONLY | _O_NOFOLLOW | _O_NONBLOCK | _O_CLOEXEC
-_CREATE_FLAGS = os.O_WRONLY | os.O_CREAT | os.O_EXCL | _O_NOFOLLOW | _O_CLOEXEC
 # a temporary of gnipy's convention (gnipy.files.temporary_name), for the name it is written for
 _TEMPORARY = re.compile(r"^\.(?P<name>.+)\.gnipy-\d+-[0-9a-f]{8,32}\.tmp$")
 # a temporary of gnipy 0.1's native cache (tempfile.mkstemp: no process id in its name), removed once
 # it is older than OLD_TEMPORARY_SECONDS (no write takes that long)
 _OLD_TEMPORARY = re.compile(r"^tmp[a-z0-9_]{8}\.tmp$")
 OLD_TEMPORARY_SECONDS = 3600.0
-
-
-class CacheWarning(RuntimeWarning):
-    """A cache folder or entry was not used because gnipy cannot trust it (the message says which,
-    why, and what to do); the work was done without the disk cache."""
-
-
-class CacheRefused(Exception):
-    """A folder or file that gnipy does not trust for a cache; the message is the reason (e.g. `it
-    is writable by others (mode 1777)`)."""
-
-
-def _supported() -> str | None:
-    """Why this platform cannot check a folder (None where it can)."""
-    if not (_O_NOFOLLOW and _O_DIRECTORY and hasattr(os, "geteuid") and os.open in os.supports_dir_fd
-            and os.stat in os.supports_dir_fd):
-        return ("this platform cannot open a folder without following links and check who owns it, "
-                "so gnipy keeps no cache on disk here")
-    return None
-
-
-def _ownership_problem(st: os.stat_result, what: str) -> str | None:
-    """Why a file or folder with status `st` is not the user's alone (None if it is)."""
-    euid = os.geteuid()
-    if st.st_uid != euid:
-        return f"{what} belongs to {user_name(st.st_uid)}, not to you ({user_name(euid)})"
-    if st.st_mode & 0o022:
-        return f"{what} is writable by {writers(st.st_mode)} (mode {stat.S_IMODE(st.st_mode):04o})"
-    return None
-
-
-def _lstat(name, dir_fd: int | None = None) -> os.stat_result | None:
-    try:
-        return os.stat(name, dir_fd=dir_fd, follow_symlinks=False)
-    except OSError:
-        return None
-
-
-def _kind(st: os.stat_result) -> str:
-    mode = st.st_mode
-    for test, kind in ((stat.S_ISLNK, "a symbolic link"), (stat.S_ISDIR, "a directory"), (stat.S_ISFIFO, "a FIFO"),
-                       (stat.S_ISSOCK, "a socket"), (stat.S_ISCHR, "a device"), (stat.S_ISBLK, "a device")):
-        if test(mode):
-            return kind
-    return "a special file"
-
-
-def _open_directory(path: Path) -> int:
-    try:
-        return os.open(path, _DIR_FLAGS)
-    except ValueError as e:  # a NUL character in the path
-        raise CacheRefused(f"it is not a path that can be opened ({e})") from None
-    except FileNotFoundError:
-        raise
-    except OSError as e:
-        st = _lstat(path)
-        if st is not None and stat.S_ISLNK(st.st_mode):
-            raise CacheRefused("it is a symbolic link (gnipy does not follow links to its caches)") from None
-        if st is not None and not stat.S_ISDIR(st.st_mode):
-            raise CacheRefused(f"it is {_kind(st) if not stat.S_ISREG(st.st_mode) else 'a file'}, "
-                               "not a directory") from None
-        raise e from None
-
-
-def _make_directories(path: Path) -> None:
-    """Create `path` and the missing folders above it, each with mode 0700 (`os.makedirs` gives
-    the folders above the default mode)."""
-    missing = []
-    p = path
-    while _lstat(p) is None:
-        missing.append(p)
-        if p.parent == p:
-            break
-        p = p.parent
-    for d in reversed(missing):
-        try:
-            os.mkdir(d, 0o700)
-        except FileExistsError:  # made meanwhile (by another process): checked when opened
-            pass
-
-
-def private_directory(path, *, create: bool = True) -> int:
-    """Open the folder `path` for a cache, if it is the user's alone.
-
-    Arguments:
-        path: the folder.
-        create: create it (mode 0700, and the missing folders above it, also 0700) if missing.
-
-    Returns:
-        A file descriptor of the open folder (the caller closes it): open every file in it
-        through this descriptor (`dir_fd=`) and with `O_NOFOLLOW`.
-
-    Raises:
-        CacheRefused: the folder is a symbolic link, not a directory, owned by another user, or
-            writable by its group or others (the message says which).
-        OSError: it cannot be created or opened (e.g. no permission, a read-only file system).
-    """
-    why = _supported()
-    if why is not None:
-        raise CacheRefused(why)
-    path = Path(os.fspath(path))
-    try:
-        fd = _open_directory(path)
-    except FileNotFoundError:
-        if not create:
-            raise
-        _make_directories(path)
-        fd = _open_directory(path)
-    try:
-        st = os.fstat(fd)
-        if not stat.S_ISDIR(st.st_mode):  # O_DIRECTORY makes this impossible; kept for platforms without it
-            raise CacheRefused("it is not a directory")
-        why = _ownership_problem(st, "it")
-        if why is not None:
-            raise CacheRefused(why)
-    except BaseException:
-        os.close(fd)
-        raise
-    return fd
-
-
-_WARNED: set[str] = set()
-_WARNED_LOCK = threading.Lock()
-
-
-def warn_refused(folder, reason: str, *, what: str, instead: str, remedy: str, entry: str | None = None,
-                 stacklevel: int = 2) -> bool:
-    """Emit one :class:`CacheWarning` per process for `folder`: later calls for the same folder
-    are silent. Returns whether this call warned.
-
-    Arguments:
-        folder: the cache folder.
-        reason: why it (or `entry`) was refused, e.g. `it is writable by others (mode 1777)`.
-        what: what the folder holds, e.g. `native object code`.
-        instead: what gnipy did instead, e.g. `the program was compiled in memory`.
-        remedy: what to do about it (the settings to change).
-        entry: the name of the entry refused, when the folder itself is fine.
-        stacklevel: as for `warnings.warn`, counted from the caller.
-    """
-    name = os.path.abspath(os.fspath(folder))
-    with _WARNED_LOCK:
-        if name in _WARNED:
-            return False
-        _WARNED.add(name)
-    rule = ("gnipy loads a cache only from a folder that you own and no one else can write, never through a link, "
-            "and only entries that your gnipy wrote")
-    if entry is None:
-        text = f"gnipy does not use the cache folder {safe(folder)} for {what}: {safe(reason)}. {rule}; {instead}. "
-    else:
-        text = (f"gnipy does not load {safe(entry)} from the cache folder {safe(folder)} ({what}): {safe(reason)}. "
-                f"{rule}, and never makes such an entry (if you did not put it there, someone with your rights or "
-                f"root did); {instead}, and gnipy's own entry replaces it (the name, never what a link points to). ")
-    warnings.warn(CacheWarning(text + remedy), stacklevel=stacklevel + 1)
-    return True
 
 
 def _read_all(fd: int, limit: int) -> bytes:
@@ -269,18 +98,18 @@ def _write_all(fd: int, data: bytes) -> None:
 def _read_secret(dir_fd: int) -> bytes | None:
     """The secret of the open folder, None if there is none yet; CacheRefused if it is not usable."""
     try:
-        fd = os.open(SECRET_NAME, _READ_FLAGS, dir_fd=dir_fd)
+        fd = os.open(SECRET_NAME, READ_FLAGS, dir_fd=dir_fd)
     except FileNotFoundError:
         return None
     except OSError:
-        st = _lstat(SECRET_NAME, dir_fd)
+        st = stat_no_follow(SECRET_NAME, dir_fd)
         if st is not None and stat.S_ISLNK(st.st_mode):
             raise CacheRefused(f"its secret file {SECRET_NAME} is a symbolic link") from None
         raise
     try:
         st = os.fstat(fd)
         if not stat.S_ISREG(st.st_mode):
-            raise CacheRefused(f"its secret file {SECRET_NAME} is {_kind(st)}, not a regular file")
+            raise CacheRefused(f"its secret file {SECRET_NAME} is {kind_of(st)}, not a regular file")
         if st.st_uid != os.geteuid():
             raise CacheRefused(f"its secret file {SECRET_NAME} belongs to {user_name(st.st_uid)}, not to you "
                                f"({user_name(os.geteuid())}); remove it and gnipy makes a new one")
@@ -302,7 +131,7 @@ def _secret(dir_fd: int) -> bytes:
     if found is not None:
         return found
     tmp = temporary_name(Path(SECRET_NAME)).name
-    fd = os.open(tmp, _CREATE_FLAGS, 0o600, dir_fd=dir_fd)
+    fd = os.open(tmp, CREATE_FLAGS, 0o600, dir_fd=dir_fd)
     try:
         try:
             _write_all(fd, secrets.token_bytes(SECRET_BYTES))
@@ -390,7 +219,7 @@ class PrivateCache:
         :meth:`write` them. An entry that is not a regular file of this user (a link, a hard link,
         another user's file, a FIFO) is not opened and is reported with a :class:`CacheWarning`."""
         _check_name(name)
-        st = _lstat(name, self.fd)
+        st = stat_no_follow(name, self.fd)
         if st is None:
             return None
         why = self._entry_problem(st)
@@ -400,7 +229,7 @@ class PrivateCache:
         if not TAG_BYTES < st.st_size <= MAX_ENTRY_BYTES:
             return None
         try:
-            fd = os.open(name, _READ_FLAGS, dir_fd=self.fd)
+            fd = os.open(name, READ_FLAGS, dir_fd=self.fd)
         except OSError:  # replaced meanwhile (by this user's other process): read next time
             return None
         try:
@@ -422,8 +251,8 @@ class PrivateCache:
     @staticmethod
     def _entry_problem(st: os.stat_result) -> str | None:
         if not stat.S_ISREG(st.st_mode):
-            return f"is {_kind(st)}, not a regular file"
-        why = _ownership_problem(st, "")
+            return f"is {kind_of(st)}, not a regular file"
+        why = ownership_problem(st, "")
         if why is not None:
             return why.strip()
         if st.st_nlink != 1:
@@ -441,7 +270,7 @@ class PrivateCache:
         fd = -1
         created = False
         try:
-            fd = os.open(tmp, _CREATE_FLAGS, 0o600, dir_fd=self.fd)
+            fd = os.open(tmp, CREATE_FLAGS, 0o600, dir_fd=self.fd)
             created = True
             _write_all(fd, bytes(data) + self.tag(key, bytes(data)))
             os.fsync(fd)  # on disk before it counts as written
@@ -479,7 +308,7 @@ class PrivateCache:
         for entry in entries:
             if not _OLD_TEMPORARY.match(entry.name):
                 continue
-            st = _lstat(entry.name, self.fd)
+            st = stat_no_follow(entry.name, self.fd)
             if st is not None and stat.S_ISREG(st.st_mode) and time.time() - st.st_mtime > OLD_TEMPORARY_SECONDS:
                 try:
                     os.unlink(entry.name, dir_fd=self.fd)

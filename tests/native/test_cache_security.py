@@ -7,7 +7,7 @@ writable by others (0777, 1777, group-writable); a folder or an entry that is a 
 owner (a monkeypatched `os.geteuid`, and as root a real `chown`); an unusable secret; a write that
 fails (a full disk, Ctrl-C, RLIMIT_FSIZE) and temporaries of dead processes; random damage of an
 entry (hypothesis). The programs are the toy steps below, whose results are exact sums; each build
-starts from an empty engine memory (`program._ENGINES`), so it reads the disk."""
+starts from an empty engine memory (`gnipy.native.engine._ENGINES`), so it reads the disk."""
 
 import errno
 import hashlib
@@ -28,15 +28,17 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from gnipy import private_cache
+from gnipy import private_cache, private_folder
 from gnipy.compilation import enable_compilation_cache
+from gnipy.native import engine as native_engine
 from gnipy.native import program
 from gnipy.native.program import build_loop
-from gnipy.private_cache import SECRET_NAME, CacheWarning, PrivateCache, private_directory
+from gnipy.private_cache import SECRET_NAME, PrivateCache
+from gnipy.private_folder import CacheWarning, private_directory
 from test_program import _carry, _toy_step
 
 # a warning where none is expected fails the test (the tests that expect one record them)
-pytestmark = pytest.mark.filterwarnings("error::gnipy.private_cache.CacheWarning")
+pytestmark = pytest.mark.filterwarnings("error::gnipy.private_folder.CacheWarning")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 H = 0.25
@@ -59,7 +61,7 @@ EXPECTED = {"toy": ([0.5, 0.5, 1.25], [1.25, 0.625, 5, -1]), "other": ([1.0, 1.0
 def _build(which="toy"):
     """Build a program with an empty engine memory (so the disk cache is asked), and check that
     it computes its own exact results; returns where its code came from."""
-    program._ENGINES.clear()
+    native_engine._ENGINES.clear()
     loop = build_loop(STEPS[which], _carry([0.0, 0.0]), H)
     carry, saved = loop.run(START, H, BLOCKS)
     saved_x0, carry_head = EXPECTED[which]
@@ -74,8 +76,8 @@ def native(tmp_path, monkeypatch):
     and the warnings already given are this test's own."""
     monkeypatch.setenv("GNIPY_CACHE_DIR", str(tmp_path / "cache"))
     monkeypatch.delenv("GNIPY_NATIVE_CACHE", raising=False)
-    monkeypatch.setattr(program, "_ENGINES", {})
-    monkeypatch.setattr(private_cache, "_WARNED", set())
+    monkeypatch.setattr(native_engine, "_ENGINES", {})
+    monkeypatch.setattr(private_folder, "_WARNED", set())
     return tmp_path / "cache" / "native"
 
 
@@ -117,14 +119,14 @@ def _malicious_object(marker):
           ret void
         }}
     """)
-    return program._compile(ir)
+    return native_engine.compile_ir(ir)
 
 
 def test_the_planted_object_runs_system_when_loaded(tmp_path):
     """The attack object of the tests below does what D1's did: loaded, it runs a command."""
     marker = tmp_path / "ran"
-    llvm = program._llvm()
-    engine = llvm.create_mcjit_compiler(llvm.parse_assembly(""), program._target_machine())
+    llvm = native_engine.llvm_binding()
+    engine = llvm.create_mcjit_compiler(llvm.parse_assembly(""), native_engine.target_machine())
     engine.add_object_file(llvm.ObjectFileRef.from_data(_malicious_object(marker)))
     engine.finalize_object()
     program._SINGLE(engine.get_function_address("gnipy_run"))(None, 0.0, None, 0, None)
@@ -254,7 +256,7 @@ def test_a_folder_of_another_user_is_refused(native, monkeypatch):
     assert _listing(native) == before
     assert _build() == "disk"  # the real owner's folder is fine
     if real == 0:
-        monkeypatch.setattr(private_cache, "_WARNED", set())
+        monkeypatch.setattr(private_folder, "_WARNED", set())
         os.chown(native, 65534, 65534)
         with warnings.catch_warnings(record=True) as records:
             warnings.simplefilter("always")
@@ -263,7 +265,7 @@ def test_a_folder_of_another_user_is_refused(native, monkeypatch):
         assert "uid 65534" in message and _listing(native) == before
         os.chown(native, 0, 0)
         os.chown(toy, 65534, 65534)
-        monkeypatch.setattr(private_cache, "_WARNED", set())
+        monkeypatch.setattr(private_folder, "_WARNED", set())
         with warnings.catch_warnings(record=True) as records:
             warnings.simplefilter("always")
             assert _build() == "compiled"
@@ -377,7 +379,7 @@ def test_the_compilation_cache_refuses_a_folder_that_is_not_private(tmp_path, mo
     """JAX's cache (opt-in) loads executables too: a folder writable by others, a link, a path that
     cannot be opened, or another user's folder is refused with a warning, and JAX's setting is
     left alone."""
-    monkeypatch.setattr(private_cache, "_WARNED", set())
+    monkeypatch.setattr(private_folder, "_WARNED", set())
     before = jax.config.jax_compilation_cache_dir
     shared = tmp_path / "shared"
     shared.mkdir()

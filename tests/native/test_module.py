@@ -7,7 +7,7 @@ import ctypes
 import numpy as np
 import pytest
 
-from gnipy.native import program
+from gnipy.native import engine as native_engine
 from gnipy.native.module import Program, convert, ir_type
 from gnipy.native.scalars import Function
 
@@ -33,14 +33,14 @@ define double @gnipy_f(double %x) {{
 
 def test_a_body_is_inlined_and_dropped():
     ok = _skeleton("{double, i32} @body(double, i32)", "{double, i32} @body(double %x, i32 7)")
-    obj = program._compile((ok, BODY))
+    obj = native_engine.compile_ir((ok, BODY))
     assert obj and b"body" not in obj
 
 
 def test_a_call_that_does_not_match_the_body_is_refused():
     wrong = _skeleton("{double, i32} @body(double)", "{double, i32} @body(double %x)")
     with pytest.raises(RuntimeError, match="not inlined"):
-        program._compile((wrong, BODY))
+        native_engine.compile_ir((wrong, BODY))
 
 
 def test_a_program_of_a_function_body_runs():
@@ -56,7 +56,7 @@ def test_a_program_of_a_function_body_runs():
     b.store(b.extract_value(r, 0), at[1])
     b.store(convert(b, b.extract_value(r, 1), "i32", "double"), at[2])
     b.ret_void()
-    engine, source, _ = program.load_program(prog.texts)
+    engine, source, _ = native_engine.load_program(prog.texts)
     io = np.array([1.75, 0.0, 0.0])
     ctypes.CFUNCTYPE(None, ctypes.c_void_p)(engine.get_function_address("gnipy_t"))(io.ctypes.data)
     # 2·1.75 = 3.5 as i32 rounds toward zero, as the lowering converts (fptosi)

@@ -2,6 +2,7 @@
 code (:mod:`gnipy.native.lowering`, :mod:`gnipy.native.program`)."""
 
 from .lowering import Unsupported
-from .program import NativeLoop, available, build_loop, cache_dir, cores
+from .engine import available, cache_dir, cores
+from .program import NativeLoop, build_loop
 
 __all__ = ["Unsupported", "NativeLoop", "available", "build_loop", "cache_dir", "cores"]

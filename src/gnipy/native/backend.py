@@ -36,7 +36,8 @@ from ..errors import InputError
 from ..monitor import SIZE, initial
 from ..stepping import finish_native, initial_carry, loop_step, report_progress, split_arrays, watched_run
 from .lowering import Unsupported
-from .program import available, build_loop, default_lanes
+from .engine import available
+from .program import build_loop, default_lanes
 
 __all__ = ["BACKENDS", "NATIVE_MIN_STEPS", "check_backend", "choose", "run_native", "native_loop", "system_params"]
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from .lowering import lower_jaxpr
 from .module import Program, ir_type
-from .program import load_program
+from .engine import load_program
 from .scalars import Function, const_array, flatten, llvm_type
 
 __all__ = ["NativeFunction", "build_function"]
