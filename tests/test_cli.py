@@ -9,6 +9,7 @@ import os
 import numpy as np
 import pytest
 import xarray as xr
+import typer
 from typer.testing import CliRunner
 
 import gnipy
@@ -385,6 +386,30 @@ def test_bad_config_file(text, words, tmp_path):
     for word in words:
         assert word in errors[0], errors[0]
     assert sorted(os.listdir(tmp_path)) == ["run.toml"]
+
+
+def test_config_keys_are_the_options_of_gni_run():
+    """The keys of --config are read from `gni run`'s own declarations: checked here against the
+    command as click builds it (its parameters, their long names and types), so that an option
+    added to `gni run` is a key (or named command-line only) without a second list."""
+    from gnipy.cli.run import CONFIG_KEYS
+
+    command = typer.main.get_command(app).commands["run"]
+    only = {"--config", "--resume", "--overwrite", "--yes", "--accept-out-of-band"}
+    expected = {}
+    for param in command.params:
+        longs = [o for o in param.opts if o.startswith("--")]
+        if not longs:
+            expected[param.name] = "MODEL"
+        elif longs[0] not in only:
+            expected.update({o[2:].replace("-", "_"): longs[0] for o in longs})
+    assert {key: option for key, (option, _) in CONFIG_KEYS.items()} == expected
+    # what each key must hold: the types of the options (the values' checks: CONFIG_ERRORS below)
+    kinds = {"h": "number", "t_final": "number", "steps": "integer", "save_every": "integer",
+             "checkpoint_every": "integer", "project_v0": "boolean", "out": "path", "plot": "path"}
+    assert {key: CONFIG_KEYS[key][1] for key in kinds} == kinds
+    assert {k for k, (_, kind) in CONFIG_KEYS.items() if kind == "vector"} == {"q0", "x0", "v0", "R0"}
+    assert CONFIG_KEYS["set"][1] == "set" and CONFIG_KEYS["model"][1] == CONFIG_KEYS["method"][1] == "string"
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,8 +1,9 @@
 """Configuration files of `gni run --config RUN.toml`: the options as TOML keys.
 
-The keys are the option names (dashes or underscores); options given on the command line
-override the file; `--overwrite` and `--yes` are command-line options only (a configuration file
-cannot grant them). Relative paths in the file are relative to the file's directory.
+The keys are the option names (dashes or underscores), read from the command's own declarations
+(:func:`config_keys`); options given on the command line override the file; `--overwrite`,
+`--yes` and `--accept-out-of-band` are command-line options only (a configuration file cannot
+grant them). Relative paths in the file are relative to the file's directory.
 """
 
 from __future__ import annotations
@@ -13,26 +14,40 @@ from typing import Any
 
 from .errors import UsageError
 
-__all__ = ["CONFIG_KEYS", "config_value", "load_config"]
+__all__ = ["config_keys", "config_value", "load_config"]
 
-#: key (dashes read as underscores) -> (the CLI option it stands for, what it must hold)
-CONFIG_KEYS: dict[str, tuple[str, str]] = {
-    "model": ("MODEL", "string"),
-    "method": ("--method", "string"),
-    "h": ("--h", "number"),
-    "steps": ("--steps", "integer"),
-    "t_final": ("--t-final", "number"),
-    "set": ("--set", "set"),
-    "q0": ("--q0", "vector"),
-    "x0": ("--q0", "vector"),  # the older name of q0
-    "v0": ("--v0", "vector"),
-    "R0": ("--R0", "vector"),
-    "save_every": ("--save-every", "integer"),
-    "out": ("--out", "path"),
-    "plot": ("--plot", "path"),
-    "project_v0": ("--project-v0", "boolean"),
-    "checkpoint_every": ("--checkpoint-every", "integer"),
-}
+#: What a config value must hold, by the type of the option it stands for (the command function's
+#: annotation); an option of text "a,b,..." is named in `config_keys`'s `vectors`, and a
+#: repeatable option (a list: `--set`) holds NAME=VALUE items.
+_KINDS = {str: "string", float: "number", int: "integer", bool: "boolean", Path: "path"}
+
+
+def config_keys(command, *, command_line_only, vectors) -> dict[str, tuple[str, str]]:
+    """`{key: (option, kind)}` for the options of a CLI command that a configuration file may hold,
+    read from the command function itself (its typer declarations and type annotations), so that
+    the keys are the command's options and nothing else: every argument and option except
+    `command_line_only`, a key for each long name of an option (`--q0` and its older name `--x0`
+    both, dashes read as underscores), `option` its first long name (`MODEL` for the argument),
+    and `kind` what the value must be (:data:`_KINDS`; `"vector"` for the options in `vectors`,
+    `"set"` for a repeatable one)."""
+    import inspect
+    import typing
+
+    hints = typing.get_type_hints(command)
+    keys: dict[str, tuple[str, str]] = {}
+    for name, param in inspect.signature(command).parameters.items():
+        if name in command_line_only:
+            continue
+        annotation = hints[name]
+        kind_of = next((a for a in typing.get_args(annotation) if a is not type(None)), annotation)
+        kind = "set" if typing.get_origin(kind_of) is list else "vector" if name in vectors else _KINDS[kind_of]
+        longs = [d.split("/")[0] for d in getattr(param.default, "param_decls", None) or () if d.startswith("--")]
+        if not longs:  # the argument
+            keys[name] = (getattr(param.default, "metavar", None) or name.upper(), kind)
+        for long in longs:
+            keys[long[2:].replace("-", "_")] = (longs[0], kind)
+    return keys
+
 
 _KIND_TEXT = {
     "string": "a string",
@@ -122,9 +137,10 @@ def _config_set(where: str, key: str, value, bad) -> list[str]:
     return items
 
 
-def load_config(path: Path) -> dict[str, Any]:
-    """Read a run configuration (TOML): `{key: value}` with keys normalized (dashes → underscores)
-    and values in the form the CLI options take; raises `UsageError` naming the file and key."""
+def load_config(path: Path, keys: dict[str, tuple[str, str]]) -> dict[str, Any]:
+    """Read a run configuration (TOML) whose `keys` are those of :func:`config_keys`: `{key:
+    value}` with keys normalized (dashes → underscores) and values in the form the CLI options
+    take; raises `UsageError` naming the file and key."""
     import tomllib
 
     where = str(path)
@@ -149,12 +165,12 @@ def load_config(path: Path) -> dict[str, Any]:
             key = "R0"
         if key == "x0" and "q0" in data:
             raise UsageError("--config", f"{where}: keys 'x0' and 'q0' both given ('x0' is the older name of 'q0')")
-        if key not in CONFIG_KEYS:
-            known = ", ".join(k.replace("_", "-") for k in CONFIG_KEYS)
+        if key not in keys:
+            known = ", ".join(k.replace("_", "-") for k in keys)
             raise UsageError("--config", f"{where}: unknown key {raw_key!r} (known: {known})")
         if key in out:
             raise UsageError("--config", f"{where}: key {raw_key!r} given twice (with dashes and underscores)")
-        out[key] = config_value(where, raw_key, CONFIG_KEYS[key][1], value, base)
+        out[key] = config_value(where, raw_key, keys[key][1], value, base)
         if key == "model" and isinstance(out[key], str):
             # a model of the user's own: only a .py file beside the config file (gnipy.user_systems)
             from gnipy.errors import InputError

@@ -16,7 +16,7 @@ import typer
 
 from . import resources
 from .app import app
-from .config import CONFIG_KEYS, load_config
+from .config import config_keys, load_config
 from .errors import UsageError, WriteFailure, guarded, writing
 from .output import exit_for_health
 from .parsing import parse_R0, prepare
@@ -25,7 +25,7 @@ from .paths import check_output, check_plot, same_file
 from .progress import Progress, busy
 from .summary import attrs_for, origin_attrs, run_report, streamed_report
 
-__all__ = ["PROGRESS_STEPS", "run", "run_streamed", "simulate_model", "write_plot"]
+__all__ = ["PROGRESS_STEPS", "CONFIG_KEYS", "run", "run_streamed", "simulate_model", "write_plot"]
 
 #: In-memory runs of at least this many steps report their progress (a bar on a terminal, plain
 #: lines elsewhere: :mod:`gnipy.cli.progress`); shorter ones show a spinner on a terminal only.
@@ -144,6 +144,13 @@ def run(
     exit_for_health(guarded(go, origins), accept_out_of_band)
 
 
+#: The keys of `gni run --config RUN.toml`: `gni run`'s own options (:func:`gnipy.cli.config.config_keys`),
+#: less those that name the file, act on earlier output or grant what a file must not (replace
+#: files, go past the resource bounds, exit 0 on a failed verdict).
+CONFIG_KEYS = config_keys(run, command_line_only={"config", "resume", "overwrite", "yes", "accept_out_of_band"},
+                          vectors={"q0", "v0", "R0"})
+
+
 @dataclass
 class _RunInputs:
     """The options of a `gni run`: each from the command line, else from --config, else its
@@ -172,7 +179,7 @@ def _run_inputs(config: Path | None, origins: dict[str, str], *, model, method, 
     from the file (option -> `"key 'h' in FILE"`). Raises UsageError for a missing model or --h."""
     cfg: dict[str, Any] = {}
     if config is not None:
-        cfg = load_config(config)
+        cfg = load_config(config, CONFIG_KEYS)
         for key in cfg:
             origins[CONFIG_KEYS[key][0]] = f"key {key.replace('_', '-')!r} in {str(config)}"
 
