@@ -7,8 +7,16 @@ temporary directory per page (files written by a block are there for the later o
   earlier ones); one whose first line is a comment naming a file (`# my_sleigh.py`) is also written
   to that file, which later commands of the page name (`gni run my_sleigh.py:make_sleigh`);
 - ```bash, ```sh, ```shell, ```console (the `$ ` lines) and unlabelled blocks are shell commands:
-  each command line (with its `\\` continuations) runs with bash, the virtual environment's `gni`
-  and `python` first on PATH; it must exit with 0 and print no Python traceback;
+  each command line (with its `\\` continuations) must exit with 0 and print no Python traceback.
+  A plain `gni ...` line (no pipe, redirection, variable or other shell syntax: :func:`_gni_argv`)
+  runs in the page's process through the entry point of the installed `gni` script
+  (`gnipy.__main__.main`, with `sys.argv` the line's words as bash splits them), its output
+  captured at the file descriptors, so that child processes' output (dask workers) is seen too;
+  every other line runs with bash, the virtual environment's `gni` and `python` first on PATH (at
+  least one `gni` line of the docs does, so the script itself runs here too). In the page's
+  process a command costs what its work costs: a `gni` process of its own first imports JAX,
+  gnipy and the file libraries and traces its programs again (about 2-3 s a command, measured;
+  the 44 `gni` lines of the docs took 210 s of the module's 381 s of CPU);
 - ```toml blocks are parsed; one whose first line is a comment naming a file (`# disk.toml`) is
   written to that file, which later commands of the page read;
 - ```text blocks are not commands (usage synopses with placeholders such as MODEL); a ```text block
@@ -19,9 +27,8 @@ A few pages get an input file from a documented command first (:data:`PAGE_INPUT
 pages' results are checked beyond running (:data:`CHECKS`).
 
 Each page runs in a fresh Python process of its own (as a reader would run it), in its own
-temporary directory; two pages run at a time (most of the time goes into the `gni` processes, each
-of which imports JAX and compiles: about 3-12 s a command on 2 cores). A failure names the page
-and the line of the block (a Python traceback points into the page itself).
+temporary directory; two pages run at a time. A failure names the page and the line of the block
+(a Python traceback points into the page itself).
 """
 
 from __future__ import annotations
@@ -216,6 +223,77 @@ def _run_shell(command: str, where: str, cwd: pathlib.Path) -> None:
     assert "Traceback" not in output, f"{where}: `{command}` printed a traceback:\n{output[-4000:]}"
 
 
+#: Characters that bash gives a meaning outside quotes (pipes, redirections, lists, subshells,
+#: expansions, globs, escapes); inside double quotes, `$`, backquote and backslash keep theirs.
+_SHELL_SYNTAX, _DOUBLE_QUOTED_SYNTAX = set("|&;<>()$`{}*?[]~\\!"), set("$`\\!")
+
+
+def _gni_argv(command: str) -> list[str] | None:
+    """The arguments of a plain `gni` line, as bash splits it (its comment cut), or None for any
+    other line: one whose first word is not `gni`, or that uses shell syntax outside single quotes
+    (a pipe, a redirection, a variable, a glob, an assignment in front, ...)."""
+    quote = None
+    for i, ch in enumerate(command):
+        if quote == "'":
+            quote = None if ch == "'" else quote
+        elif quote == '"':
+            if ch in _DOUBLE_QUOTED_SYNTAX:
+                return None
+            quote = None if ch == '"' else quote
+        elif ch in "'\"":
+            quote = ch
+        elif ch == "#" and (i == 0 or command[i - 1].isspace()):
+            break  # the comment: bash reads no further
+        elif ch in _SHELL_SYNTAX:
+            return None
+    if quote is not None:
+        return None
+    words = shlex.split(command, comments=True)
+    return words[1:] if words and words[0] == "gni" else None
+
+
+def _run_gni(argv: list[str], command: str, where: str) -> None:
+    """Run `gni ARGV` in this process as the `gni` script does (`gnipy.__main__.main`), its
+    output (and that of any process it starts) captured at file descriptors 1 and 2."""
+    import tempfile
+    import traceback
+    import warnings
+
+    from gnipy.__main__ import main
+
+    start = time.perf_counter()
+    code, error = 0, ""
+    sys.stdout.flush()
+    sys.stderr.flush()
+    saved = os.dup(1), os.dup(2)
+    old_argv = sys.argv
+    with tempfile.TemporaryFile() as out:
+        os.dup2(out.fileno(), 1)
+        os.dup2(out.fileno(), 2)
+        try:
+            sys.argv = ["gni", *argv]
+            with warnings.catch_warnings():  # the command's warning filters stay its own
+                main()
+        except SystemExit as e:
+            code = 0 if e.code is None else e.code if isinstance(e.code, int) else 1
+            error = "" if isinstance(e.code, int) or e.code is None else str(e.code)
+        except BaseException:  # noqa: BLE001 (reported as the command's failure, below)
+            code, error = 1, traceback.format_exc()
+        finally:
+            sys.argv = old_argv
+            sys.stdout.flush()
+            sys.stderr.flush()
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+        out.seek(0)
+        output = out.read().decode(errors="replace") + error
+    print(f"{where}: {time.perf_counter() - start:.1f} s  {command}  (in this process)", flush=True)
+    assert code == 0, f"{where}: `{command}` exited with {code}:\n{output[-4000:]}"
+    assert "Traceback" not in output, f"{where}: `{command}` printed a traceback:\n{output[-4000:]}"
+
+
 def run_page(page: pathlib.Path, cwd: pathlib.Path) -> dict:
     """Run every block of `page` in order in `cwd` (the current directory); return the namespace of
     its Python blocks."""
@@ -236,8 +314,13 @@ def run_page(page: pathlib.Path, cwd: pathlib.Path) -> dict:
             print(f"{where}: {time.perf_counter() - start:.1f} s  (python block)", flush=True)
         elif lang in SHELL:
             for line, command in _commands(lang, code, first):
-                if _key(command) not in NOT_RUN:
+                if _key(command) in NOT_RUN:
+                    continue
+                argv = _gni_argv(command)
+                if argv is None:
                     _run_shell(command, f"{rel}:{line}", cwd)
+                else:
+                    _run_gni(argv, command, f"{rel}:{line}")
         elif lang in DATA:
             data = tomllib.loads(code)
             name = re.match(r"#\s*(\S+\.toml)\s*$", code.splitlines()[0])
@@ -427,6 +510,20 @@ def test_commands_not_run_are_in_the_docs_and_covered_elsewhere():
         for path, name in tests:
             assert re.search(rf"^def {name}\(", (ROOT / path).read_text(), flags=re.M), f"{path}::{name}"
     assert all(command in commands for cmds in PAGE_INPUTS.values() for command in cmds)
+
+
+def test_plain_gni_lines_run_in_the_page_process_and_the_others_with_bash():
+    assert _gni_argv("gni run a --grid 'Omega=linspace(0, 2, 5)' --h 1   # a comment; | >") == [
+        "run", "a", "--grid", "Omega=linspace(0, 2, 5)", "--h", "1"]
+    for line in ("gni control --example x --print > x.toml", "gni info a.nc | head", "gni run $MODEL",
+                 "FOO=1 gni run a", "gni run a && gni info b", "gni run \"$(cat m)\"", "gni info *.nc",
+                 "python -c 'print(1)'", "gni run 'unclosed"):
+        assert _gni_argv(line) is None, line
+    # the installed `gni` script itself runs here too: some documented gni line is bash's
+    commands = [c for page in PAGES for lang, first, code in _blocks(page) if lang in SHELL
+                for _, c in _commands(lang, code, first) if _key(c) not in NOT_RUN]
+    assert any(c.startswith("gni ") and _gni_argv(c) is None for c in commands)
+    assert sum(_gni_argv(c) is not None for c in commands) >= 30
 
 
 def test_command_lines_are_split_as_bash_reads_them():
