@@ -244,7 +244,6 @@ def model_from_function(function, *, reference: str | None = None, digest: str |
         InputError: a parameter without a default, a function that does not return a System.
     """
     import inspect
-    import math
 
     if isinstance(function, System):
         system_value = function
@@ -255,23 +254,7 @@ def model_from_function(function, *, reference: str | None = None, digest: str |
         label = reference or system_value.name
     elif callable(function):
         label = reference or f"{getattr(function, '__module__', '?')}:{getattr(function, '__qualname__', '?')}"
-        try:
-            signature = inspect.signature(function)
-        except (TypeError, ValueError) as e:
-            raise InputError(f"model: cannot read the parameters of {safe(label)!r}: {e}") from None
-        params = {}
-        for p in signature.parameters.values():
-            if p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
-                continue
-            if p.default is p.empty:
-                raise InputError(f"model: {safe(label)!r}: parameter {p.name!r} has no default; give each "
-                                 "parameter of the function a default (a number makes it a model parameter)")
-            d = p.default
-            if isinstance(d, (int, float)) and not isinstance(d, bool) and math.isfinite(d):
-                if p.kind is p.POSITIONAL_ONLY:
-                    raise InputError(f"model: {safe(label)!r}: parameter {p.name!r} is positional-only; "
-                                     "model parameters are passed by name")
-                params[p.name] = float(d)
+        params = _model_parameters(function, label)
 
         def make(p):
             return function(**p)
@@ -303,14 +286,9 @@ def model_from_function(function, *, reference: str | None = None, digest: str |
         return built(p).as_user_model(label, digest, rebuild)
 
     first = build(params)
-    n, N = first.n, first.dim
 
     def initial(p):
-        defaults = build(p).defaults
-        q0 = (0.0,) * n if not defaults or defaults[0] is None else tuple(float(x) for x in defaults[0])
-        v0 = (0.0,) * N if not defaults or len(defaults) < 2 or defaults[1] is None else \
-            tuple(float(x) for x in defaults[1])
-        return q0, v0
+        return _initial_condition(build(p))
 
     q0, v0 = initial(params)
     R0 = first.defaults[2] if first.defaults and len(first.defaults) > 2 else None
@@ -321,6 +299,42 @@ def model_from_function(function, *, reference: str | None = None, digest: str |
         R0=None if R0 is None else tuple(float(x) for x in R0), default_ic=initial if params else None,
         notes=doc, origin=(label, digest),
     )
+
+
+def _model_parameters(function, label: str) -> dict[str, float]:
+    """The model parameters of the user's `function` (:func:`model_from_function`): its parameters
+    with a finite number as default, by name; InputError for a parameter without a default, or a
+    positional-only model parameter."""
+    import inspect
+    import math
+
+    try:
+        signature = inspect.signature(function)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"model: cannot read the parameters of {safe(label)!r}: {e}") from None
+    params = {}
+    for p in signature.parameters.values():
+        if p.kind in (p.VAR_POSITIONAL, p.VAR_KEYWORD):
+            continue
+        if p.default is p.empty:
+            raise InputError(f"model: {safe(label)!r}: parameter {p.name!r} has no default; give each "
+                             "parameter of the function a default (a number makes it a model parameter)")
+        d = p.default
+        if isinstance(d, (int, float)) and not isinstance(d, bool) and math.isfinite(d):
+            if p.kind is p.POSITIONAL_ONLY:
+                raise InputError(f"model: {safe(label)!r}: parameter {p.name!r} is positional-only; "
+                                 "model parameters are passed by name")
+            params[p.name] = float(d)
+    return params
+
+
+def _initial_condition(system: System) -> tuple[tuple[float, ...], tuple[float, ...]]:
+    """`(q0, v0)` of a user's model: the System's `defaults`, else the origin at rest."""
+    defaults = system.defaults or ()
+    q0 = defaults[0] if len(defaults) > 0 else None
+    v0 = defaults[1] if len(defaults) > 1 else None
+    return ((0.0,) * system.n if q0 is None else tuple(float(x) for x in q0),
+            (0.0,) * system.dim if v0 is None else tuple(float(x) for x in v0))
 
 
 def model_names() -> list[str]:
