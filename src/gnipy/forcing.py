@@ -243,24 +243,30 @@ def drive(system, controls, h, t0, steps):
     else:
         if not m:
             raise InputError("controls: the system's force takes no inputs (inputs=0)")
-        if not isinstance(controls, jax.core.Tracer):
-            arr = np.asarray(controls)
-            if arr.dtype == object or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
-                raise InputError(f"controls: expected a real array (steps, {m}) or a function u(t), got {arr.dtype}")
-            if arr.ndim == 1 and m == 1:
-                arr = arr[:, None]
-            if arr.ndim != 2 or arr.shape[1] != m or arr.shape[0] < 1:
-                raise InputError(f"controls: expected shape (steps, {m}), got {np.shape(controls)}")
-            if not np.all(np.isfinite(arr)):
-                raise InputError("controls: contains NaN or infinite values")
-            values = arr.astype(np.float64)
-        else:
-            values = jnp.asarray(controls, jnp.float64)
-            if values.ndim == 1 and m == 1:
-                values = values[:, None]
-            if values.ndim != 2 or values.shape[1] != m:
-                raise InputError(f"controls: expected shape (steps, {m}), got {tuple(values.shape)}")
+        values = _control_values(controls, m)
     return system.driven(Drive.make(values, signal, t0=t0, h=h, inputs=m))
+
+
+def _control_values(controls, m: int):
+    """Per-step controls as an array (steps, m) of float64: a NumPy array where they are concrete
+    (checked: real, finite, at least one step), traced ones as they are (their shape checked)."""
+    if isinstance(controls, jax.core.Tracer):
+        values = jnp.asarray(controls, jnp.float64)
+        if values.ndim == 1 and m == 1:
+            values = values[:, None]
+        if values.ndim != 2 or values.shape[1] != m:
+            raise InputError(f"controls: expected shape (steps, {m}), got {tuple(values.shape)}")
+        return values
+    arr = np.asarray(controls)
+    if arr.dtype == object or not np.issubdtype(arr.dtype, np.number) or np.iscomplexobj(arr):
+        raise InputError(f"controls: expected a real array (steps, {m}) or a function u(t), got {arr.dtype}")
+    if arr.ndim == 1 and m == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2 or arr.shape[1] != m or arr.shape[0] < 1:
+        raise InputError(f"controls: expected shape (steps, {m}), got {np.shape(controls)}")
+    if not np.all(np.isfinite(arr)):
+        raise InputError("controls: contains NaN or infinite values")
+    return arr.astype(np.float64)
 
 
 def check_forced_run(system, h, total_steps):

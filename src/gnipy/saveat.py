@@ -120,6 +120,41 @@ class Schedule:
         return t0 + h * k
 
 
+def _nodes_of_times(ts, steps: int, partial: float, h: float | None, t0: float) -> set[int]:
+    """The step indices of the times `ts` (:attr:`SaveAt.ts`) on the grid `t0 + k h` of a run of
+    `steps` steps (and a shortened one of `partial` h, whose node is `steps + 1`); InputError for a
+    time off the grid or outside the run, or times in the other order than the run's."""
+    last = steps + (1 if partial > 0 else 0)
+    if h is None:
+        raise InputError("saveat.ts: needs a concrete h to place the times on the grid")
+    if len(ts) > 1 and (ts[1] > ts[0]) != (h > 0):
+        # the rows of the solution follow the run: ts in the other order would not match them
+        raise InputError(
+            f"saveat.ts: the times are {'increasing' if ts[1] > ts[0] else 'decreasing'}, but "
+            f"h = {h!r} runs {'forward' if h > 0 else 'backward'} in time; give them in the order the run "
+            f"reaches them ({'increasing' if h > 0 else 'decreasing'}), so that row i of the solution is ts[i]"
+        )
+    nodes = set()
+    t_end = t0 + h * (steps + partial)
+    for t in ts:
+        k = (t - t0) / h
+        kr = round(k)
+        tol = GRID_RTOL * max(1.0, abs(k))
+        if partial > 0 and abs(t - t_end) <= GRID_RTOL * max(abs(t_end), abs(h)):
+            nodes.add(last)
+        elif abs(k - kr) <= tol and 0 <= kr <= steps:
+            nodes.add(int(kr))
+        elif k < -tol or k > steps + partial + tol:
+            raise InputError(f"saveat.ts: {t!r} lies outside the run [{min(t0, t_end)!r}, {max(t0, t_end)!r}]")
+        else:
+            raise InputError(
+                f"saveat.ts: {t!r} is not a node t0 + k h (h = {h!r}: it lies between k = {math.floor(k)} and "
+                f"{math.floor(k) + 1}); gnipy saves nodes and does not interpolate (an interpolant leaves the "
+                "constraints): choose h dividing the times"
+            )
+    return nodes
+
+
 def schedule(saveat: SaveAt, steps: int, partial: float = 0.0, *, h: float | None = None, t0: float = 0.0) -> Schedule:
     """The :class:`Schedule` of a run of `steps` full steps (and a shortened last one of `partial`
     h when `partial > 0`), saving as `saveat` says. `h` and `t0` place `saveat.ts` on the grid."""
@@ -128,33 +163,7 @@ def schedule(saveat: SaveAt, steps: int, partial: float = 0.0, *, h: float | Non
         every = 1 if saveat.steps else saveat.every
         nodes = set(range(0, steps + 1, every)) | {last}
     elif saveat.ts is not None:
-        if h is None:
-            raise InputError("saveat.ts: needs a concrete h to place the times on the grid")
-        if len(saveat.ts) > 1 and (saveat.ts[1] > saveat.ts[0]) != (h > 0):
-            # the rows of the solution follow the run: ts in the other order would not match them
-            raise InputError(
-                f"saveat.ts: the times are {'increasing' if saveat.ts[1] > saveat.ts[0] else 'decreasing'}, but "
-                f"h = {h!r} runs {'forward' if h > 0 else 'backward'} in time; give them in the order the run "
-                f"reaches them ({'increasing' if h > 0 else 'decreasing'}), so that row i of the solution is ts[i]"
-            )
-        nodes = set()
-        t_end = t0 + h * (steps + partial)
-        for t in saveat.ts:
-            k = (t - t0) / h
-            kr = round(k)
-            tol = GRID_RTOL * max(1.0, abs(k))
-            if partial > 0 and abs(t - t_end) <= GRID_RTOL * max(abs(t_end), abs(h)):
-                nodes.add(last)
-            elif abs(k - kr) <= tol and 0 <= kr <= steps:
-                nodes.add(int(kr))
-            elif k < -tol or k > steps + partial + tol:
-                raise InputError(f"saveat.ts: {t!r} lies outside the run [{min(t0, t_end)!r}, {max(t0, t_end)!r}]")
-            else:
-                raise InputError(
-                    f"saveat.ts: {t!r} is not a node t0 + k h (h = {h!r}: it lies between k = {math.floor(k)} and "
-                    f"{math.floor(k) + 1}); gnipy saves nodes and does not interpolate (an interpolant leaves the "
-                    "constraints): choose h dividing the times"
-                )
+        nodes = _nodes_of_times(saveat.ts, steps, partial, h, t0)
     else:
         nodes = set()
     if saveat.t0:
