@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .compilation import compiler_options
 from .errors import InputError
 from .stepping import run_nodes, split_arrays
 
@@ -63,8 +64,6 @@ def _key_part(x):
 
 def _program(key, make):
     """The compiled program under `key` (made by `make()` the first time; uncached when key is None)."""
-    from .compilation import compiler_options
-
     if key is not None and key in _PROGRAMS:
         return _PROGRAMS[key]
     program = jax.jit(make(), compiler_options=compiler_options())
@@ -246,7 +245,7 @@ def _state_reading(system, method):
             m, s = rebuild(leaves)
             return m.observe(s, state, 1.0)[0]
 
-        hit = (ref_def, [r.shape for r in ref_leaves], jax.jit(point))
+        hit = (ref_def, [r.shape for r in ref_leaves], jax.jit(point, compiler_options=compiler_options()))
         if key is not None:
             if len(_READINGS) >= _CACHE_MAX:
                 _READINGS.pop(next(iter(_READINGS)))

@@ -43,6 +43,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..compilation import jit
 from ..errors import InputError, SolverFailure
 from ..inputs import finite_number, real_number, require_float64, whole_number
 from ..saveat import SaveAt
@@ -156,7 +157,7 @@ class _Problem(eqx.Module):
         return self.residuals(self.scale * z, data)
 
 
-@eqx.filter_jit
+@jit
 def _linearization(problem: _Problem, y, data):
     """The weighted residuals at `y` and their Jacobian (compiled once per problem structure):
     for solvers whose final state does not hold them."""
@@ -164,13 +165,13 @@ def _linearization(problem: _Problem, y, data):
     return r, jac
 
 
-@eqx.filter_jit
+@jit
 def _as_matrix(operator):
     """A lineax operator's matrix (the solver's Jacobian at its final point)."""
     return operator.as_matrix()
 
 
-@eqx.filter_jit
+@jit
 def _reported(problem: _Problem, y):
     """The reported quantities at `y`, their derivative, and the projected v0."""
     return problem.outputs(y), jax.jacfwd(problem.outputs)(y), problem.initial_velocity(y)
@@ -381,15 +382,21 @@ def _least_squares_solver(solver, rtol, atol, reporter):
     return solver
 
 
+@jit
+def _least_squares(problem: _Problem, solver, z0, data, max_steps: int):
+    """optimistix's least squares, compiled with gnipy's compiler options (gnipy.compilation.jit)."""
+    import optimistix as optx
+
+    return optx.least_squares(problem, solver, z0, data, max_steps=max_steps, throw=False)
+
+
 def _solve(problem: _Problem, solver, z0, data, max_steps, reporter, names):
     """`(optimistix's solution, its final point)` from the scaled guess `z0`, progress reported
     through `reporter`; InputError for a model that cannot be traced, SolverFailure for a
     simulation that failed at some trial values."""
-    import optimistix as optx
-
     _REPORT[0] = reporter
     try:
-        out = optx.least_squares(problem, solver, jnp.asarray(z0), data, max_steps=int(max_steps), throw=False)
+        out = _least_squares(problem, solver, jnp.asarray(z0), data, int(max_steps))
         return out, np.asarray(out.value)
     except InputError:
         raise
