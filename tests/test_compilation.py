@@ -78,3 +78,16 @@ def test_compiler_options_are_accepted_and_the_decorator_compiles_the_same_funct
     np.testing.assert_allclose(float(jit(f)(x, 3)), expected, rtol=1e-14)
     assert jit(f).__name__ == "f"
     np.testing.assert_allclose(float(jit(donate="none")(f)(x, 2)), np.sum(np.sin(np.asarray(x)) ** 2), rtol=1e-14)
+
+
+def test_the_decorator_works_inside_transformations():
+    """Under jax.jit, jax.grad and jax.vmap (traced arguments) gnipy's jit is a nested program without
+    compiler options, which JAX refuses on a nested jit: d/dx sin(x)^2 = sin(2x), exactly."""
+    from gnipy.compilation import jit
+
+    f = jit(lambda x: jnp.sin(x) ** 2)
+    x = jnp.linspace(-1.0, 1.0, 5)
+    np.testing.assert_allclose(np.asarray(jax.vmap(jax.grad(f))(x)), np.sin(2 * np.asarray(x)), rtol=1e-14, atol=1e-15)
+    np.testing.assert_allclose(float(jax.jit(f)(0.5)), np.sin(0.5) ** 2, rtol=1e-15)
+    np.testing.assert_allclose(float(jax.jit(jax.grad(f))(0.5)), np.sin(1.0), rtol=1e-15)
+    np.testing.assert_allclose(float(f(0.5)), np.sin(0.5) ** 2, rtol=1e-15)

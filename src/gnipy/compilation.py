@@ -79,17 +79,24 @@ def jit(fun=None, **jitkwargs):
     """`equinox.filter_jit` with :func:`compiler_options`: the decorator of gnipy's compiled programs.
 
     The options are looked up at the first call (so importing gnipy compiles nothing). Usable as
-    `@jit` or `jit(fun, donate=...)`.
+    `@jit` or `jit(fun, donate=...)`. Called with traced arguments (under `jax.jit`, `jax.grad`,
+    `jax.vmap`, ...), where JAX accepts compiler options only on the outermost program, it is
+    `equinox.filter_jit` without them (the outer program's options apply).
     """
     if fun is None:
         return functools.partial(jit, **jitkwargs)
     import equinox as eqx
+    import jax
 
-    jitted = None
+    jitted = nested = None
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
-        nonlocal jitted
+        nonlocal jitted, nested
+        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kwargs))):
+            if nested is None:
+                nested = eqx.filter_jit(fun, **jitkwargs)
+            return nested(*args, **kwargs)
         if jitted is None:
             jitted = eqx.filter_jit(fun, compiler_options=compiler_options(), **jitkwargs)
         return jitted(*args, **kwargs)

@@ -245,7 +245,7 @@ def _state_reading(system, method):
             m, s = rebuild(leaves)
             return m.observe(s, state, 1.0)[0]
 
-        hit = (ref_def, [r.shape for r in ref_leaves], jax.jit(point, compiler_options=compiler_options()))
+        hit = (ref_def, [r.shape for r in ref_leaves], jax.jit(point))  # also called under transformations
         if key is not None:
             if len(_READINGS) >= _CACHE_MAX:
                 _READINGS.pop(next(iter(_READINGS)))
