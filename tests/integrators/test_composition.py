@@ -3,6 +3,16 @@ solutions, the impulse rescaling and the consistent start they need on the GNI, 
 
 Orders are least-squares slopes of the error at T = 1 against the model's exact solution, on the
 points above round-off (:func:`gnipy.analysis.fitted_order`), and must equal `method.order`.
+
+Every composition runs the same Composition.step (substeps at γ_i h, for a GNI base the impulse
+rescaling of change_step), so the fitted orders run one case per kind of result, each compiling its
+own program (3-6 s): order 4 on a GNI (yoshida4-gni-trapezoid, a negative substep, affine
+constraints), order 6 on a base that is not a GNI (kahanli6-mp, and yoshida6-mp with its two
+negative substeps of size ~2h), and the GNI's cap at order 4 (kahanli6-gni-trapezoid). The order
+conditions of every scheme's coefficients (suzuki4's included) are checked exactly in
+test_composition_coefficients_are_palindromic_and_consistent, and the base's l_d enters only through
+its own step (yoshida4-gni-midpoint, suzuki4-gni-trapezoid left out). Measured on the 2-core machine
+(noisy, shared): 38 s before, 36 s after (loaded; the cases kept took 30 s of the run before).
 """
 
 import jax
@@ -37,8 +47,6 @@ def _errors(model, method, steps):
 CASES = [
     # (method, model with an exact solution, step counts giving errors above round-off)
     ("yoshida4-gni-trapezoid", "rotating-table-ball", [10, 20, 40, 80]),
-    ("suzuki4-gni-trapezoid", "vertical-disk", [10, 20, 40, 80]),
-    ("yoshida4-gni-midpoint", "knife-edge", [10, 20, 40, 80]),
     ("kahanli6-mp", "knife-edge", [2, 4, 8, 16]),
     ("yoshida6-mp", "knife-edge", [3, 6, 12]),
     ("kahanli6-gni-trapezoid", "vertical-disk", [10, 20, 40, 80]),  # order 6 scheme on a GNI: order 4

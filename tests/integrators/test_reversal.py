@@ -54,12 +54,19 @@ def _applicable(method):
 # coefficients, one per kind of base: yoshida4-gni-trapezoid (a GNI) and kahanli6-mp (not a GNI).
 # suzuki4-gni-trapezoid differs from the first only by its coefficients, yoshida4-gni-midpoint by a
 # base whose own round trips are run here; their coefficients are checked to be palindromic in
-# test_compositions_are_palindromic.
+# test_compositions_are_palindromic. Each pair compiles its own program (1-7 s on the 2-core machine),
+# so the GNI meets linear constraints on R^n once (by the midpoint; the trapezoid on affine ones,
+# which contain them with Y = 0), and of the SGNI, whose two members differ in the same way as the
+# GNI's, sgni-trapezoid runs (sgni-midpoint's exact reversibility is also
+# tests/integrators/test_gni_variants.py's, on three structures). Measured (noisy, the machine
+# shared): 55 s before; the cases kept took 52 s of that run (72 s measured afterwards, loaded).
 ROUND_TRIP_COMPOSITIONS = ("yoshida4-gni-trapezoid", "kahanli6-mp")
-GNI_MODELS = {"gni-trapezoid": ("contact-oscillator", "rotating-table-ball", "chaplygin-top"),
+ROUND_TRIP_LEFT_OUT = ("sgni-midpoint",)
+GNI_MODELS = {"gni-trapezoid": ("rotating-table-ball", "chaplygin-top"),
               "gni-midpoint": ("contact-oscillator", "rolling-ball")}
 CASES = [(method, model) for method in _symmetric_methods()
          if method in ROUND_TRIP_COMPOSITIONS or not isinstance(gnipy.get_method(method), gnipy.Composition)
+         if method not in ROUND_TRIP_LEFT_OUT
          for model in (GNI_MODELS[method] if method in GNI_MODELS else _applicable(method)[:1])]
 #: the heavy top's GNI compiles for ~7 s: marked slow (`pytest -m "not slow"` skips it)
 CASES = [pytest.param(*case, marks=pytest.mark.slow) if case[1] == "chaplygin-top" else case for case in CASES]
@@ -116,8 +123,8 @@ def _round_trip(model, method, h=0.05, n=100):
 @pytest.mark.parametrize("method,model", CASES)
 def test_forward_then_back_returns_to_the_start(method, model):
     """100 steps forward and 100 back return to the start to round-off, the whole integrator state
-    included: every symmetric method (one composition per kind of base, see CASES), the GNI on every
-    kind of space."""
+    included: every symmetric method (one composition per kind of base, sgni-trapezoid for the SGNI,
+    see CASES), the GNI on every kind of space."""
     start, fwd, back = _round_trip(model, method)
     assert float(fwd.t[-1]) == pytest.approx(5.0, abs=1e-12) and float(back.t[-1]) == pytest.approx(0.0, abs=1e-12)
     scale = max(1.0, float(np.max(np.abs(fwd.q[-1]), initial=0.0)))
@@ -234,8 +241,8 @@ def test_plain_negative_step_of_the_gni_is_not_its_inverse():
     system = gnipy.make_system("contact-oscillator")
     m = gnipy.get_method("gni-trapezoid")
     fwd = gnipy.simulate(system, m, h=0.05, steps=100, saveat=gnipy.SaveAt(t1=True))
-    run = jax.jit(lambda s: jax.lax.scan(lambda c, _: (m.step(system.without_metadata(), c, -0.05)[0], None), s,
-                                          None, length=100)[0])
+    run = gnipy_jit(lambda s: jax.lax.scan(lambda c, _: (m.step(system.without_metadata(), c, -0.05)[0], None), s,
+                                            None, length=100)[0])
     plain = run(fwd.final_state)
     exact = gnipy.simulate(system, m, h=-0.05, steps=100, state0=fwd.final_state, t0=5.0, saveat=gnipy.SaveAt(t1=True))
     q0 = np.array(gnipy.get_model("contact-oscillator").q0)

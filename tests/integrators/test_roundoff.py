@@ -4,6 +4,14 @@ carried as p⁻ + (FL⁺ − FL⁻); SHAKE in summed form; mp's multiplier at it
 Numbers come from the exact solutions of `rotating-table-ball` and `rolling-ball` (homogeneous
 ball; for the latter (x, y) of the closed form) and from the straight-line rolling at Ω = 0, whose
 discrete solution is exact for every method, so that any error there is round-off.
+
+The h² line runs every method family on the rotating-table ball (R^n, affine) and on the rolling
+ball (R² × SO(3)) the GNI (by gni-trapezoid) and RAT: the GNI's increments and compensated sums on a
+group are those of gnipy.spaces whatever its discrete Lagrangian, and both of its second-order
+Lagrangians run on the table. gni-midpoint on the rolling ball (8.6 s, the file's longest case) is
+left out. The straight-line runs use the table's model with Ω a parameter leaf and the same loop
+configuration (two saved nodes, no shortened last step), so they reuse the h² test's programs.
+Measured on the 2-core machine (noisy, shared): 55 s before, 38 s after.
 """
 
 import numpy as np
@@ -37,7 +45,7 @@ def _errors(model: str, method: str):
 @pytest.mark.parametrize(
     ("model", "method"),
     [("rotating-table-ball", m) for m in ("gni-trapezoid", "gni-midpoint", "euler-ab", "shake", "rattle", "dla", "mp")]
-    + [("rolling-ball", m) for m in ("gni-trapezoid", "gni-midpoint", "rat")],
+    + [("rolling-ball", m) for m in ("gni-trapezoid", "rat")],
 )
 def test_second_order_error_follows_its_h2_line_down_to_1e_minus_5(model, method):
     """T = 10, h = 1e-3, 1e-4, 1e-5 (10⁶ steps): the fitted slope is 2, the error at 1e-5 is on the
