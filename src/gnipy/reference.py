@@ -43,7 +43,10 @@ class ContinuousReference(eqx.Module):
         times = np.asarray(times, dtype=np.float64)
         start = times[0] if t0 is None else float(t0)
         ts = times if start == times[0] else np.concatenate([[start], times])  # the start is not saved
-        ys, num_steps, ok = _solve(self, system, b0, jnp.asarray(v0), jnp.asarray(ts))
+        # the system without its provenance (the parameters' values as metadata): the compiled
+        # solver is shared by runs of other parameter values (their array leaves are traced)
+        core = system.without_metadata()
+        ys, num_steps, ok = _solve(self, core, b0, jnp.asarray(v0), jnp.asarray(ts))
         ys = ys[len(ts) - len(times):]
         meta = dict(system=system.name, method=self.name, h=float(h), coordinates=system.coordinates,
                     params=system.params, start="continuous", orientation=system.orientation_description)
@@ -52,7 +55,7 @@ class ContinuousReference(eqx.Module):
                 f"reference: the adaptive solver failed before t = {times[-1]:.6g} (step cap {self.max_steps} "
                 "or non-finite values)", step=-1, time=float(times[0]), residual=float("nan"),
             )
-        q, R, v, p, energy, res = _nodes(system.without_metadata(), ys)
+        q, R, v, p, energy, res = _nodes(core, ys)
         its = jnp.asarray([int(num_steps), 0], dtype=jnp.int32)
         return Solution(jnp.asarray(times), q, v, p, energy, res, its, R=R, velocities=system.velocities, **meta)
 
