@@ -3,6 +3,10 @@
 Checks against exact solutions (each member converges at order 2 to its own exact solution), against
 single runs of the same member, and the batch's error handling (sizes, the member named in
 messages, failures of single members).
+
+The rolling ball's parameter batch has three members, ball_batch's batch size and loop, and shares
+its compiled program. Measured on the shared 2-core machine (`pytest -n 0 --durations=0` on this
+file alone, other jobs running, so noisy to a few seconds): 36.6 s → 33.6 s (that test: 5.5 → 0.4 s).
 """
 
 import jax
@@ -92,7 +96,9 @@ def test_batch_of_initial_conditions_broadcasts_one_system():
 @pytest.mark.parametrize(
     "name, params",
     [
-        ("rolling-ball", {"Omega": np.linspace(0.0, 1.0, 5)}),  # the README's parameter batch
+        # the README's parameter batch (Omega from 0 to 1), three members: the batch size and the loop
+        # of ball_batch (two saved nodes), whose compiled program it shares (9 s of CPU otherwise)
+        ("rolling-ball", {"Omega": np.linspace(0.0, 1.0, 3)}),
         ("chaplygin-top", {"r": np.array([0.5, 1.0, 2.0])}),  # R-dependent constraints, default R0 ≠ I
     ],
 )
