@@ -42,7 +42,8 @@ def _run(method, system, b0, v0, state0, h, lengths: tuple, tail: int, h_last, *
     and :func:`gnipy.stepping.run_nodes_checkpointed`, as one compiled program. Under an outer
     `jax.jit` it is part of that program; under `jax.grad` and the like called outside `jit`,
     JAX would otherwise run the steps primitive by primitive, compiling each again at every call
-    (measured, the sleigh, 40 steps, a gradient outside `jit`: 4.6 s a call, 0.37 s this way).
+    (measured, the sleigh, 40 steps, a gradient outside `jit` on the quiet 2-core machine: 1.9 s a
+    call after the first, 0.04 s this way; the first call 10 s, 4.2 s this way).
     gnipy's compiler options cannot be given to a nested program: `jax.jit(jax.grad(f))` compiles
     with XLA's defaults unless the caller passes them (docs: gradients guide)."""
     if state0 is None:
