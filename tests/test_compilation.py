@@ -91,3 +91,59 @@ def test_the_decorator_works_inside_transformations():
     np.testing.assert_allclose(float(jax.jit(f)(0.5)), np.sin(0.5) ** 2, rtol=1e-15)
     np.testing.assert_allclose(float(jax.jit(jax.grad(f))(0.5)), np.sin(1.0), rtol=1e-15)
     np.testing.assert_allclose(float(f(0.5)), np.sin(0.5) ** 2, rtol=1e-15)
+
+
+def test_traced_once_traces_a_function_once_inside_a_program_and_runs_it_as_written_outside():
+    from gnipy.compilation import traced_once
+
+    traces = []
+
+    @traced_once
+    def f(x, scale):
+        traces.append(1)  # a Python side effect: runs each time JAX traces (or eagerly runs) the body
+        return jnp.sin(x) * scale
+
+    def plain(x, scale):
+        return jnp.sin(x) * scale
+
+    def program(g):
+        return lambda x: g(x, 2.0) + g(x + 1.0, 3.0) + jax.grad(lambda y: g(y, 2.0).sum())(x)
+
+    x = jnp.linspace(0.0, 1.0, 5)
+    got = jax.jit(program(f))(x)
+    # three calls and a derivative: one trace per value of `scale` (a Python float is static, as in
+    # equinox.filter_jit), the derivative reusing the trace of its call
+    assert len(traces) == 2
+    np.testing.assert_array_equal(got, jax.jit(program(plain))(x))  # XLA inlines the call: same numbers
+    traces.clear()
+    assert isinstance(f(x, 2.0), jax.Array) and f(x, 3.0) is not None
+    assert len(traces) == 2  # concrete arguments: run as written, each call
+
+
+def test_the_maps_of_systems_and_groups_share_one_trace_inside_a_program():
+    """A system's metric and a group's exponential, called at several points inside a program,
+    appear as calls of one shared jaxpr, and compute what the undecorated functions compute."""
+    import gnipy
+    from gnipy.lie_groups import SO3
+    from gnipy.system import System
+
+    system = gnipy.make_system("vertical-disk")
+    q0 = jnp.asarray(system.defaults[0])
+    group = SO3()
+
+    def program(metric, exp):
+        def run(q, w):
+            return (metric(system, q) + metric(system, 2.0 * q), exp(group, w) @ exp(group, 0.5 * w))
+        return run
+
+    decorated = program(System.metric, SO3.exp)
+    closed = jax.make_jaxpr(decorated)(q0, jnp.ones(3))
+    calls = [e for e in closed.jaxpr.eqns if e.primitive.name in ("jit", "pjit")]
+    by_name = {}
+    for e in calls:
+        by_name.setdefault(e.params["name"], set()).add(id(e.params["jaxpr"]))
+    assert set(by_name) >= {"metric", "exp"}, by_name
+    assert all(len(ids) == 1 for ids in by_name.values()), by_name  # one trace each, called twice
+    plain = program(System.metric.__wrapped__, SO3.exp.__wrapped__)
+    for a, b in zip(jax.jit(decorated)(q0, jnp.ones(3)), jax.jit(plain)(q0, jnp.ones(3))):
+        np.testing.assert_array_equal(a, b)

@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .compilation import traced_once
 from . import system_checks as checks
 from .errors import InputError
 from .system_arguments import (check_functions, configuration_space, dimension, inputs_count, provenance,
@@ -259,23 +260,28 @@ class System(eqx.Module):
                               defaults=None if rebuilt is None else rebuilt.defaults,
                               orientation_note="" if rebuilt is None else rebuilt.orientation_note)
 
+    @traced_once
     def L(self, b, v):
         """The Lagrangian $l(b, v)$ at a base point."""
         return self._call(self.lagrangian, *self._args(b), v)
 
+    @traced_once
     def metric(self, b):
         """The kinetic-energy metric $\\mathbb{G}(b) = \\partial^2 l / \\partial v^2$ (N×N)."""
         return jax.hessian(lambda v: self.L(b, v))(jnp.zeros(self.dim))
 
+    @traced_once
     def potential(self, b):
         """The potential $V(b) = -l(b, 0)$."""
         return -self.L(b, jnp.zeros(self.dim))
 
+    @traced_once
     def potential_gradient(self, b):
         """$\\partial V / \\partial q$ on $\\mathbb{R}^n$; on $\\mathbb{R}^n\\times G$ the
         $(\\partial V/\\partial x, \\nabla^L_R V)$ (left-trivialized)."""
         return jax.grad(lambda w: self.potential(self.space.move(b, w)))(jnp.zeros(self.dim))
 
+    @traced_once
     def momentum(self, b, v):
         """The Legendre transform $p = \\partial l / \\partial v = \\mathbb{G}(b) v$."""
         return jax.grad(lambda w: self.L(b, w))(v)
@@ -286,10 +292,12 @@ class System(eqx.Module):
 
         return solve_spd(self.metric(b), p)
 
+    @traced_once
     def mu(self, b):
         """Constraint one-forms $\\mu(b)$ as an (m, N) array."""
         return jnp.atleast_2d(jnp.asarray(self._call(self.constraints, *self._args(b))))
 
+    @traced_once
     def Y(self, b):
         """Affine part $Y(b)$ (zero for linear constraints)."""
         if self.affine is None:
@@ -301,6 +309,7 @@ class System(eqx.Module):
         """The one-form $\\Pi = \\mathbb{G} Y$ of paper §6."""
         return self.metric(b) @ self.Y(b)
 
+    @traced_once
     def energy(self, b, v):
         """Energy $\\tfrac12 v^T \\mathbb{G} v + V$."""
         return 0.5 * v @ self.metric(b) @ v + self.potential(b)

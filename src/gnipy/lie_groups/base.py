@@ -29,6 +29,7 @@ import jax.numpy as jnp
 import numpy as np
 from jax.scipy.linalg import expm
 
+from ..compilation import traced_once
 from ..linalg import solve as small_solve
 from .series import dexp_inv_series, dexp_series
 
@@ -119,6 +120,7 @@ class MatrixLieGroup(eqx.Module):
 
     # -- algebra -----------------------------------------------------------------------------
 
+    @traced_once
     def hat(self, xi):
         """The matrix $\\hat\\xi\\in\\mathfrak g\\subset\\mathfrak{gl}(k)$ of a vector.
 
@@ -130,6 +132,7 @@ class MatrixLieGroup(eqx.Module):
         """
         raise NotImplementedError
 
+    @traced_once
     def vee(self, X):
         """Inverse of :meth:`hat` (generic: least squares on the basis of generators).
 
@@ -168,6 +171,7 @@ class MatrixLieGroup(eqx.Module):
         """$g^{-1}$ (generic: matrix inverse)."""
         return jnp.linalg.inv(g)
 
+    @traced_once
     def exp(self, xi):
         """The exponential map $\\exp(\\hat\\xi)$ (generic: `jax.scipy.linalg.expm`).
 
@@ -179,6 +183,7 @@ class MatrixLieGroup(eqx.Module):
         """
         return expm(self.hat(check_vector(xi, self.dim)))
 
+    @traced_once
     def log(self, g):
         """The principal logarithm, inverse of :meth:`exp` near the identity.
 
@@ -190,6 +195,7 @@ class MatrixLieGroup(eqx.Module):
         """
         raise NotImplementedError(f"{type(self).__name__}.log has no generic implementation")
 
+    @traced_once
     def Ad(self, g):
         """The adjoint representation: $\\mathrm{Ad}_g\\eta = (g\\hat\\eta g^{-1})^\\vee$.
 
@@ -205,6 +211,7 @@ class MatrixLieGroup(eqx.Module):
         ginv = self.inverse(g)
         return jax.vmap(lambda E: self.vee(g @ E @ ginv))(self.basis()).T
 
+    @traced_once
     def ad(self, xi):
         """The adjoint of the algebra: $\\mathrm{ad}_\\xi\\eta = [\\hat\\xi, \\hat\\eta]^\\vee$.
 
@@ -220,6 +227,7 @@ class MatrixLieGroup(eqx.Module):
         X = self.hat(xi)
         return jax.vmap(lambda E: self.vee(X @ E - E @ X))(self.basis()).T
 
+    @traced_once
     def ad_star(self, xi, m):
         """The coadjoint action $\\mathrm{ad}^*_\\xi m = \\mathrm{ad}_\\xi^T m$ on $\\mathfrak g^*\\cong\\mathbb{R}^d$.
 
@@ -240,6 +248,7 @@ class MatrixLieGroup(eqx.Module):
     # Generic forms, for any matrix group whose algebra is closed under the products below; the
     # groups override them with closed forms. The tangents are d×d matrices on vee-coordinates.
 
+    @traced_once
     def cayley(self, xi):
         """The Cayley map $\\mathrm{cay}(\\xi) = (I - \\hat\\xi/2)^{-1}(I + \\hat\\xi/2)$ (Appendix b).
 
@@ -253,6 +262,7 @@ class MatrixLieGroup(eqx.Module):
         eye = jnp.eye(self.matrix_size, dtype=X.dtype)
         return small_solve(eye - 0.5 * X, eye + 0.5 * X)
 
+    @traced_once
     def cayley_inv(self, g):
         """The local inverse of the Cayley map: $\\hat x = 2(g + I)^{-1}(g - I)$ (Appendix b).
 
@@ -266,6 +276,7 @@ class MatrixLieGroup(eqx.Module):
         eye = jnp.eye(self.matrix_size, dtype=g.dtype)
         return self.vee(2.0 * small_solve(g + eye, g - eye))
 
+    @traced_once
     def dcayley(self, xi):
         """The right-trivialized tangent of the Cayley map (eq:dtaudef):
         $\\mathrm{dcay}_x y = (I - x/2)^{-1}\\,y\\,(I + x/2)^{-1}$ (Appendix b).
@@ -282,6 +293,7 @@ class MatrixLieGroup(eqx.Module):
         B_inv = small_solve(eye + 0.5 * X, eye)
         return self._on_generators(lambda E: A_inv @ E @ B_inv)
 
+    @traced_once
     def dcayley_inv(self, xi):
         """The inverse tangent of the Cayley map (eq:dtauinversedef):
         $\\mathrm{dcay}^{-1}_x y = (I - x/2)\\,y\\,(I + x/2)$ (Appendix b).
@@ -297,6 +309,7 @@ class MatrixLieGroup(eqx.Module):
         A, B = eye - 0.5 * X, eye + 0.5 * X
         return self._on_generators(lambda E: A @ E @ B)
 
+    @traced_once
     def dcayley_inv_along(self, xi):
         """$\\mathrm{dcay}^{-1}_\\xi\\,\\xi$: $(I - x/2)\\,x\\,(I + x/2) = x - x^3/4$ (Appendix b).
 
@@ -309,6 +322,7 @@ class MatrixLieGroup(eqx.Module):
         X = self.hat(check_vector(xi, self.dim))
         return self.vee(X - 0.25 * (X @ X @ X))
 
+    @traced_once
     def dexp(self, xi):
         """The right-trivialized tangent of the exponential (eq:dtaudef), generic: the paper's series
         $\\mathrm{dexp}_x = \\sum_{j\\ge0}\\mathrm{ad}_x^j/(j+1)!$ (Appendix a, :func:`~gnipy.lie_groups.series.dexp_series`),
@@ -322,6 +336,7 @@ class MatrixLieGroup(eqx.Module):
         """
         return dexp_series(self, check_vector(xi, self.dim))
 
+    @traced_once
     def dexp_inv(self, xi):
         """The inverse tangent of the exponential (eq:dtauinversedef), generic: the paper's series
         $\\mathrm{dexp}^{-1}_x = \\sum_{j\\ge0}(B_j/j!)\\,\\mathrm{ad}_x^j$ (Appendix a,
@@ -336,6 +351,7 @@ class MatrixLieGroup(eqx.Module):
         """
         return dexp_inv_series(self, check_vector(xi, self.dim))
 
+    @traced_once
     def dexp_inv_along(self, xi):
         """$\\mathrm{dexp}^{-1}_\\xi\\,\\xi = \\xi$ on every group: every term of the series but the first
         holds $\\mathrm{ad}_\\xi\\xi = 0$.

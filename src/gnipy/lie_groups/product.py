@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 from jax.scipy.linalg import block_diag
 
+from ..compilation import traced_once
 from .base import MatrixLieGroup, check_matrix, check_vector
 
 
@@ -85,10 +86,12 @@ class ProductGroup(MatrixLieGroup):
         """$(f_1(a_1), \\dots, f_m(a_m))$ concatenated, with $f_i$ the factor's `method`, $a_i$ its part."""
         return jnp.concatenate([getattr(f, method)(a) for f, a in zip(self.factors, parts)])
 
+    @traced_once
     def hat(self, xi):
         """$\\mathrm{diag}(\\hat\\xi_1, \\dots, \\hat\\xi_m)$."""
         return self._diag("hat", self.split(xi))
 
+    @traced_once
     def vee(self, X):
         """Concatenation of the blocks' vee (off-diagonal blocks are ignored)."""
         return self._concat("vee", self.blocks(X))
@@ -97,50 +100,62 @@ class ProductGroup(MatrixLieGroup):
         """Blockwise inverse."""
         return self._diag("inverse", self.blocks(g))
 
+    @traced_once
     def exp(self, xi):
         """Blockwise exp (safe at 0 when each factor's is)."""
         return self._diag("exp", self.split(xi))
 
+    @traced_once
     def log(self, g):
         """Blockwise principal logarithm."""
         return self._concat("log", self.blocks(g))
 
+    @traced_once
     def cayley(self, xi):
         """Blockwise Cayley map."""
         return self._diag("cayley", self.split(xi))
 
+    @traced_once
     def cayley_inv(self, g):
         """Blockwise inverse of the Cayley map."""
         return self._concat("cayley_inv", self.blocks(g))
 
+    @traced_once
     def dcayley(self, xi):
         """$\\mathrm{diag}(\\mathrm{dcay}_{\\xi_1}, \\dots)$."""
         return self._diag("dcayley", self.split(xi))
 
+    @traced_once
     def dcayley_inv(self, xi):
         """$\\mathrm{diag}(\\mathrm{dcay}^{-1}_{\\xi_1}, \\dots)$."""
         return self._diag("dcayley_inv", self.split(xi))
 
+    @traced_once
     def dcayley_inv_along(self, xi):
         """The factors' $\\mathrm{dcay}^{-1}_{\\xi_i}\\xi_i$, concatenated."""
         return self._concat("dcayley_inv_along", self.split(xi))
 
+    @traced_once
     def dexp(self, xi):
         """$\\mathrm{diag}(\\mathrm{dexp}_{\\xi_1}, \\dots)$."""
         return self._diag("dexp", self.split(xi))
 
+    @traced_once
     def dexp_inv(self, xi):
         """$\\mathrm{diag}(\\mathrm{dexp}^{-1}_{\\xi_1}, \\dots)$."""
         return self._diag("dexp_inv", self.split(xi))
 
+    @traced_once
     def Ad(self, g):
         """$\\mathrm{diag}(\\mathrm{Ad}_{g_1}, \\dots)$."""
         return self._diag("Ad", self.blocks(g))
 
+    @traced_once
     def ad(self, xi):
         """$\\mathrm{diag}(\\mathrm{ad}_{\\xi_1}, \\dots)$."""
         return self._diag("ad", self.split(xi))
 
+    @traced_once
     def ad_star(self, xi, m):
         """Blockwise $\\mathrm{ad}^*$."""
         ms = [jnp.asarray(m)[s] for s in self._dim_slices()]

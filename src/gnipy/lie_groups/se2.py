@@ -8,6 +8,7 @@ from typing import ClassVar
 import jax
 import jax.numpy as jnp
 
+from ..compilation import traced_once
 from .base import MatrixLieGroup, check_matrix, check_vector
 from .series import cos_sq, half_cot_half_sq, one_minus_cos_sq, sinc_sq, theta_minus_sin_sq
 
@@ -36,6 +37,7 @@ class SE2(MatrixLieGroup):
     def matrix_size(self) -> int:
         return 3
 
+    @traced_once
     def hat(self, xi):
         """$\\hat\\xi$ for $\\xi = (v_x, v_y, \\omega)$.
 
@@ -49,6 +51,7 @@ class SE2(MatrixLieGroup):
         z = jnp.zeros_like(w)
         return jnp.array([[z, -w, vx], [w, z, vy], [z, z, z]])
 
+    @traced_once
     def vee(self, X):
         """$(X_{02}, X_{12}, (X_{10} - X_{01})/2)$.
 
@@ -89,6 +92,7 @@ class SE2(MatrixLieGroup):
         Rt = g[:2, :2].T
         return jnp.zeros_like(g).at[:2, :2].set(Rt).at[:2, 2].set(-Rt @ g[:2, 2]).at[2, 2].set(1.0)
 
+    @traced_once
     def exp(self, xi):
         """$\\exp\\hat\\xi = (R(\\omega), V(\\omega)v)$.
 
@@ -106,6 +110,7 @@ class SE2(MatrixLieGroup):
         g = jnp.zeros((3, 3), dtype=R.dtype)
         return g.at[:2, :2].set(R).at[:2, 2].set(self.V(w) @ v).at[2, 2].set(1.0)
 
+    @traced_once
     def log(self, g):
         """Principal logarithm: $\\omega = \\mathrm{atan2}(R_{10}, R_{00})\\in(-\\pi, \\pi]$, $v = V(\\omega)^{-1} t$.
 
@@ -119,12 +124,14 @@ class SE2(MatrixLieGroup):
         w = jnp.arctan2(g[1, 0], g[0, 0])
         return jnp.concatenate([self.V_inv(w) @ g[:2, 2], w[None]])
 
+    @traced_once
     def Ad(self, g):
         """$\\mathrm{Ad}_g = \\begin{pmatrix} R & -Jt\\\\ 0 & 1\\end{pmatrix}$, i.e. the $\\omega$ column is $(t_y, -t_x, 1)$."""
         g = check_matrix(g, 3)
         out = jnp.zeros_like(g).at[:2, :2].set(g[:2, :2])
         return out.at[0, 2].set(g[1, 2]).at[1, 2].set(-g[0, 2]).at[2, 2].set(1.0)
 
+    @traced_once
     def ad(self, xi):
         """$\\mathrm{ad}_\\xi = \\begin{pmatrix} \\omega J & -Jv\\\\ 0 & 0\\end{pmatrix}$: $[\\xi, \\eta] = (\\omega J u - \\eta_\\omega J v,\\ 0)$."""
         vx, vy, w = check_vector(xi, 3)
@@ -133,12 +140,14 @@ class SE2(MatrixLieGroup):
 
     # -- retraction maps (paper, Appendix) ------------------------------------------------------
 
+    @traced_once
     def dcayley_inv_along(self, xi):
         """$\\mathrm{dcay}^{-1}_\\xi\\,\\xi = \\xi\\,(1 + \\omega^2/4)$: $\\hat\\xi - \\hat\\xi^3/4$ (Appendix b) with
         $\\hat\\xi^3 = -\\omega^2\\hat\\xi$ on $\\mathfrak{se}(2)$."""
         xi = check_vector(xi, 3)
         return xi * (1.0 + 0.25 * (xi[2] * xi[2]))
 
+    @traced_once
     def dexp(self, xi):
         """$\\mathrm{dexp}_\\xi = \\begin{pmatrix} V(\\omega) & -W(\\omega)Jv\\\\ 0 & 1\\end{pmatrix}$ (Appendix a, summed).
 
@@ -156,6 +165,7 @@ class SE2(MatrixLieGroup):
         v, w = xi[:2], xi[2]
         return _block(self.V(w), -_W(w) @ _J(v))
 
+    @traced_once
     def dexp_inv(self, xi):
         """$\\mathrm{dexp}^{-1}_\\xi$, the block inverse of :meth:`dexp`:
         $\\begin{pmatrix} V^{-1} & V^{-1}WJv\\\\ 0 & 1\\end{pmatrix}$ (valid for $|\\omega| < 2\\pi$; safe at 0),

@@ -16,6 +16,8 @@ import math
 
 import jax.numpy as jnp
 
+from ..compilation import traced_once
+
 # Below this value of $t = \theta^2$ (|θ| < 0.5) the Taylor branch is used. The closed forms with a
 # cancellation, such as $(\theta - \sin\theta)/\theta^3$, lose about $\epsilon/\theta^2$ (≤ 1e-15 at the
 # switch, ≤ 1e-14 for their derivatives); the Taylor series below are truncated where the first
@@ -59,18 +61,21 @@ def _even_series_safe(t, closed, coeffs):
     return jnp.where(use_taylor, taylor, closed_value)
 
 
+@traced_once
 def sinc_sq(t):
     """$\\sin\\theta/\\theta$ as a function of $t = \\theta^2$ (safe at 0)."""
     coeffs = [(-1) ** j / math.factorial(2 * j + 1) for j in range(_TAYLOR_TERMS)]
     return _even_series_safe(t, lambda th: jnp.sin(th) / th, coeffs)
 
 
+@traced_once
 def cos_sq(t):
     """$\\cos\\theta$ as a function of $t = \\theta^2$ (safe at 0, where $\\sqrt t$ is not)."""
     coeffs = [(-1) ** j / math.factorial(2 * j) for j in range(_TAYLOR_TERMS)]
     return _even_series_safe(t, jnp.cos, coeffs)
 
 
+@traced_once
 def one_minus_cos_sq(t):
     """$(1 - \\cos\\theta)/\\theta^2$ as a function of $t = \\theta^2$.
 
@@ -79,12 +84,14 @@ def one_minus_cos_sq(t):
     return 0.5 * sinc_sq(0.25 * t) ** 2
 
 
+@traced_once
 def theta_minus_sin_sq(t):
     """$(\\theta - \\sin\\theta)/\\theta^3$ as a function of $t = \\theta^2$ (safe at 0)."""
     coeffs = [(-1) ** j / math.factorial(2 * j + 3) for j in range(_TAYLOR_TERMS)]
     return _even_series_safe(t, lambda th: (th - jnp.sin(th)) / th**3, coeffs)
 
 
+@traced_once
 def dexp_inv_coefficient_sq(t):
     """$\\bigl(1 - \\tfrac{\\theta}{2}\\cot\\tfrac{\\theta}{2}\\bigr)/\\theta^2$ as a function of $t = \\theta^2$.
 
@@ -102,6 +109,7 @@ def dexp_inv_coefficient_sq(t):
     return _even_series_safe(t, closed, coeffs)
 
 
+@traced_once
 def half_cot_half_sq(t):
     """$\\tfrac{\\theta}{2}\\cot\\tfrac{\\theta}{2}$ as a function of $t = \\theta^2$ (safe at 0)."""
     return 1.0 - t * dexp_inv_coefficient_sq(t)

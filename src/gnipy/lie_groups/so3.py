@@ -9,6 +9,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..compilation import traced_once
 from .base import MatrixLieGroup, check_matrix, check_vector
 from .series import dexp_inv_coefficient_sq, one_minus_cos_sq, sinc_sq, theta_minus_sin_sq
 
@@ -66,6 +67,7 @@ class SO3(MatrixLieGroup):
     def matrix_size(self) -> int:
         return 3
 
+    @traced_once
     def hat(self, xi):
         """$\\hat\\omega$ with $\\hat\\omega\\rho = \\omega\\times\\rho$ (hatso).
 
@@ -79,6 +81,7 @@ class SO3(MatrixLieGroup):
         z = jnp.zeros_like(w1)
         return jnp.array([[z, -w3, w2], [w3, z, -w1], [-w2, w1, z]])
 
+    @traced_once
     def vee(self, X):
         """$\\omega$ from the skew part of $X$ (the orthogonal projection onto $\\mathfrak{so}(3)$).
 
@@ -95,6 +98,7 @@ class SO3(MatrixLieGroup):
         """$R^{-1} = R^T$."""
         return check_matrix(g, 3).T
 
+    @traced_once
     def exp(self, xi):
         """Rodrigues: $\\exp\\hat\\omega = I + \\frac{\\sin\\theta}{\\theta}\\hat\\omega + \\frac{1-\\cos\\theta}{\\theta^2}\\hat\\omega^2$, $\\theta = |\\omega|$.
 
@@ -109,6 +113,7 @@ class SO3(MatrixLieGroup):
         W = self.hat(w)
         return jnp.eye(3) + sinc_sq(t) * W + one_minus_cos_sq(t) * (W @ W)
 
+    @traced_once
     def log(self, g):
         """Principal logarithm: $\\omega$ with $|\\omega| \\le \\pi$ and $\\exp\\hat\\omega = R$.
 
@@ -138,14 +143,17 @@ class SO3(MatrixLieGroup):
         closed = 2.0 * jnp.arctan2(n_safe, w) / n_safe
         return jnp.where(use_taylor, taylor, closed) * v
 
+    @traced_once
     def Ad(self, g):
         """$\\mathrm{Ad}_R = R$."""
         return check_matrix(g, 3)
 
+    @traced_once
     def ad(self, xi):
         """$\\mathrm{ad}_\\omega = \\hat\\omega$ (the bracket is the cross product)."""
         return self.hat(xi)
 
+    @traced_once
     def ad_star(self, xi, m):
         """$\\mathrm{ad}^*_\\omega M = \\hat\\omega^T M = M\\times\\omega$."""
         return jnp.cross(jnp.asarray(m), check_vector(xi, 3))
@@ -156,33 +164,39 @@ class SO3(MatrixLieGroup):
 
     # -- retraction maps (paper, Appendix, "Applications to matrix groups": SO(3)) -------------
 
+    @traced_once
     def cayley(self, xi):
         """$\\mathrm{cay}(\\hat\\omega) = I + \\frac{4}{4 + |\\omega|^2}\\bigl(\\hat\\omega + \\tfrac12\\hat\\omega^2\\bigr)$ (Appendix, SO(3))."""
         w = check_vector(xi, 3)
         W = self.hat(w)
         return jnp.eye(3) + (4.0 / (4.0 + w @ w)) * (W + 0.5 * (W @ W))
 
+    @traced_once
     def cayley_inv(self, g):
         """$R = \\mathrm{cay}(\\hat\\omega) \\Leftrightarrow \\omega = 2\\,(R - R^T)^\\vee/(1 + \\mathrm{tr}\\,R)$
         (Appendix, SO(3); defined for rotation angles below $\\pi$)."""
         g = check_matrix(g, 3)
         return (4.0 / (1.0 + jnp.trace(g))) * self.vee(g)
 
+    @traced_once
     def dcayley(self, xi):
         """$\\mathrm{dcay}_\\omega = \\frac{2}{4 + |\\omega|^2}(2I + \\hat\\omega)$ (Appendix, SO(3))."""
         w = check_vector(xi, 3)
         return (2.0 / (4.0 + w @ w)) * (2.0 * jnp.eye(3) + self.hat(w))
 
+    @traced_once
     def dcayley_inv(self, xi):
         """$\\mathrm{dcay}^{-1}_\\omega = I - \\tfrac12\\hat\\omega + \\tfrac14\\omega\\omega^T$ (Appendix, SO(3))."""
         w = check_vector(xi, 3)
         return jnp.eye(3) - 0.5 * self.hat(w) + 0.25 * jnp.outer(w, w)
 
+    @traced_once
     def dcayley_inv_along(self, xi):
         """$\\mathrm{dcay}^{-1}_\\omega\\,\\omega = \\omega\\,(1 + |\\omega|^2/4)$ ($\\hat\\omega\\omega = 0$)."""
         w = check_vector(xi, 3)
         return w * (1.0 + 0.25 * (w @ w))  # (I − ω̂/2 + ωωᵀ/4) ω
 
+    @traced_once
     def dexp(self, xi):
         """$\\mathrm{dexp}_\\omega = I + \\frac{1-\\cos\\theta}{\\theta^2}\\hat\\omega + \\frac{\\theta-\\sin\\theta}{\\theta^3}\\hat\\omega^2$,
         $\\theta = |\\omega|$ (Appendix a, summed; safe at 0)."""
@@ -191,6 +205,7 @@ class SO3(MatrixLieGroup):
         W = self.hat(w)
         return jnp.eye(3) + one_minus_cos_sq(t) * W + theta_minus_sin_sq(t) * (W @ W)
 
+    @traced_once
     def dexp_inv(self, xi):
         """$\\mathrm{dexp}^{-1}_\\omega = I - \\tfrac12\\hat\\omega + \\frac{1}{\\theta^2}\\bigl(1 - \\frac\\theta2\\cot\\frac\\theta2\\bigr)\\hat\\omega^2$
         (Appendix a, summed; safe at 0, valid for $\\theta < 2\\pi$)."""
