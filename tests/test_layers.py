@@ -22,11 +22,12 @@ ROOT = Path(gnipy.__file__).parent
 #: import each other; each imports only from the layers before it. Design layers (DESIGN.md §3) in
 #: the comments.
 LAYERS = [
-    # foundations: errors, small solves, the files' schema, input checks, files, the native cache
-    ["version", "errors", "text", "linalg", "schema"],
+    # foundations: errors, the files' schema, input checks, files, the native cache
+    ["version", "errors", "text", "schema"],
     ["inputs", "files", "resources", "sharding", "solution_text", "extras", "private_folder"],
     ["private_cache", "file_attributes", "user_systems"],
     ["compilation"],
+    ["linalg"],  # its solves are traced once per shape (compilation.traced_once)
     # 1. Lie groups and retractions
     ["lie_groups"],
     ["retractions"],

@@ -10,12 +10,15 @@ well-kept library offers this (lineax and jax.scipy both call LAPACK on CPU). Ab
 :data:`UNROLL_MAX` unknowns the LAPACK path is used.
 
 Both functions accept a right-hand side `b` of shape (N,) or (N, K) and work under `jit`,
-`vmap` and automatic differentiation (they are ordinary jnp code).
+`vmap` and automatic differentiation (they are ordinary jnp code). Inside a program each is traced
+once per shape (:func:`gnipy.compilation.traced_once`): a step solves with the metric several times.
 """
 
 from __future__ import annotations
 
 import jax.numpy as jnp
+
+from .compilation import traced_once
 
 __all__ = ["solve", "solve_spd", "UNROLL_MAX"]
 
@@ -29,6 +32,7 @@ def _as_matrix_rhs(b, n):
     return b, False
 
 
+@traced_once
 def solve_spd(A, b):
     """Solve $A x = b$ for a symmetric positive definite (or any matrix that needs no pivoting,
     e.g. diagonally dominant) A: Gaussian elimination without pivoting, unrolled for N ≤ 12.
@@ -63,6 +67,7 @@ def solve_spd(A, b):
     return X[:, 0] if vec else X
 
 
+@traced_once
 def solve(A, b):
     """Solve $A x = b$ for a general regular A: Gaussian elimination with partial pivoting, unrolled
     for N ≤ 12 (row exchanges by selects, so no gathers).
