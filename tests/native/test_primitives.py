@@ -14,9 +14,9 @@ A composition's step is its base method's step and change of step size, once per
 stages differing only in their coefficients: the longer schemes (Suzuki's 5 stages, Kahan–Li's 9)
 are traced as Yoshida's 3-stage scheme of the same base, which has the same primitives
 (`test_a_composition_has_the_primitives_of_its_three_stage_stand_in` checks it on one model).
-That halves the time of the survey. The survey's 184 steps take about 35 s of tracing on the 2-core
-machine (105 s before the systems' and groups' maps were traced once per shape:
-`gnipy.compilation.traced_once`).
+That halves the time of the survey. The survey's 184 steps take about 19 s of tracing on the 2-core
+machine (105 s before the maps of the systems and groups and the small solves were traced once per
+shape: `gnipy.compilation.traced_once`).
 
 The sub-jaxprs walked are those the lowering walks: every `Jaxpr` or `ClosedJaxpr` among an
 equation's parameters (calls, `custom_jvp_call`, `custom_vjp_call`, `while`, `cond`, `scan`,
