@@ -114,6 +114,13 @@ def compiler_options(vectorized: bool = False) -> dict[str, object]:
     return {name: value for name, value in wanted.items() if _accepted(name, value)}
 
 
+def _traced(tree) -> bool:
+    """Whether a leaf of `tree` is a JAX tracer (the call is being traced, or transformed)."""
+    import jax
+
+    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
+
+
 def jit(fun=None, *, vectorized: bool = False, **jitkwargs):
     """`equinox.filter_jit` with :func:`compiler_options`: the decorator of gnipy's compiled programs
     (`vectorized=True` for a program vectorized over the members of a batch).
@@ -126,14 +133,13 @@ def jit(fun=None, *, vectorized: bool = False, **jitkwargs):
     if fun is None:
         return functools.partial(jit, vectorized=vectorized, **jitkwargs)
     import equinox as eqx
-    import jax
 
     jitted = nested = None
 
     @functools.wraps(fun)
     def wrapper(*args, **kwargs):
         nonlocal jitted, nested
-        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((args, kwargs))):
+        if _traced((args, kwargs)):
             if nested is None:
                 nested = eqx.filter_jit(fun, **jitkwargs)
             return nested(*args, **kwargs)
@@ -159,14 +165,13 @@ def traced_once(fun):
     Takes positional arguments only (a method's `self` included: it is part of the structure).
     """
     import equinox as eqx
-    import jax
 
     nested = None
 
     @functools.wraps(fun)
     def wrapper(*args):
         nonlocal nested
-        if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(args)):
+        if _traced(args):
             if nested is None:
                 nested = eqx.filter_jit(fun)
             return nested(*args)

@@ -120,7 +120,6 @@ class MatrixLieGroup(eqx.Module):
 
     # -- algebra -----------------------------------------------------------------------------
 
-    @traced_once
     def hat(self, xi):
         """The matrix $\\hat\\xi\\in\\mathfrak g\\subset\\mathfrak{gl}(k)$ of a vector.
 
@@ -183,7 +182,6 @@ class MatrixLieGroup(eqx.Module):
         """
         return expm(self.hat(check_vector(xi, self.dim)))
 
-    @traced_once
     def log(self, g):
         """The principal logarithm, inverse of :meth:`exp` near the identity.
 
@@ -351,7 +349,6 @@ class MatrixLieGroup(eqx.Module):
         """
         return dexp_inv_series(self, check_vector(xi, self.dim))
 
-    @traced_once
     def dexp_inv_along(self, xi):
         """$\\mathrm{dexp}^{-1}_\\xi\\,\\xi = \\xi$ on every group: every term of the series but the first
         holds $\\mathrm{ad}_\\xi\\xi = 0$.

@@ -124,7 +124,6 @@ class SE2(MatrixLieGroup):
         w = jnp.arctan2(g[1, 0], g[0, 0])
         return jnp.concatenate([self.V_inv(w) @ g[:2, 2], w[None]])
 
-    @traced_once
     def Ad(self, g):
         """$\\mathrm{Ad}_g = \\begin{pmatrix} R & -Jt\\\\ 0 & 1\\end{pmatrix}$, i.e. the $\\omega$ column is $(t_y, -t_x, 1)$."""
         g = check_matrix(g, 3)
@@ -140,7 +139,6 @@ class SE2(MatrixLieGroup):
 
     # -- retraction maps (paper, Appendix) ------------------------------------------------------
 
-    @traced_once
     def dcayley_inv_along(self, xi):
         """$\\mathrm{dcay}^{-1}_\\xi\\,\\xi = \\xi\\,(1 + \\omega^2/4)$: $\\hat\\xi - \\hat\\xi^3/4$ (Appendix b) with
         $\\hat\\xi^3 = -\\omega^2\\hat\\xi$ on $\\mathfrak{se}(2)$."""

@@ -143,17 +143,14 @@ class SO3(MatrixLieGroup):
         closed = 2.0 * jnp.arctan2(n_safe, w) / n_safe
         return jnp.where(use_taylor, taylor, closed) * v
 
-    @traced_once
     def Ad(self, g):
         """$\\mathrm{Ad}_R = R$."""
         return check_matrix(g, 3)
 
-    @traced_once
     def ad(self, xi):
         """$\\mathrm{ad}_\\omega = \\hat\\omega$ (the bracket is the cross product)."""
         return self.hat(xi)
 
-    @traced_once
     def ad_star(self, xi, m):
         """$\\mathrm{ad}^*_\\omega M = \\hat\\omega^T M = M\\times\\omega$."""
         return jnp.cross(jnp.asarray(m), check_vector(xi, 3))
