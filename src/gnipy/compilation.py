@@ -6,33 +6,9 @@ memory when a process holds too many of them.
 gnipy's programs. Measured on the 2-core machine, interleaved A/B runs in fresh processes: the
 first `simulate` call of the rolling ball falls from 3.7–4.0 s to 2.1–2.5 s (XLA's own compile
 time from 2.0–2.7 s to 1.0–1.1 s) and of a 1000-member batch from 5.4–6.2 s to 3.8–4.2 s, while the
-compiled code runs as fast (per step, and batched, within the machine's noise).
-
-A program of *one* trajectory (a run, its diagnostics, the continuous reference, a streamed
-run's chunks, the experiments) is also compiled without LLVM's optimizations
-(`xla_backend_optimization_level=0`). Its kernels are scalar code that LLVM has little to improve,
-and optimizing each of a step's hundreds of kernels is most of XLA's compile time. Measured on the
-2-core machine (fresh processes, two runs each, 1000 steps, then 10⁵ steps for the speed):
-
-| model, method | XLA compile | first call | per step |
-|---|---|---|---|
-| rolling ball, gni-trapezoid | 1.64–1.70 → 1.16–1.17 s | 2.46–2.59 → 2.04–2.06 s | 10.1–10.3 → 8.3–8.7 µs |
-| Chaplygin top, gni-midpoint | 4.34–4.42 → 2.80–2.85 s | 5.67–5.84 → 4.13–4.20 s | 16.3–16.9 → 13.0–13.5 µs |
-
-and the whole test suite 16 min 41 s → 12 min 55 s. Without LLVM's optimizations XLA also stops
-contracting `a*b + c` into fused multiply-adds, so every operation of such a program is rounded as
-written (as NumPy and the native backend round it): its results differ from the optimized
-program's in the last bits (≤ 1.6e-14 over 1000 steps of the Chaplygin top).
-
-A program *vectorized over the members of a batch* (:data:`VECTORIZED_COMPILER_OPTIONS`:
-`gnipy.simulate` of a batch, sweeps, the atlas's invariants, the Jacobians of control and
-identification) keeps LLVM's optimizations: its kernels loop over the members, and LLVM vectorizes
-those loops (a 1000-member batch ran 3.5× slower per member and step without them on the rolling
-ball, 4.9× on the Chaplygin top). There XLA contracts multiply-adds, so a member of a batch equals
-its single run to round-off, not bit for bit.
-
-Where the installed JAX/XLA does not know an option (older or newer versions),
-:func:`compiler_options` finds out once, by compiling a trivial program, and gnipy compiles without it.
+compiled code runs as fast (per step, and batched, within the machine's noise). Where the
+installed JAX/XLA does not know the option (older or newer versions), :func:`compiler_options`
+finds out once, by compiling a trivial program, and gnipy compiles without it.
 
 A first `gnipy.simulate` call in a fresh process spends most of its few seconds compiling. JAX can
 keep compiled programs on disk and load them in later processes (measured for the rolling ball
@@ -67,7 +43,6 @@ from .private_folder import CacheRefused, private_directory, warn_refused
 
 __all__ = [
     "COMPILER_OPTIONS",
-    "VECTORIZED_COMPILER_OPTIONS",
     "compiler_options",
     "jit",
     "traced_once",
@@ -79,39 +54,26 @@ __all__ = [
 ]
 
 
-#: XLA options of gnipy's programs of one trajectory (see the module docstring for the measurements).
-COMPILER_OPTIONS: dict[str, object] = {"xla_cpu_use_fusion_emitters": False, "xla_backend_optimization_level": 0}
-
-#: XLA options of gnipy's programs vectorized over the members of a batch (LLVM's optimizations kept).
-VECTORIZED_COMPILER_OPTIONS: dict[str, object] = {"xla_cpu_use_fusion_emitters": False}
+#: XLA options passed to every program gnipy compiles (see the module docstring for the measurements).
+COMPILER_OPTIONS: dict[str, object] = {"xla_cpu_use_fusion_emitters": False}
 
 
 @functools.cache
-def _accepted(name: str, value) -> bool:
-    """Whether this JAX/XLA compiles a trivial program with the option `name=value` (checked once)."""
-    import jax
-
-    try:
-        jax.jit(lambda x: x + 1, compiler_options={name: value}).lower(1.0).compile()
-    except Exception:  # TypeError (no compiler_options argument) or XLA's "No such compile option"
-        return False
-    return True
-
-
-@functools.cache
-def compiler_options(vectorized: bool = False) -> dict[str, object]:
-    """The options of :data:`COMPILER_OPTIONS` (or, with `vectorized`, of
-    :data:`VECTORIZED_COMPILER_OPTIONS`) that this JAX/XLA accepts, when JAX's default backend is
-    the CPU (each checked once per process by compiling a trivial program); else `{}` (on a GPU,
-    XLA's defaults). Setting `GNIPY_XLA_DEFAULTS=1` also returns `{}`."""
+def compiler_options() -> dict[str, object]:
+    """:data:`COMPILER_OPTIONS` when JAX's default backend is the CPU and this JAX/XLA accepts them
+    (checked once per process by compiling a trivial program), else `{}` (on a GPU, XLA's defaults).
+    Setting `GNIPY_XLA_DEFAULTS=1` also returns `{}`."""
     if os.environ.get("GNIPY_XLA_DEFAULTS", "").strip() not in ("", "0"):
         return {}
     import jax
 
     if jax.default_backend() != "cpu":
         return {}
-    wanted = VECTORIZED_COMPILER_OPTIONS if vectorized else COMPILER_OPTIONS
-    return {name: value for name, value in wanted.items() if _accepted(name, value)}
+    try:
+        jax.jit(lambda x: x + 1, compiler_options=dict(COMPILER_OPTIONS)).lower(1.0).compile()
+    except Exception:  # TypeError (no compiler_options argument) or XLA's "No such compile option"
+        return {}
+    return dict(COMPILER_OPTIONS)
 
 
 def _traced(tree) -> bool:
@@ -121,17 +83,16 @@ def _traced(tree) -> bool:
     return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
-def jit(fun=None, *, vectorized: bool = False, **jitkwargs):
-    """`equinox.filter_jit` with :func:`compiler_options`: the decorator of gnipy's compiled programs
-    (`vectorized=True` for a program vectorized over the members of a batch).
+def jit(fun=None, **jitkwargs):
+    """`equinox.filter_jit` with :func:`compiler_options`: the decorator of gnipy's compiled programs.
 
     The options are looked up at the first call (so importing gnipy compiles nothing). Usable as
-    `@jit`, `@jit(vectorized=True)` or `jit(fun, donate=...)`. Called with traced arguments (under
-    `jax.jit`, `jax.grad`, `jax.vmap`, ...), where JAX accepts compiler options only on the
-    outermost program, it is `equinox.filter_jit` without them (the outer program's options apply).
+    `@jit` or `jit(fun, donate=...)`. Called with traced arguments (under `jax.jit`, `jax.grad`,
+    `jax.vmap`, ...), where JAX accepts compiler options only on the outermost program, it is
+    `equinox.filter_jit` without them (the outer program's options apply).
     """
     if fun is None:
-        return functools.partial(jit, vectorized=vectorized, **jitkwargs)
+        return functools.partial(jit, **jitkwargs)
     import equinox as eqx
 
     jitted = nested = None
@@ -144,7 +105,7 @@ def jit(fun=None, *, vectorized: bool = False, **jitkwargs):
                 nested = eqx.filter_jit(fun, **jitkwargs)
             return nested(*args, **kwargs)
         if jitted is None:
-            jitted = eqx.filter_jit(fun, compiler_options=compiler_options(vectorized), **jitkwargs)
+            jitted = eqx.filter_jit(fun, compiler_options=compiler_options(), **jitkwargs)
         return jitted(*args, **kwargs)
 
     return wrapper

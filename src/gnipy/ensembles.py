@@ -242,7 +242,7 @@ def broadcast_initial_conditions(system: System, q0, v0, R0, size: int | None):
     return B, q0, v0, R
 
 
-@jit(vectorized=True)
+@jit
 def _batch_diagnostics(system, batched: bool, b0, v0):
     def one(s, b, v):
         G = s.metric(b)
@@ -329,7 +329,7 @@ def member_params(systems: Sequence[System]) -> dict[str, np.ndarray]:
 # ------------------------------------------------------------------------------------------------
 # The batched run of gnipy.simulate
 # ------------------------------------------------------------------------------------------------
-@jit(vectorized=True)
+@jit
 def _run_batch(method, system, system_batched: bool, state0, h, lengths, tail, h_last, partial: bool,
                save_final: bool, save_states: bool, progress: bool, progress_stride, monitor0, devices: tuple = ()):
     """:func:`gnipy.stepping.run_nodes` vmapped over the members (states, monitors, and systems when
@@ -361,7 +361,7 @@ def _run_batch(method, system, system_batched: bool, state0, h, lengths, tail, h
     return jax.tree_util.tree_map(lambda a: a[:B], out)
 
 
-@jit(vectorized=True)
+@jit
 def _init_batch(method, system, system_batched: bool, b0, v0, h):
     return eqx.filter_vmap(
         lambda s, b, v: method.init(s, b, v, h), in_axes=(eqx.if_array(0) if system_batched else None, 0, 0)

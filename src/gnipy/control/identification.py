@@ -157,7 +157,7 @@ class _Problem(eqx.Module):
         return self.residuals(self.scale * z, data)
 
 
-@jit(vectorized=True)
+@jit
 def _linearization(problem: _Problem, y, data):
     """The weighted residuals at `y` and their Jacobian (compiled once per problem structure):
     for solvers whose final state does not hold them."""
@@ -165,13 +165,13 @@ def _linearization(problem: _Problem, y, data):
     return r, jac
 
 
-@jit(vectorized=True)
+@jit
 def _as_matrix(operator):
     """A lineax operator's matrix (the solver's Jacobian at its final point)."""
     return operator.as_matrix()
 
 
-@jit(vectorized=True)
+@jit
 def _reported(problem: _Problem, y):
     """The reported quantities at `y`, their derivative, and the projected v0."""
     return problem.outputs(y), jax.jacfwd(problem.outputs)(y), problem.initial_velocity(y)
@@ -382,7 +382,7 @@ def _least_squares_solver(solver, rtol, atol, reporter):
     return solver
 
 
-@jit(vectorized=True)
+@jit
 def _least_squares(problem: _Problem, solver, z0, data, max_steps: int):
     """optimistix's least squares, compiled with gnipy's compiler options (gnipy.compilation.jit)."""
     import optimistix as optx

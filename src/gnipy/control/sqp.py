@@ -30,11 +30,8 @@ class Functions:
     @classmethod
     def compiled(cls, cost: Callable, constraints: Callable) -> "Functions":
         """The functions of `cost(x)` and `constraints(x)`, each compiled by `jax.jit` with gnipy's
-        compiler options (:func:`gnipy.compilation.compiler_options`, those of one trajectory; measured
-        on the sleigh-steering problem: XLA's compile time 6.3 s -> 4.2 s with the fusion emitters off,
-        the same optimum to the last digit; then 3.8 s -> 2.7 s without LLVM's optimizations, and
-        `gni control --example sleigh-steering` 7.0 s -> 5.9 s, 24 -> 23 SQP iterations, the same
-        cost to the digits shown)."""
+        compiler options (:func:`gnipy.compilation.compiler_options`; measured on the sleigh-steering
+        problem: XLA's compile time 6.3 s -> 4.2 s, the same optimum to the last digit)."""
         options = compiler_options()
 
         def compiled(f):

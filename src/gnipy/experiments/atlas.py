@@ -238,9 +238,9 @@ class _Invariant:
         self.with_R = len(inspect.signature(f).parameters) >= 4
         self.traced = True
         if self.with_R:
-            self.g = jax.jit(jax.vmap(lambda q, v, R: f(params, q, v, R)), compiler_options=compiler_options(vectorized=True))
+            self.g = jax.jit(jax.vmap(lambda q, v, R: f(params, q, v, R)), compiler_options=compiler_options())
         else:
-            self.g = jax.jit(jax.vmap(lambda q, v: f(params, q, v)), compiler_options=compiler_options(vectorized=True))
+            self.g = jax.jit(jax.vmap(lambda q, v: f(params, q, v)), compiler_options=compiler_options())
 
     def __call__(self, q, v, R) -> np.ndarray:
         args = (q, v, R) if self.with_R else (q, v)
