@@ -556,8 +556,11 @@ def test_every_member_has_its_own_verdicts_and_labels(client, tmp_path):
                              save_every=4000)
     assert not ds["healthy"].values.any()
     np.testing.assert_allclose(ds["hidden_momentum_first_time"].values, one.hidden_verdict.first_time, atol=1e-9)
+    # the ratio (~3.5e5) measures round-off grown along the sleigh's expanding direction, so two programs
+    # that round differently (the sweep's batch and the single run; -O0 and XLA's default) agree to
+    # what that growth leaves of round-off: 6e-5 relative measured, both programs at -O0
     np.testing.assert_allclose(ds["hidden_momentum_max_band_ratio"].values, one.hidden_verdict.max_band_ratio,
-                               rtol=1e-9)
+                               rtol=1e-3)
     assert ds.attrs["start"].startswith("consistent") and "Trapezoid" in ds.attrs["method_settings"]
     assert ds["native"].dtype == bool
     # a healthy sweep: no warning, every member healthy (the ball store above)
