@@ -53,7 +53,7 @@ from .atomic import (
     clean_stale_temporaries,
     temporary_name,
 )
-from .checksums import DataChecksum, array_checksum
+from .checksums import DataChecksum, array_checksum, as_stored
 from .destinations import check_destination, check_directory_destination, format_bytes, free_bytes
 from .locks import lock_path, output_lock
 from .owned import MARKER, is_owned_dir, make_owned_dir, remove_owned_dir
@@ -75,6 +75,7 @@ __all__ = [
     "is_owned_dir",
     "remove_owned_dir",
     "DataChecksum",
+    "as_stored",
     "array_checksum",
     "as_output_error",
     "format_bytes",

@@ -6,7 +6,7 @@ import hashlib
 from collections.abc import Mapping
 
 
-__all__ = ["DataChecksum", "array_checksum"]
+__all__ = ["DataChecksum", "array_checksum", "as_stored"]
 
 
 class DataChecksum:
@@ -30,8 +30,8 @@ class DataChecksum:
             a = a.reshape(1)
         rows = int(a.shape[0])
         if a.dtype.kind in "OUS":  # strings: a canonical byte form, each first-axis entry ended by \x1e
-            text = "".join("\x1f".join(map(str, np.asarray(r).ravel().tolist())) + "\x1e"
-                           for r in a.reshape(rows, -1))
+            entries = a.reshape(rows, -1) if rows else ()  # none: e.g. the coordinate names of a model on G alone
+            text = "".join("\x1f".join(map(str, np.asarray(r).ravel().tolist())) + "\x1e" for r in entries)
             a = np.frombuffer(text.encode("utf-8"), dtype=np.uint8)
             dtype, tail = "str", ()
         else:
@@ -60,6 +60,17 @@ class DataChecksum:
             dtype, tail, n = self._meta[name]
             total.update(f"{name}\0{dtype}\0{tail}\0{n}\0{self._hashes[name].hexdigest()}\n".encode())
         return "sha256:" + total.hexdigest()
+
+
+def as_stored(values):
+    """What a checksum of a file's variable is fed for `values` written whole: the values, or, for a
+    variable with no entries along its first axis, float zeros of its trailing shape whatever its
+    type (the form :func:`gnipy.io.netcdf_checksum` reads such a variable in, and in which the files
+    gnipy has written were checksummed: netCDF gives an empty string variable no numpy type)."""
+    import numpy as np
+
+    a = np.asarray(values)
+    return np.zeros((0, *a.shape[1:])) if a.ndim and a.shape[0] == 0 else a
 
 
 def array_checksum(arrays: Mapping[str, object]) -> str:

@@ -13,7 +13,7 @@ import numpy as np
 from ..extras import require
 from .. import schema
 from ..monitor import RunVerdicts
-from ..files import DataChecksum, OutputError, atomic_write, remove_owned_dir
+from ..files import DataChecksum, OutputError, as_stored, atomic_write, remove_owned_dir
 from .interrupts import DeferredInterrupt
 from .parts import DATA_DIMS, OWN_FILES, ChunkPlan, check_part, clean_own_temporaries, part_path
 from .result import SPEC_ATTR, StreamResult, solver_failure
@@ -128,12 +128,12 @@ def _create_variables(nc, names, data0: dict, sizes: dict, names_of: dict, check
         var = nc.createVariable(name, str, schema.dims(name))
         var.setncatts(schema.variable_attrs(name))
         var[:] = a
-        checksum.update(name, a)
+        checksum.update(name, as_stored(a))  # (none: the coordinates of a model on G alone)
     constraint = np.arange(sizes["constraint"], dtype=np.int64)
     var = nc.createVariable("constraint", np.int64, schema.dims("constraint"))
     var.setncatts(schema.variable_attrs("constraint"))
     var[:] = constraint
-    checksum.update("constraint", constraint)
+    checksum.update("constraint", as_stored(constraint))
     return out
 
 
