@@ -9,7 +9,7 @@ import os
 #: they compile about a quarter faster and run about twice slower (measured on the 2-core machine:
 #: the first call of the rolling ball 3.06 → 2.22 s, of the Chaplygin top 6.03 → 4.27 s; the suite
 #: 16 min 46 s → 12 min 34 s). The programs users run keep XLA's default (-O2), which rounds some
-#: operations differently (fused multiply-adds: 200 steps agree to ~6e-15):
+#: operations differently (fused multiply-adds: runs of 200 steps agree to ≤ 4e-15):
 #: tests/test_compiled_as_shipped.py runs one model of each structure with each family of solves
 #: compiled both ways and holds them equal to round-off, and `GNIPY_TEST_SHIPPED_XLA=1 pytest`
 #: runs the whole suite as shipped.

@@ -19,8 +19,6 @@ import numpy as np
 import pytest
 from conftest import SUITE_XLA_FLAGS
 
-import gnipy
-
 #: (model, method, members): one model per structure (R^n linear and affine, SE(2), R^2 x SO(3)),
 #: each with another family of solves (the GNI's impulse solve, the discrete Lagrange-d'Alembert
 #: constraint, the discrete gradient's); members > 0 is a batch of that many initial conditions

@@ -1,7 +1,8 @@
 """`gni reproduce --quick`, the README's main job in its quick form, run once for the module end
 to end through the CLI: the report it writes, and the numbers of what it computed on the way (its
 figures, its theorem table and errata), taken as the CLI computed them (:func:`reproduction` wraps
-the stages' functions) rather than computed a second time (measured: 36 s of the suite's CPU).
+the stages' functions) rather than computed a second time (the three modules' 63 s of worker time in
+the suite before, 50 s alone after).
 
 The expected values are the paper's or theory's, never an earlier run's:
 
@@ -47,8 +48,6 @@ class _Recorder:
 
 
 @pytest.fixture(scope="module")
-
-
 def reproduction(tmp_path_factory):
     """`gni reproduce --out DIR --quick` through the CLI, once: `out`, `result` (the CLI's), and what
     its stages returned with the progress each reported: `figures` (name → FigureResult, with
@@ -86,34 +85,24 @@ def reproduction(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-
-
 def run(reproduction):
     """The figures as tests/experiments/test_figures.py's checks read them: (out, results, calls)."""
     return reproduction.out, reproduction.figures, reproduction.figure_calls
 
 
 @pytest.fixture(scope="module")
-
-
 def table(reproduction):
     return reproduction.table
 
 
 @pytest.fixture(scope="module")
-
-
 def errata(reproduction):
     return reproduction.errata
 
 
 # ------------------------------------------------------------------------------------------------
 # The report
-
-
 # ------------------------------------------------------------------------------------------------
-
-
 def test_gni_reproduce_quick(reproduction):
     out, result = reproduction.out, reproduction.result
     assert result.exit_code == 0, result.output
@@ -140,11 +129,7 @@ def test_gni_reproduce_quick(reproduction):
 
 # ------------------------------------------------------------------------------------------------
 # The figures (paper §7.4)
-
-
 # ------------------------------------------------------------------------------------------------
-
-
 def test_files_written_into_out_dir(run):
     out, results, _ = run
     for name, res in results.items():
@@ -224,11 +209,7 @@ def test_figure_3_orders_of_both_starts(run):
 
 # ------------------------------------------------------------------------------------------------
 # The theorem table
-
-
 # ------------------------------------------------------------------------------------------------
-
-
 def _rows_with(rows, key):
     return [r for r in rows if key in r.values]
 
@@ -302,11 +283,7 @@ def test_progress_advances_add_up_to_one(table, errata):
 
 # ------------------------------------------------------------------------------------------------
 # Errata
-
-
 # ------------------------------------------------------------------------------------------------
-
-
 def _erratum(errata, where):
     (e,) = [e for loc, e in errata[0].items() if where in loc]
     assert e.printed and e.corrected and e.measurement and math.isfinite(e.evidence_value)
@@ -314,8 +291,6 @@ def _erratum(errata, where):
 
 
 @pytest.mark.parametrize("where", ["(RBb)", "Remark 5.1", "(Cona)", "(RATc)"])
-
-
 def test_printed_form_fails_and_corrected_form_holds(errata, where):
     e = _erratum(errata, where)
     assert e.values["printed_residual"] > 1e-3, e.measurement
