@@ -358,6 +358,9 @@ def _check_getting_started(ns, cwd):
 def _check_systems(ns, cwd):
     _orthogonal(ns["sol"].R[-1])
     assert ns["disk"].name == "my-disk"
+    # the blade from SymPy slides down the slope (x grows) and keeps its constraint
+    assert ns["run"].healthy and float(ns["run"].q[-1, 0]) > 0.1
+    assert float(abs(ns["run"].constraint_residual).max()) <= 1e-12
 
 
 def _check_files(ns, cwd):

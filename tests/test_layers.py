@@ -35,7 +35,7 @@ LAYERS = [
     ["spaces", "forcing", "projectors", "equations"],
     ["system_checks", "system_arguments"],
     ["system"],
-    ["registry"],
+    ["registry", "symbolic"],
     # 3. discretization
     ["discrete_lagrangians"],
     # 4. integrators, and the method names that stand for them

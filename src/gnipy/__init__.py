@@ -119,6 +119,7 @@ __all__ = [
     "method_names",
     "get_model",
     "model_from_function",
+    "from_sympy",
     "make_system",
     "model_names",
     "models",
@@ -142,6 +143,7 @@ __all__ = [
 _LAZY = {
     **dict.fromkeys(["ControlResult", "FitResult", "Observations", "fit", "solve_optimal_control"], "control"),
     "simulate_to_file": "streaming",
+    "from_sympy": "symbolic",
     **dict.fromkeys(["open_sweep", "run_sweep"], "sweep"),
     **dict.fromkeys(["read_netcdf", "verify_netcdf", "write_netcdf"], "io"),
 }

@@ -10,6 +10,7 @@ reference, gradients, fits and optimal control, on JAX's XLA backend. The rest i
 | `cli` | the `gni` command | typer, rich (and `plots`, `files`) |
 | `sweeps` | `gnipy.run_sweep`, `gnipy.open_sweep`, `gni sweep` | dask[distributed], rich (and `files`) |
 | `native` | the native CPU backend (`backend="native"`; `"auto"` uses it when it is installed) | llvmlite |
+| `sympy` | `gnipy.from_sympy`: systems from SymPy expressions and `sympy.physics.mechanics` | sympy, sympy2jax |
 | `all` | everything above | |
 
 The library imports an optional package only where it is used, through :func:`require`: without
@@ -34,6 +35,7 @@ EXTRAS: dict[str, str] = {
     "cli": "command line",
     "sweeps": "sweep runner",
     "native": "native backend",
+    "sympy": "SymPy models (gnipy.from_sympy)",
 }
 
 
