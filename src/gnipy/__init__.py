@@ -120,6 +120,7 @@ __all__ = [
     "get_model",
     "model_from_function",
     "from_sympy",
+    "linearize",
     "make_system",
     "model_names",
     "models",
@@ -144,6 +145,7 @@ _LAZY = {
     **dict.fromkeys(["ControlResult", "FitResult", "Observations", "fit", "solve_optimal_control"], "control"),
     "simulate_to_file": "streaming",
     "from_sympy": "symbolic",
+    "linearize": "analysis",
     **dict.fromkeys(["open_sweep", "run_sweep"], "sweep"),
     **dict.fromkeys(["read_netcdf", "verify_netcdf", "write_netcdf"], "io"),
 }

@@ -7,7 +7,8 @@ tests.
 - :mod:`gnipy.analysis.invariants`: the drift of a model's invariants, the errors against its
   exact solution;
 - :mod:`gnipy.analysis.orders`: the one fitted order of convergence;
-- :mod:`gnipy.analysis.convergence`: convergence studies (`gni convergence`).
+- :mod:`gnipy.analysis.convergence`: convergence studies (`gni convergence`);
+- :mod:`gnipy.analysis.linearization`: the linear stability of a steady motion (`gnipy.linearize`).
 """
 
 from .convergence import MEASURES, REFERENCE_FLOOR, ConvergenceStudy, convergence_study
@@ -25,9 +26,12 @@ from ..diagnostics import (
     hidden_momentum_verdict,
 )
 from .invariants import ExactErrors, exact_errors, invariant_drifts
+from .linearization import Linearization, linearize
 from .orders import ROUND_OFF, fit_points, fitted_order
 
 __all__ = [
+    "Linearization",
+    "linearize",
     "ConvergenceStudy",
     "convergence_study",
     "MEASURES",

@@ -1,0 +1,79 @@
+"""gnipy.linearize: the linear stability of a steady motion, against the closed form of the upright
+rolling disk, and what it refuses.
+
+**The closed form.** A disk of mass m, radius R, moments of inertia A about a diameter and C about
+its axis, rolls upright and straight with spin rate Ω (speed RΩ). Linearized in the lean θ and the
+heading rate ψ̇ (the classical result: e.g. Neimark & Fufaev, *Dynamics of Nonholonomic Systems*,
+§ on the rolling disk; O'Reilly, *Nonlinear Dynamics* 10 (1996) 287–305):
+
+    (A + mR²) θ̈ + (C + mR²) Ω ψ̇ − m g R θ = 0,      A ψ̈ − C Ω θ̇ = 0,
+
+so ψ̇ − (CΩ/A) θ is conserved and θ obeys (A + mR²) θ̈ = (m g R − C(C + mR²)Ω²/A) θ: eigenvalues
+±λ with λ² = (m g R − C(C + mR²)Ω²/A)/(A + mR²), stable for Ω² > m g R A/(C(C + mR²)). For the
+uniform disk (A = mR²/4, C = mR²/2) that is v² = R²Ω² > gR/3; for a hoop (A = mR²/2, C = mR²)
+v² > gR/4, the textbook thresholds. The other six eigenvalues of the 8 perturbations on the
+constraints are zero: the ignorable x, y, φ, the heading ψ, the conserved spin and ψ̇ − (CΩ/A)θ.
+The disk is built with sympy.physics.mechanics (tests/test_symbolic.py) and differentiated by JAX
+through gnipy's Lagrange–d'Alembert equations: an independent formulation of the same physics.
+"""
+
+import numpy as np
+import pytest
+from test_symbolic import _rolling_disk
+
+import gnipy
+
+M, R, G = 1.0, 0.5, 9.81
+A, C = M * R ** 2 / 4, M * R ** 2 / 2
+CRITICAL_SPIN = np.sqrt(M * G * R * A / (C * (C + M * R ** 2)))  # = sqrt(g / 3R) for the uniform disk
+
+
+@pytest.fixture(scope="module")
+def disk():
+    return gnipy.from_sympy(_rolling_disk(), params={"m": M, "R": R, "g": G}, name="rolling-disk")
+
+
+def _upright(spin):
+    # q = (x, y, psi, theta, phi); rolling along x: ẋ = R φ̇ (ψ = 0)
+    return np.zeros(5), np.array([R * spin, 0.0, 0.0, 0.0, spin])
+
+
+def test_the_critical_speed_is_the_textbook_one():
+    np.testing.assert_allclose(CRITICAL_SPIN * R, np.sqrt(G * R / 3), rtol=1e-15)
+
+
+@pytest.mark.parametrize("spin", [1.0, 2.0, 0.9 * CRITICAL_SPIN, 1.1 * CRITICAL_SPIN, 4.0, 8.0])
+def test_upright_rolling_disk_eigenvalues(disk, spin):
+    lin = gnipy.linearize(disk, *_upright(spin))
+    lam2 = (M * G * R - C * (C + M * R ** 2) * spin ** 2 / A) / (A + M * R ** 2)
+    lam = np.sqrt(complex(lam2))
+    assert lin.zero_count == 6 and lin.eigenvalues.shape == (8,)
+    nonzero = lin.nonzero_eigenvalues
+    np.testing.assert_allclose(np.sort_complex(nonzero), np.sort_complex(np.array([lam, -lam])), rtol=1e-10)
+    assert lin.stable == (spin > CRITICAL_SPIN)
+    if spin > CRITICAL_SPIN:
+        assert lin.growth_rate == 0.0 and np.all(nonzero.real == 0.0)  # neutral: a conservative system
+    else:
+        np.testing.assert_allclose(lin.growth_rate, lam.real, rtol=1e-10)
+
+
+def test_what_is_not_a_steady_motion_is_refused(disk):
+    q, v = _upright(4.0)
+    with pytest.raises(gnipy.InputError, match="not on the constraints"):
+        gnipy.linearize(disk, q, v + np.array([0.0, 0.1, 0.0, 0.0, 0.0]))
+    leaning = q + np.array([0.0, 0.0, 0.0, 0.2, 0.0])
+    with pytest.raises(gnipy.InputError, match="is not a steady motion: the velocity"):
+        gnipy.linearize(disk, leaning, v)  # gravity tips a leaning disk that does not turn
+    # a particle passing through the bottom of a well x²/2, with ż = y ẋ: no acceleration there,
+    # but x moves and the equations depend on it
+    import jax.numpy as jnp
+
+    well = gnipy.System(lambda q, v: 0.5 * v @ v - 0.5 * q[0] ** 2, lambda q: jnp.stack([-q[1], 0.0 * q[1], 1.0 + 0.0 * q[1]])[None],
+                        coordinates=("x", "y", "z"))
+    with pytest.raises(gnipy.InputError, match="the coordinates 'x' move"):
+        gnipy.linearize(well, np.zeros(3), np.array([1.0, 0.0, 0.0]))
+    assert gnipy.linearize(well, np.zeros(3), np.zeros(3)).stable  # at rest at the bottom
+    with pytest.raises(gnipy.InputError, match=r"q must have shape \(5,\)"):
+        gnipy.linearize(disk, np.zeros(4), v)
+    with pytest.raises(gnipy.InputError, match="R\\^n x G"):
+        gnipy.linearize(gnipy.make_system("rolling-ball"), np.zeros(2), np.zeros(5))
