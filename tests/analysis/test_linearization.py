@@ -11,8 +11,9 @@ heading rate ψ̇ (the classical result: e.g. Neimark & Fufaev, *Dynamics of Non
 so ψ̇ − (CΩ/A) θ is conserved and θ obeys (A + mR²) θ̈ = (m g R − C(C + mR²)Ω²/A) θ: eigenvalues
 ±λ with λ² = (m g R − C(C + mR²)Ω²/A)/(A + mR²), stable for Ω² > m g R A/(C(C + mR²)). For the
 uniform disk (A = mR²/4, C = mR²/2) that is v² = R²Ω² > gR/3; for a hoop (A = mR²/2, C = mR²)
-v² > gR/4, the textbook thresholds. The other six eigenvalues of the 8 perturbations on the
-constraints are zero: the ignorable x, y, φ, the heading ψ, the conserved spin and ψ̇ − (CΩ/A)θ.
+v² > gR/4, the textbook thresholds. The ignorable coordinates x, y, φ and then ψ (it entered only
+the contact point's velocity) are dropped, leaving the state (θ, ψ̇, θ̇, φ̇): its other two
+eigenvalues are zero, of the conserved spin and ψ̇ − (CΩ/A)θ.
 The disk is built with sympy.physics.mechanics (tests/test_symbolic.py) and differentiated by JAX
 through gnipy's Lagrange–d'Alembert equations: an independent formulation of the same physics.
 """
@@ -47,7 +48,7 @@ def test_upright_rolling_disk_eigenvalues(disk, spin):
     lin = gnipy.linearize(disk, *_upright(spin))
     lam2 = (M * G * R - C * (C + M * R ** 2) * spin ** 2 / A) / (A + M * R ** 2)
     lam = np.sqrt(complex(lam2))
-    assert lin.zero_count == 6 and lin.eigenvalues.shape == (8,)
+    assert lin.state == ("theta", "dpsi", "dtheta", "dphi") and lin.zero_count == 2
     nonzero = lin.nonzero_eigenvalues
     np.testing.assert_allclose(np.sort_complex(nonzero), np.sort_complex(np.array([lam, -lam])), rtol=1e-10)
     assert lin.stable == (spin > CRITICAL_SPIN)
@@ -55,6 +56,17 @@ def test_upright_rolling_disk_eigenvalues(disk, spin):
         assert lin.growth_rate == 0.0 and np.all(nonzero.real == 0.0)  # neutral: a conservative system
     else:
         np.testing.assert_allclose(lin.growth_rate, lam.real, rtol=1e-10)
+
+
+def test_the_critical_speed_is_found_along_the_family_of_steady_motions(disk):
+    curve = gnipy.analysis.stability_curve(disk, _upright, np.linspace(1.0, 6.0, 6), tol=1e-11)
+    assert list(curve.stable) == [False, False, True, True, True, True]
+    assert len(curve.transitions) == 1
+    np.testing.assert_allclose(curve.transitions[0], CRITICAL_SPIN, rtol=1e-9)
+    np.testing.assert_allclose(curve.growth_rate[0], np.sqrt((M * G * R - C * (C + M * R ** 2) / A) / (A + M * R ** 2)),
+                               rtol=1e-10)
+    with pytest.raises(gnipy.InputError, match="increasing"):
+        gnipy.analysis.stability_curve(disk, _upright, [2.0, 1.0])
 
 
 def test_what_is_not_a_steady_motion_is_refused(disk):

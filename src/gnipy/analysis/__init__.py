@@ -26,12 +26,14 @@ from ..diagnostics import (
     hidden_momentum_verdict,
 )
 from .invariants import ExactErrors, exact_errors, invariant_drifts
-from .linearization import Linearization, linearize
+from .linearization import Linearization, StabilityCurve, linearize, stability_curve
 from .orders import ROUND_OFF, fit_points, fitted_order
 
 __all__ = [
     "Linearization",
     "linearize",
+    "StabilityCurve",
+    "stability_curve",
     "ConvergenceStudy",
     "convergence_study",
     "MEASURES",

@@ -1,72 +1,82 @@
-"""Linear stability of a steady motion: :func:`linearize`.
+r"""Linear stability of a steady motion: :func:`linearize`.
 
-A steady motion of a system on $\\mathbb{R}^n$ is a motion with constant velocity $v^*$ along which
-the equations do not change: $\\dot v = 0$ at $(q^*, v^*)$, and every coordinate that moves
-($v^*_i \\ne 0$: a wheel's rotation, the position of the contact point) is one the equations do not
+A steady motion of a system on $\mathbb{R}^n$ is a motion with constant velocity $v^*$ along which
+the equations do not change: $\dot v = 0$ at $(q^*, v^*)$, and every coordinate that moves
+($v^*_i \ne 0$: a wheel's rotation, the position of the contact point) is one the equations do not
 depend on (an ignorable coordinate). The upright bicycle or disk rolling straight at constant
 speed is one; so is a rest point. Along it the linearized equations are constant:
 
-$$\\frac{d}{dt}\\begin{pmatrix}\\delta q\\\\ \\delta v\\end{pmatrix} = J\\begin{pmatrix}\\delta q\\\\
-\\delta v\\end{pmatrix}, \\qquad J = \\begin{pmatrix}0 & I\\\\ \\partial_q a & \\partial_v a\\end{pmatrix},$$
+$$\frac{d}{dt}\begin{pmatrix}\delta q\\ \delta v\end{pmatrix} = \begin{pmatrix}0 & I\\ \partial_q a &
+\partial_v a\end{pmatrix}\begin{pmatrix}\delta q\\ \delta v\end{pmatrix},$$
 
 with $a(q, v)$ the constrained acceleration of the Lagrange–d'Alembert equations
-(:func:`gnipy.equations.lagrange_dalembert_acceleration`), differentiated by JAX. Perturbations that
-keep the constraints $\\mu(q)(v - Y(q)) = 0$ form the tangent space of the constraint manifold,
-the null space of the constraints' derivative $K = \\partial(\\mu(v - Y))/\\partial(q, v)$; the flow
-keeps the manifold, so $J$ maps that space into itself, and the stability of the motion is read
-from the eigenvalues of $J$ restricted to it ($B^TJB$ with $B$ an orthonormal basis of
-$\\ker K$, $2n - m$ of them). Each ignorable coordinate and each conserved quantity gives a zero
-eigenvalue; a nonholonomic system that conserves energy has its other eigenvalues in pairs
-$\\pm\\lambda$ (pure imaginary where the motion is stable, as the upright disk above its critical
-speed: neutral, not asymptotic, stability).
+(:func:`gnipy.equations.lagrange_dalembert_acceleration`), differentiated by JAX. gnipy writes them
+on the constraint manifold as an ODE: the velocity is split into $m$ dependent components, solved
+from the constraints $\mu(q)(v - Y(q)) = 0$ (the best-conditioned columns of $\mu$, by QR with
+column pivoting), and $n - m$ independent ones $w$; the state is $(q, w)$. An *ignorable*
+coordinate, one that no equation of the state depends on, only drifts with its perturbation (a
+zero eigenvalue that tells nothing of stability): it is dropped with its equation, repeatedly
+(dropping the contact point's position of a disk makes its heading ignorable too, which entered
+only the contact point's velocity). The eigenvalues of what remains decide the stability; each
+conserved quantity gives a zero among them, and a nonholonomic system that conserves energy has
+its other eigenvalues in pairs $\pm\lambda$ (pure imaginary where the motion is stable, as the
+upright disk above its critical speed: neutral, not asymptotic, stability).
+
+:func:`stability_curve` follows a family of steady motions along a parameter (a speed) and
+locates where the stability changes, as the weave and capsize speeds of a bicycle.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
 import numpy as np
+import scipy.linalg
 
 from ..equations import lagrange_dalembert_acceleration
 from ..errors import InputError
 
-__all__ = ["Linearization", "linearize"]
+__all__ = ["Linearization", "linearize", "StabilityCurve", "stability_curve"]
+
+
+#: eigenvalues within ZERO_TOL·max(1, ‖J‖₂) of zero are zero (and real or imaginary parts that
+#: small are dropped): the zero eigenvalues left after the ignorable coordinates are removed come
+#: from conserved quantities and are computed to round-off (measured on the rolling disk: ≤ 1e-15
+#: with ‖J‖ ≈ 40); a genuine eigenvalue within that of zero is read as zero
+ZERO_TOL = 1e-10
 
 
 @dataclass(frozen=True)
 class Linearization:
-    r"""The linearized equations about a steady motion (:func:`linearize`).
+    """The linearized equations about a steady motion (:func:`linearize`).
 
     Attributes:
         q, v: the steady motion's configuration and (constant) velocity.
-        jacobian: $J$ (2n × 2n), in the state $(q, v)$.
-        basis: an orthonormal basis $B$ (2n × k, k = 2n − m) of the perturbations that keep the
-            constraints.
-        reduced: $B^T J B$ (k × k), the linearized equations on the constraint manifold.
-        eigenvalues: the k eigenvalues of `reduced`, largest real part first, those within
-            `zero_tol` of 0 set to exactly 0 (and a real part within $10^{-6}$ `zero_tol` of 0,
-            beside an imaginary part, to 0: round-off of $B^TJB$).
-        zero_tol: the size below which an eigenvalue is read as zero, $10^{-4}\,\max(1, \|B^TJB\|_2)$:
-            the zero eigenvalues of ignorable coordinates and conserved quantities come in Jordan
-            blocks, which an eigenvalue computation resolves only to about
-            $\varepsilon^{1/3}\|J\| \approx 6\cdot10^{-6}\|J\|$ (measured on the rolling disk: up to
-            $3\cdot10^{-6}$ with $\|J\| \approx 40$). A genuine eigenvalue that small (a motion within
-            about that of its critical speed) is read as zero too.
+        jacobian: the Jacobian of the equations on the constraint manifold in the state (q, w),
+            w the independent velocities (n + n − m).
+        state: the names of the state variables kept in `reduced` (the ignorable coordinates
+            dropped).
+        reduced: the Jacobian restricted to `state`: the linearized equations whose eigenvalues
+            decide the stability.
+        eigenvalues: the eigenvalues of `reduced`, largest real part first (within `zero_tol` of
+            zero: zero; real and imaginary parts that small: dropped).
+        zero_tol: :data:`ZERO_TOL` times max(1, the norm of `reduced`).
     """
 
     q: np.ndarray
     v: np.ndarray
     jacobian: np.ndarray
-    basis: np.ndarray
+    state: tuple[str, ...]
     reduced: np.ndarray
     eigenvalues: np.ndarray
     zero_tol: float
 
     @property
     def zero_count(self) -> int:
-        """How many eigenvalues are zero (ignorable coordinates, conserved quantities)."""
+        """How many eigenvalues are zero (conserved quantities)."""
         return int(np.sum(self.eigenvalues == 0))
 
     @property
@@ -76,15 +86,15 @@ class Linearization:
 
     @property
     def growth_rate(self) -> float:
-        r"""The largest real part of the eigenvalues (0 when all are zero or imaginary): > 0 for an
-        unstable motion, whose perturbations grow like $e^{\text{growth rate}\cdot t}$."""
+        """The largest real part of the eigenvalues (0 when none is positive): > 0 for an unstable
+        motion, whose perturbations grow like exp(growth_rate · t)."""
         return float(max(0.0, np.max(self.eigenvalues.real)))
 
     @property
     def stable(self) -> bool:
-        """No eigenvalue with a positive real part (beyond `zero_tol`): stable to first order (for a
-        conservative system, neutrally: its eigenvalues are then imaginary)."""
-        return bool(np.all(self.eigenvalues.real <= self.zero_tol))
+        """No eigenvalue with a positive real part: stable to first order (for a conservative system,
+        neutrally: its eigenvalues are then imaginary)."""
+        return bool(np.all(self.eigenvalues.real <= 0))
 
 
 def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
@@ -133,27 +143,50 @@ def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
         i = int(np.argmax(np.abs(acceleration)))
         raise InputError(f"linearize: (q, v) is not a steady motion: the velocity {system.velocities[i]!r} changes "
                          f"at rate {acceleration[i]:.3g}")
-    J = np.asarray(jax.jacfwd(field)(state))
-    moving = np.abs(np.asarray(v)) > tol * scale
-    depends = np.max(np.abs(J[:, :n]), axis=0) > tol * scale * np.max(np.abs(J))
-    coupled = moving & depends
-    if np.any(coupled):
-        names = ", ".join(repr(system.coordinates[i]) for i in np.flatnonzero(coupled))
-        raise InputError(f"linearize: (q, v) is not a steady motion: the coordinates {names} move, and the equations "
+    # the equations on the constraint manifold as an ODE in (q, w), w the independent velocities
+    # (the complement of the best-conditioned columns of μ at q, by QR with column pivoting)
+    m = int(np.asarray(system.mu(q)).shape[0])
+    _, _, pivots = scipy.linalg.qr(np.asarray(system.mu(q)), pivoting=True)
+    dep, ind = np.sort(pivots[:m]), np.sort(pivots[m:])
+
+    def full_velocity(qq, w):
+        mu = system.mu(qq)
+        rhs = -mu[:, ind] @ w + (mu @ system.Y(qq) if system.is_affine else 0.0)
+        return jnp.zeros(n, dtype=w.dtype).at[ind].set(w).at[dep].set(jnp.linalg.solve(mu[:, dep], rhs))
+
+    def reduced_field(z):
+        qq, w = z[:n], z[n:]
+        vv = full_velocity(qq, w)
+        return jnp.concatenate([vv, lagrange_dalembert_acceleration(system, qq, vv)[0][ind]])
+
+    J = np.asarray(jax.jacfwd(reduced_field)(jnp.concatenate([q, v[ind]])))
+    names = (*system.coordinates, *(system.velocities[i] for i in ind))
+    # ignorable coordinates: those no kept equation depends on, dropped with their own equation
+    # (their perturbation just drifts); dropping one can make another ignorable (the heading of a
+    # disk enters only the velocities of its contact point)
+    keep = list(range(J.shape[0]))
+    small = 1e-12 * max(1.0, float(np.max(np.abs(J))))
+    changed = True
+    while changed:
+        changed = False
+        for i in [k for k in keep if k < n]:
+            if np.max(np.abs(J[np.ix_(keep, [i])])) <= small and len(keep) > 1:
+                keep.remove(i)
+                changed = True
+    moving = [i for i in range(n) if abs(float(v[i])) > tol * scale and i in keep]
+    if moving:
+        which = ", ".join(repr(system.coordinates[i]) for i in moving)
+        raise InputError(f"linearize: (q, v) is not a steady motion: the coordinates {which} move, and the equations "
                          f"depend on them (the linearized equations would change along the motion)")
-    K = np.asarray(jax.jacfwd(residual)(state))
-    _, s, Vt = np.linalg.svd(K)
-    rank = int(np.sum(s > 1e-10 * max(1.0, s[0])))
-    B = Vt[rank:].T
-    reduced = B.T @ J @ B
+    reduced = J[np.ix_(keep, keep)]
     eigenvalues = np.linalg.eigvals(reduced)
-    zero_tol = 1e-4 * max(1.0, float(np.linalg.norm(reduced, 2)))
+    zero_tol = ZERO_TOL * max(1.0, float(np.linalg.norm(reduced, 2)))
     eigenvalues = np.where(np.abs(eigenvalues) <= zero_tol, 0.0, eigenvalues)
-    # a real part or imaginary part at round-off next to a large other part is round-off too
-    eigenvalues = np.where(np.abs(eigenvalues.real) <= zero_tol * 1e-6, 1j * eigenvalues.imag, eigenvalues)
+    eigenvalues = np.where(np.abs(eigenvalues.real) <= zero_tol, 1j * eigenvalues.imag, eigenvalues)
+    eigenvalues = np.where(np.abs(eigenvalues.imag) <= zero_tol, eigenvalues.real + 0j, eigenvalues)
     order = np.lexsort((eigenvalues.imag, -eigenvalues.real))
-    return Linearization(q=np.asarray(q), v=np.asarray(v), jacobian=J, basis=B, reduced=reduced,
-                         eigenvalues=eigenvalues[order], zero_tol=zero_tol)
+    return Linearization(q=np.asarray(q), v=np.asarray(v), jacobian=J, state=tuple(names[k] for k in keep),
+                         reduced=reduced, eigenvalues=eigenvalues[order], zero_tol=zero_tol)
 
 
 def _vector(x, n: int, argument: str) -> jnp.ndarray:
@@ -163,3 +196,74 @@ def _vector(x, n: int, argument: str) -> jnp.ndarray:
     if not np.all(np.isfinite(a)):
         raise InputError(f"linearize: {argument} must be finite")
     return jnp.asarray(a)
+
+
+@dataclass(frozen=True)
+class StabilityCurve:
+    """The eigenvalues of a family of steady motions against a parameter (:func:`stability_curve`),
+    as Meijaard et al. (2007, Fig. 3) plot the benchmark bicycle's against its speed.
+
+    Attributes:
+        values: the parameter's values, increasing.
+        eigenvalues: (len(values), k) complex: each value's eigenvalues (:class:`Linearization`).
+        growth_rate: each value's largest real part (0 where stable).
+        stable: each value's stability to first order.
+        transitions: the parameter values where the stability changes, each refined by bisection
+            between the two samples that bracket it (to `tol` relative).
+    """
+
+    values: np.ndarray
+    eigenvalues: np.ndarray
+    growth_rate: np.ndarray
+    stable: np.ndarray
+    transitions: tuple[float, ...]
+
+
+def stability_curve(system, steady: Callable[[float], Sequence], values, *, tol: float = 1e-10) -> StabilityCurve:
+    """Linearize a family of steady motions and find where their stability changes.
+
+    Arguments:
+        system: the System (:func:`linearize`).
+        steady: `steady(value) -> (q, v)`, or `(system, q, v)` where the parameter changes the
+            system (`system.with_args(...)`): the steady motion at each value, e.g. the upright
+            rolling at speed `value`.
+        values: the parameter's values (at least two, increasing).
+        tol: the relative accuracy of the transitions.
+
+    Returns:
+        A :class:`StabilityCurve`; :func:`gnipy.plots.plot_stability` draws it.
+
+    Raises:
+        InputError: on values that are not increasing, or a steady motion that is not one
+            (:func:`linearize`, naming the value).
+    """
+    values = np.asarray(values, dtype=np.float64)
+    if values.ndim != 1 or values.size < 2 or not np.all(np.diff(values) > 0) or not np.all(np.isfinite(values)):
+        raise InputError("stability_curve: values must be at least two finite numbers, increasing")
+
+    def at(value: float) -> Linearization:
+        motion = tuple(steady(float(value)))
+        sys_, q, v = motion if len(motion) == 3 else (system, *motion)
+        try:
+            return linearize(sys_, q, v)
+        except InputError as e:
+            raise InputError(f"stability_curve: at {value:.12g}: {e}") from None
+
+    lins = [at(x) for x in values]
+    width = max(lin.eigenvalues.size for lin in lins)
+    eig = np.full((values.size, width), np.nan + 0j)
+    for i, lin in enumerate(lins):
+        eig[i, :lin.eigenvalues.size] = lin.eigenvalues
+    stable = np.array([lin.stable for lin in lins])
+    transitions = []
+    for i in np.flatnonzero(stable[1:] != stable[:-1]):
+        lo, hi, lo_stable = values[i], values[i + 1], stable[i]
+        while hi - lo > tol * max(abs(lo), abs(hi), 1e-300):
+            mid = 0.5 * (lo + hi)
+            if at(mid).stable == lo_stable:
+                lo = mid
+            else:
+                hi = mid
+        transitions.append(0.5 * (lo + hi))
+    return StabilityCurve(values=values, eigenvalues=eig, growth_rate=np.array([lin.growth_rate for lin in lins]),
+                          stable=stable, transitions=tuple(transitions))
