@@ -58,8 +58,11 @@ def test_upright_rolling_disk_eigenvalues(disk, spin):
         np.testing.assert_allclose(lin.growth_rate, lam.real, rtol=1e-10)
 
 
-def test_the_critical_speed_is_found_along_the_family_of_steady_motions(disk):
+def test_the_critical_speed_is_found_along_the_family_of_steady_motions(disk, tmp_path):
     curve = gnipy.analysis.stability_curve(disk, _upright, np.linspace(1.0, 6.0, 6), tol=1e-11)
+    fig = gnipy.plots.plot_stability(curve, tmp_path / "disk.png", xlabel="spin rate (rad/s)")
+    assert (tmp_path / "disk.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert f"{CRITICAL_SPIN:.6g}" in [t.get_text() for t in fig.axes[0].texts]  # the transition, marked
     assert list(curve.stable) == [False, False, True, True, True, True]
     assert len(curve.transitions) == 1
     np.testing.assert_allclose(curve.transitions[0], CRITICAL_SPIN, rtol=1e-9)

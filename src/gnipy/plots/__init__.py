@@ -30,6 +30,7 @@ from .run_figures import (
     plot_hidden_momentum,
     plot_solution,
     plot_convergence,
+    plot_stability,
 )
 from .control_figures import plot_controls, plot_control, plot_fit
 
@@ -41,6 +42,7 @@ __all__ = [
     "plot_hidden_momentum",
     "plot_solution",
     "plot_convergence",
+    "plot_stability",
     "plot_controls",
     "plot_control",
     "plot_fit",

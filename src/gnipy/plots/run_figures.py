@@ -1,6 +1,7 @@
 """The figures of a run (its configuration path, energy error, constraint residual, hidden
-momentum, and all of them together: :func:`plot_solution`) and of a convergence study
-(:func:`plot_convergence`)."""
+momentum, and all of them together: :func:`plot_solution`), of a convergence study
+(:func:`plot_convergence`) and of the stability of a family of steady motions
+(:func:`plot_stability`)."""
 
 from __future__ import annotations
 
@@ -316,4 +317,52 @@ def plot_convergence(
         ax.set_title(title, fontsize="medium")
     if path is not None:
         save_figure(fig, path, overwrite)
+    return fig
+
+
+def plot_stability(curve, path=None, *, xlabel: str = "parameter", title: str | None = None, ax=None,
+                   overwrite: bool = False):
+    """The eigenvalues of a family of steady motions against its parameter
+    (:func:`gnipy.analysis.stability_curve`), as Meijaard et al. (2007, Fig. 3) draw the benchmark
+    bicycle's against its speed: real parts as solid lines, imaginary parts (their absolute values)
+    dashed, zero eigenvalues left out, the unstable values shaded and each change of stability
+    marked with its value.
+
+    Arguments:
+        curve: a :class:`~gnipy.analysis.linearization.StabilityCurve`.
+        path: where to save the figure (None: do not save); written atomically.
+        xlabel: the parameter's name on the horizontal axis (e.g. "speed v (m/s)").
+        title: the axes title.
+        ax: the matplotlib axes to draw on (default: a new figure).
+        overwrite: replace an existing regular file at `path`.
+
+    Returns:
+        The `matplotlib.figure.Figure`.
+    """
+    ax = new_axes(ax, figsize=(6.5, 4.5))
+    fig = ax.figure
+    x = np.asarray(curve.values, dtype=float)
+    eig = np.asarray(curve.eigenvalues)
+    real = np.where(eig == 0, np.nan, eig.real)
+    imag = np.where((eig == 0) | (eig.imag == 0), np.nan, np.abs(eig.imag))
+    ax.plot(x, real, ".-", color="C0", lw=1, ms=3)
+    ax.plot(x, imag, ".--", color="C1", lw=1, ms=3)
+    ax.plot([], [], "-", color="C0", label="real part")
+    ax.plot([], [], "--", color="C1", label="|imaginary part|")
+    ax.axhline(0.0, color="0.5", lw=0.8)
+    unstable = ~np.asarray(curve.stable, dtype=bool)
+    for i in np.flatnonzero(unstable):
+        lo = x[i] if i == 0 else 0.5 * (x[i - 1] + x[i])
+        hi = x[i] if i == x.size - 1 else 0.5 * (x[i] + x[i + 1])
+        ax.axvspan(lo, hi, color="C3", alpha=0.08, lw=0)
+    for value in curve.transitions:
+        ax.axvline(value, color="C3", lw=1, ls=":")
+        ax.annotate(f"{value:.6g}", (value, 1.0), xycoords=("data", "axes fraction"), xytext=(3, -12),
+                    textcoords="offset points", color="C3", fontsize=8)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("eigenvalues (1/s)")
+    ax.set_title(title or "eigenvalues of the steady motions (unstable: shaded)")
+    ax.legend(loc="best", fontsize=8)
+    if path is not None:
+        save_figure(fig, path, overwrite=overwrite)
     return fig
