@@ -72,6 +72,30 @@ def test_the_critical_speed_is_found_along_the_family_of_steady_motions(disk, tm
         gnipy.analysis.stability_curve(disk, _upright, [2.0, 1.0])
 
 
+def test_a_methods_discrete_map_converges_to_the_continuous_eigenvalues(disk):
+    """Above the critical speed (Ω = 4, λ = ±4.7649i): the exponents log(μ)/h of gni-midpoint's
+    step map converge to ±λ at order 2 and stay on the imaginary axis (the neutral stability kept;
+    measured for gni-trapezoid, dla, sgni-trapezoid and the discrete gradient too); gni-euler-b's
+    have a positive real part (+0.082 at h = 0.005: a stable disk made to grow), gni-euler-a's the
+    opposite (numerical damping). mp is refused (a metric that depends on q)."""
+    q, v = _upright(4.0)
+    lam = gnipy.linearize(disk, q, v).nonzero_eigenvalues
+    hs = np.array([0.02, 0.01, 0.005])
+    errors = []
+    for h in hs:
+        near = gnipy.analysis.discrete_linearization(disk, "gni-midpoint", q, v, float(h)).nearest(lam)
+        assert np.max(np.abs(near.real)) < 1e-10
+        errors.append(np.max(np.abs(near - lam)))
+    slope = np.polyfit(np.log(hs), np.log(errors), 1)[0]
+    assert 1.95 < slope < 2.05 and errors[-1] < 1e-3, (errors, slope)
+    growth = gnipy.analysis.discrete_linearization(disk, "gni-euler-b", q, v, 0.005).nearest(lam).real
+    assert np.all(growth > 0.05), growth
+    with pytest.raises(gnipy.MethodError, match="constant metric"):
+        gnipy.analysis.discrete_linearization(disk, "mp", q, v, 0.01)
+    with pytest.raises(gnipy.InputError, match="h must be a positive number"):
+        gnipy.analysis.discrete_linearization(disk, "gni-midpoint", q, v, -0.01)
+
+
 def test_what_is_not_a_steady_motion_is_refused(disk):
     q, v = _upright(4.0)
     with pytest.raises(gnipy.InputError, match="not on the constraints"):

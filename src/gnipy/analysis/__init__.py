@@ -26,7 +26,8 @@ from ..diagnostics import (
     hidden_momentum_verdict,
 )
 from .invariants import ExactErrors, exact_errors, invariant_drifts
-from .linearization import Linearization, StabilityCurve, linearize, stability_curve
+from .linearization import (DiscreteLinearization, Linearization, StabilityCurve, discrete_linearization, linearize,
+                            stability_curve)
 from .orders import ROUND_OFF, fit_points, fitted_order
 
 __all__ = [
@@ -34,6 +35,8 @@ __all__ = [
     "linearize",
     "StabilityCurve",
     "stability_curve",
+    "DiscreteLinearization",
+    "discrete_linearization",
     "ConvergenceStudy",
     "convergence_study",
     "MEASURES",
