@@ -4,7 +4,9 @@ A steady motion of a system on $\mathbb{R}^n$ is a motion with constant velocity
 the equations do not change: $\dot v = 0$ at $(q^*, v^*)$, and every coordinate that moves
 ($v^*_i \ne 0$: a wheel's rotation, the position of the contact point) is one the equations do not
 depend on (an ignorable coordinate). The upright bicycle or disk rolling straight at constant
-speed is one; so is a rest point. Along it the linearized equations are constant:
+speed is one; so is a rest point. Along it the linearized equations are constant (what
+:func:`linearize` checks is that at the point, to first order: a coordinate that moves through a
+flat point of a potential, where the equations depend on it only to second order, passes):
 
 $$\frac{d}{dt}\begin{pmatrix}\delta q\\ \delta v\end{pmatrix} = \begin{pmatrix}0 & I\\ \partial_q a &
 \partial_v a\end{pmatrix}\begin{pmatrix}\delta q\\ \delta v\end{pmatrix},$$
@@ -23,7 +25,8 @@ its other eigenvalues in pairs $\pm\lambda$ (pure imaginary where the motion is 
 upright disk above its critical speed: neutral, not asymptotic, stability).
 
 :func:`stability_curve` follows a family of steady motions along a parameter (a speed) and
-locates where the stability changes, as the weave and capsize speeds of a bicycle.
+locates where the stability changes, as the weave and capsize speeds of a bicycle (two changes
+between neighbouring samples cancel and are not seen: sample finely enough).
 """
 
 from __future__ import annotations
@@ -46,7 +49,10 @@ __all__ = ["Linearization", "linearize", "DiscreteLinearization", "discrete_line
 #: eigenvalues within ZERO_TOL·max(1, ‖J‖₂) of zero are zero (and real or imaginary parts that
 #: small are dropped): the zero eigenvalues left after the ignorable coordinates are removed come
 #: from conserved quantities and are computed to round-off (measured on the rolling disk: ≤ 1e-15
-#: with ‖J‖ ≈ 40); a genuine eigenvalue within that of zero is read as zero
+#: with ‖J‖ ≈ 40). Limits: a genuine eigenvalue within that of zero is read as zero (a slow mode
+#: beside a very stiff one: ‖J‖ mixes 1/s and 1/s²), and eigenvalues that nearly coincide (a
+#: collision of two pairs) are computed only to about √ε‖J‖, so `stable` is decided to that
+#: accuracy there
 ZERO_TOL = 1e-10
 
 
@@ -77,7 +83,10 @@ class Linearization:
 
     @property
     def zero_count(self) -> int:
-        """How many eigenvalues are zero (conserved quantities)."""
+        """How many eigenvalues are zero. The nonzero eigenvalues do not depend on how the state is
+        chosen; this count does (which velocities are dependent, which coordinates were found
+        ignorable): read it as "at least the conserved quantities left in the state", not as
+        their number."""
         return int(np.sum(self.eigenvalues == 0))
 
     @property
@@ -191,7 +200,10 @@ def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
 
 
 def _vector(x, n: int, argument: str) -> jnp.ndarray:
-    a = np.asarray(x, dtype=np.float64)
+    try:
+        a = np.asarray(x, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"linearize: {argument} must be an array of numbers, got {x!r}") from None
     if a.shape != (n,):
         raise InputError(f"linearize: {argument} must have shape ({n},), got {a.shape}")
     if not np.all(np.isfinite(a)):
@@ -222,7 +234,19 @@ class DiscreteLinearization:
         """For each of `eigenvalues` (the continuous ones, :attr:`Linearization.eigenvalues`), the
         exponent closest to it."""
         ev = np.atleast_1d(np.asarray(eigenvalues, dtype=complex))
+        if self.exponents.size == 0:
+            return np.full(ev.shape, np.nan + 0j)
         return np.array([self.exponents[np.argmin(np.abs(self.exponents - e))] for e in ev])
+
+    @property
+    def growth_rate(self) -> float:
+        """The largest log|μ|/h over every multiplier, the method's parasitic ones included: > 0 where
+        some perturbation grows under the method's map. On the Chaplygin sleigh sliding straight
+        (stable, λ = −0.4) gni-midpoint's map has μ = −1.0408 at h = 0.1: growth +0.4, the mirror of
+        the motion's contraction, carried by the GNI's hidden momentum (its map preserves volume, so
+        it cannot contract without something else expanding: the methods guide, 'Where the GNI
+        struggles')."""
+        return float(np.max(np.log(np.abs(self.multipliers))) / self.h) if self.multipliers.size else 0.0
 
 
 def discrete_linearization(system, method, q, v, h: float) -> DiscreteLinearization:
@@ -247,8 +271,13 @@ def discrete_linearization(system, method, q, v, h: float) -> DiscreteLinearizat
     """
     from ..methods import get_method
 
-    if not (isinstance(h, (int, float)) and np.isfinite(h) and h > 0):
+    try:
+        ok = not isinstance(h, bool) and np.ndim(h) == 0 and np.isfinite(float(h)) and float(h) > 0
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
         raise InputError(f"discrete_linearization: h must be a positive number, got {h!r}")
+    h = float(h)
     linearize(system, q, v)  # the same checks of the steady motion
     q = jnp.asarray(np.asarray(q, dtype=np.float64))
     v = jnp.asarray(np.asarray(v, dtype=np.float64))
@@ -323,7 +352,10 @@ def stability_curve(system, steady: Callable[[float], Sequence], values, *, tol:
         raise InputError("stability_curve: values must be at least two finite numbers, increasing")
 
     def at(value: float) -> Linearization:
-        motion = tuple(steady(float(value)))
+        motion = steady(float(value))
+        if not isinstance(motion, (tuple, list)) or len(motion) not in (2, 3):
+            raise InputError(f"stability_curve: steady({value:.12g}) must return (q, v) or (system, q, v), "
+                             f"got {type(motion).__name__}")
         sys_, q, v = motion if len(motion) == 3 else (system, *motion)
         try:
             return linearize(sys_, q, v)
@@ -337,9 +369,12 @@ def stability_curve(system, steady: Callable[[float], Sequence], values, *, tol:
         eig[i, :lin.eigenvalues.size] = lin.eigenvalues
     stable = np.array([lin.stable for lin in lins])
     transitions = []
+    span = float(values[-1] - values[0])
     for i in np.flatnonzero(stable[1:] != stable[:-1]):
         lo, hi, lo_stable = values[i], values[i + 1], stable[i]
-        while hi - lo > tol * max(abs(lo), abs(hi), 1e-300):
+        for _ in range(200):  # relative to the values, and to their span where a transition is at 0
+            if hi - lo <= tol * max(abs(lo), abs(hi), span):
+                break
             mid = 0.5 * (lo + hi)
             if at(mid).stable == lo_stable:
                 lo = mid
