@@ -135,7 +135,7 @@ def test_the_sleigh_sliding_straight_and_the_gnis_parasitic_growth():
     assert abs(gni.nearest(lam)[0] - lam[0]) < 1e-3
     np.testing.assert_allclose(gni.growth_rate, 0.4, rtol=1e-3)
     # a change of stability at 0 (a·u changes sign with a) is found, and the bisection stops
-    curve = gnipy.analysis.stability_curve(sleigh, lambda a: (sleigh.with_args(a=a), q, v), [-0.5, 0.25], tol=1e-3)
-    assert len(curve.transitions) == 1 and abs(curve.transitions[0]) <= 1e-3
+    curve = gnipy.analysis.stability_curve(sleigh, lambda a: (sleigh.with_args(a=a), q, v), [-0.5, 0.25], tol=1e-9)
+    assert len(curve.transitions) == 1 and abs(curve.transitions[0]) <= 1e-9
     with pytest.raises(gnipy.InputError, match=r"steady\(0\) must return"):
         gnipy.analysis.stability_curve(sleigh, lambda a: None, [0.0, 0.25])

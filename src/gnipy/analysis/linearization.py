@@ -134,6 +134,10 @@ def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
     q = _vector(q, n, "q")
     v = _vector(v, n, "v")
     scale = 1.0 + float(np.max(np.abs(v)))
+    # as the driver does: without the provenance (static fields that change with the parameters'
+    # values), Systems that differ only in args share the compiled pieces of the equations (a
+    # stability curve over a parameter: 0.8 s per value before, 0.05 s after, measured on the sleigh)
+    system = system.without_metadata()
 
     def residual(state):
         qq, vv = state[:n], state[n:]
@@ -282,6 +286,7 @@ def discrete_linearization(system, method, q, v, h: float) -> DiscreteLinearizat
     q = jnp.asarray(np.asarray(q, dtype=np.float64))
     v = jnp.asarray(np.asarray(v, dtype=np.float64))
     integrator = get_method(method) if isinstance(method, str) else method
+    system = system.without_metadata()
     integrator.check(system, q)
     integrator = integrator.prepare(system, q)
     state = integrator.init(system, q, v, h)
