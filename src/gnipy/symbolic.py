@@ -58,6 +58,7 @@ import jax.numpy as jnp
 
 from .errors import InputError
 from .extras import require
+from .inputs import real_number
 from .system import System
 
 __all__ = ["from_sympy"]
@@ -307,10 +308,7 @@ def _parameters(params, exprs, known) -> dict[str, float]:
         if not name.isidentifier():
             raise InputError(f"from_sympy: params: {name!r} is not a Python name, which gnipy's args need (it names "
                              f"the parameter in --set, sweeps and fits): rename the symbol")
-        try:
-            given[name] = float(value)
-        except (TypeError, ValueError):
-            raise InputError(f"from_sympy: params[{name!r}] = {value!r} is not a number") from None
+        given[name] = real_number(f"from_sympy: params[{name!r}]", value)
     if any(e.has(sp.I) for e in exprs):
         raise InputError("from_sympy: the model holds the imaginary unit I; gnipy's systems are real")
     free = sorted({s.name for e in exprs for s in e.free_symbols if s not in known})

@@ -92,7 +92,7 @@ def test_a_methods_discrete_map_converges_to_the_continuous_eigenvalues(disk):
     assert np.all(growth > 0.05), growth
     with pytest.raises(gnipy.MethodError, match="constant metric"):
         gnipy.analysis.discrete_linearization(disk, "mp", q, v, 0.01)
-    with pytest.raises(gnipy.InputError, match="h must be a positive number"):
+    with pytest.raises(gnipy.InputError, match="h: must be > 0"):
         gnipy.analysis.discrete_linearization(disk, "gni-midpoint", q, v, -0.01)
 
 
@@ -112,7 +112,7 @@ def test_what_is_not_a_steady_motion_is_refused(disk):
     with pytest.raises(gnipy.InputError, match="the coordinates 'x' move"):
         gnipy.linearize(well, np.zeros(3), np.array([1.0, 0.0, 0.0]))
     assert gnipy.linearize(well, np.zeros(3), np.zeros(3)).stable  # at rest at the bottom
-    with pytest.raises(gnipy.InputError, match=r"q must have shape \(5,\)"):
+    with pytest.raises(gnipy.InputError, match=r"q: expected a vector of length 5"):
         gnipy.linearize(disk, np.zeros(4), v)
     with pytest.raises(gnipy.InputError, match="R\\^n x G"):
         gnipy.linearize(gnipy.make_system("rolling-ball"), np.zeros(2), np.zeros(5))

@@ -41,6 +41,7 @@ import scipy.linalg
 
 from ..equations import lagrange_dalembert_acceleration
 from ..errors import InputError
+from ..inputs import finite_vector, real_number
 
 __all__ = ["Linearization", "linearize", "DiscreteLinearization", "discrete_linearization", "StabilityCurve",
            "stability_curve"]
@@ -131,8 +132,8 @@ def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
     if system.is_forced:
         raise InputError(f"linearize: system {system.name!r} is forced; a steady motion is defined without inputs")
     n = system.n
-    q = _vector(q, n, "q")
-    v = _vector(v, n, "v")
+    q = jnp.asarray(finite_vector("q", q, n))
+    v = jnp.asarray(finite_vector("v", v, n))
     scale = 1.0 + float(np.max(np.abs(v)))
     # as the driver does: without the provenance (static fields that change with the parameters'
     # values), Systems that differ only in args share the compiled pieces of the equations (a
@@ -203,18 +204,6 @@ def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
                          reduced=reduced, eigenvalues=eigenvalues[order], zero_tol=zero_tol)
 
 
-def _vector(x, n: int, argument: str) -> jnp.ndarray:
-    try:
-        a = np.asarray(x, dtype=np.float64)
-    except (TypeError, ValueError):
-        raise InputError(f"linearize: {argument} must be an array of numbers, got {x!r}") from None
-    if a.shape != (n,):
-        raise InputError(f"linearize: {argument} must have shape ({n},), got {a.shape}")
-    if not np.all(np.isfinite(a)):
-        raise InputError(f"linearize: {argument} must be finite")
-    return jnp.asarray(a)
-
-
 @dataclass(frozen=True)
 class DiscreteLinearization:
     """The linearized one-step map of a method about a steady motion (:func:`discrete_linearization`).
@@ -275,13 +264,7 @@ def discrete_linearization(system, method, q, v, h: float) -> DiscreteLinearizat
     """
     from ..methods import get_method
 
-    try:
-        ok = not isinstance(h, bool) and np.ndim(h) == 0 and np.isfinite(float(h)) and float(h) > 0
-    except (TypeError, ValueError):
-        ok = False
-    if not ok:
-        raise InputError(f"discrete_linearization: h must be a positive number, got {h!r}")
-    h = float(h)
+    h = real_number("h", h, lower=0.0, strict=True)
     linearize(system, q, v)  # the same checks of the steady motion
     q = jnp.asarray(np.asarray(q, dtype=np.float64))
     v = jnp.asarray(np.asarray(v, dtype=np.float64))
