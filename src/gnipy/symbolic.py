@@ -59,6 +59,7 @@ import jax.numpy as jnp
 from .errors import InputError
 from .extras import require
 from .inputs import real_number
+from .linalg import solve_spd
 from .system import System
 
 __all__ = ["from_sympy"]
@@ -176,10 +177,12 @@ def _functions(L, cons: tuple, n: int):
             raise InputError(f"from_sympy: {where}: a function gnipy cannot convert to JAX: {e.args[0]}") from None
 
     L_fn = converted(L, "model")
-    for i, row in enumerate(mu):
-        converted(list(row), f"constraints[{i}]")  # names the constraint whose function has no JAX counterpart
-    mu_fn = converted([list(row) for row in mu], "constraints")
+    mu_rows = [converted(list(row), f"constraints[{i}]") for i, row in enumerate(mu)]
     c0_fn = converted(list(c0), "constraints") if affine else None
+
+    def mu_at(q, args):
+        values = values_at(q, None, args)
+        return _matrix([row(**values) for row in mu_rows])
 
     def values_at(q, v, args):
         out = dict(args)
@@ -192,12 +195,12 @@ def _functions(L, cons: tuple, n: int):
         return jnp.asarray(L_fn(**values_at(q, v, args)), dtype=jnp.float64)
 
     def sympy_constraints(q, args):
-        return _matrix(mu_fn(**values_at(q, None, args)))
+        return mu_at(q, args)
 
     def sympy_affine(q, args):
-        m = _matrix(mu_fn(**values_at(q, None, args)))
+        m = mu_at(q, args)
         c = jnp.stack([jnp.asarray(x, dtype=jnp.float64) * jnp.ones_like(q[0]) for x in c0_fn(**values_at(q, None, args))])
-        return -m.T @ jnp.linalg.solve(m @ m.T, c)
+        return -m.T @ solve_spd(m @ m.T, c)  # μμᵀ is symmetric positive definite (μ of full rank)
 
     return sympy_lagrangian, sympy_constraints, (sympy_affine if affine else None)
 
