@@ -361,6 +361,10 @@ def _check_systems(ns, cwd):
     # the blade from SymPy slides down the slope (x grows) and keeps its constraint
     assert ns["run"].healthy and float(ns["run"].q[-1, 0]) > 0.1
     assert float(abs(ns["run"].constraint_residual).max()) <= 1e-12
+    # the pendulum with a holonomic constraint stays on |q| = 1 at round-off
+    q = np.asarray(ns["swing"].q)
+    assert ns["swing"].constraint_residual.shape == (1001, 2)
+    assert np.max(np.abs(np.sum(q * q, axis=1) - 1.0)) < 1e-15
 
 
 def _check_files(ns, cwd):

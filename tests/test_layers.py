@@ -33,6 +33,7 @@ LAYERS = [
     ["retractions"],
     # 2. mechanics: the System and what derives from it; the model table
     ["spaces", "forcing", "projectors", "equations"],
+    ["holonomic"],  # holonomic constraints: the System's rows, the methods' position multiplier
     ["system_checks", "system_arguments"],
     ["system"],
     ["registry", "symbolic"],

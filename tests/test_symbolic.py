@@ -173,7 +173,9 @@ def test_plain_form_refusals():
     messages.append(_refused("degree \\[1\\]", L + x * dx, [x, y], speeds=[dx, dy], constraints=c))
     messages.append(_refused("not a polynomial", L + sp.cos(dx), [x, y], speeds=[dx, dy], constraints=c))
     messages.append(_refused("constraints\\[0\\] is not affine", L, [x, y], speeds=[dx, dy], constraints=[dx ** 2 - dy]))
-    messages.append(_refused("no nonholonomic constraint", L, [x, y], speeds=[dx, dy]))
+    messages.append(_refused("no constraint given", L, [x, y], speeds=[dx, dy]))
+    messages.append(_refused(r"holonomic\[0\] = -dy \+ x involves the velocities", L, [x, y], speeds=[dx, dy],
+                             holonomic=[x - dy]))
     messages.append(_refused("repeats", L, [x, x], speeds=[dx, dy], constraints=c))
     messages.append(_refused("depends on t", L, [x, y], speeds=[dx, dy], constraints=[dx - sp.Symbol("t") * dy]))
     messages.append(_refused("model must be", "0.5*dx**2", [x, y], speeds=[dx, dy], constraints=c))
@@ -208,7 +210,7 @@ def test_plain_form_refusals():
     messages.append(_refused(r"f\(x\) is not a coordinate, a velocity or a function", L - f(x), [x, y], speeds=[dx, dy], constraints=c))
     messages.append(_refused("a function gnipy cannot convert to JAX", L - sp.besselj(0, x), [x, y], speeds=[dx, dy], constraints=c))
     # every refusal names the function and the argument it is about, and none was swallowed
-    assert len(messages) == 29 and all(m.startswith("from_sympy: ") for m in messages), messages
+    assert len(messages) == 30 and all(m.startswith("from_sympy: ") for m in messages), messages
 
 
 def test_mechanics_system_refusals():
@@ -226,10 +228,6 @@ def test_mechanics_system_refusals():
     torqued.add_loads(me.Torque(torqued.bodies[0].frame, sp.Symbol("tau") * torqued.frame.z))
     with pytest.raises(gnipy.InputError, match="torque"):
         gnipy.from_sympy(torqued, params={**spec.params, "tau": 1.0})
-    holonomic = _knife_edge_system()
-    holonomic.add_holonomic_constraints(holonomic.q[1])
-    with pytest.raises(gnipy.InputError, match="holonomic constraints"):
-        gnipy.from_sympy(holonomic, params=spec.params)
     sprung = _knife_edge_system()
     sprung.add_actuators(me.LinearSpring(sp.Symbol("k"), me.LinearPathway(sprung.fixed_point, sprung.bodies[0].masscenter)))
     with pytest.raises(gnipy.InputError, match="actuators"):
@@ -317,3 +315,42 @@ def test_the_rolling_disk_converges_to_sympys_own_equations_of_motion():
     slope = np.polyfit(np.log(hs), np.log(errors), 1)[0]
     assert 1.9 < slope < 2.1, (errors, slope)
     assert errors[-1] < 1e-2
+
+
+def _pendulum_mechanics_system():
+    """The spherical pendulum as a particle at (x, y, z) held at distance l from the origin: a
+    sympy.physics.mechanics System with a holonomic constraint and gravity."""
+    x, y, z = me.dynamicsymbols("x y z")
+    m, g, l = sp.symbols("m g l")
+    N = me.ReferenceFrame("N")
+    O = me.Point("O")
+    O.set_vel(N, 0)
+    P = O.locatenew("P", x * N.x + y * N.y + z * N.z)
+    P.set_vel(N, x.diff(T) * N.x + y.diff(T) * N.y + z.diff(T) * N.z)
+    system = me.System(N, O)
+    system.q_ind = [x, y, z]
+    system.u_ind = [x.diff(T), y.diff(T), z.diff(T)]
+    system.add_bodies(me.Particle("bob", P, m))
+    system.apply_uniform_gravity(-g * N.z)
+    system.add_holonomic_constraints(x**2 + y**2 + z**2 - l**2)
+    return system
+
+
+def test_mechanics_system_with_a_holonomic_constraint():
+    """A sympy.physics.mechanics System with a holonomic constraint runs as the hand-written
+    pendulum of tests/test_holonomic.py (φ = (|q|² − l²)/2 there: the same surface, a multiple
+    of the multiplier) to round-off, and keeps its constraint at round-off."""
+    import jax.numpy as jnp
+
+    pendulum = gnipy.from_sympy(_pendulum_mechanics_system(), params={"m": 1.0, "g": 9.81, "l": 1.0}, name="pendulum")
+    assert pendulum.constraints is None and pendulum.holonomic is not None
+
+    def lagrangian(q, v):
+        return 0.5 * v @ v - 9.81 * q[2]
+
+    hand = gnipy.System(lagrangian, None, holonomic=lambda q: jnp.array([0.5 * (q @ q - 1.0)]), n=3)
+    q0, v0 = np.array([np.sin(1.0), 0.0, -np.cos(1.0)]), np.array([0.0, 1.2, 0.0])
+    a = gnipy.simulate(pendulum, "gni-trapezoid", q0, v0, h=0.01, steps=300)
+    b = gnipy.simulate(hand, "gni-trapezoid", q0, v0, h=0.01, steps=300)
+    assert np.max(np.abs(np.asarray(a.q) - np.asarray(b.q))) < 1e-13
+    assert np.max(np.abs(np.sum(np.asarray(a.q) ** 2, axis=1) - 1.0)) < 1e-15

@@ -407,7 +407,7 @@ def simulate_batch(problem, reporter, backend: str) -> Solution:
     b0, v0 = check_batch(core, sys_batched, q0, v0, R0, project_v0=problem.project_v0)
     first_b0 = jax.tree_util.tree_map(lambda a: a[0], b0)
     method = problem.method
-    method.check(system, first_b0)
+    method.validate(system, first_b0)
     method = method.prepare(system, first_b0)
     hj = np.float64(h)
     state0 = _init_batch(method, core, sys_batched, b0, v0, hj)

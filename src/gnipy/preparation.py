@@ -286,7 +286,7 @@ def prepare(system, method, q0, v0, R0, project_v0: bool, state0) -> Prepared:
         v0c = np.asarray(v0c, dtype=np.float64)
     else:
         b0, v0c = state_point(system, method, state0)
-    method.check(system, b0)
+    method.validate(system, b0)
     prepared = Prepared(b0, v0c, method.prepare(system, b0), system.without_metadata(), (system, method))
     if key is not None:
         if len(_CACHE) >= _CACHE_MAX:

@@ -46,7 +46,8 @@ class ContinuousReference(eqx.Module):
         # the system without its provenance (the parameters' values as metadata): the compiled
         # solver is shared by runs of other parameter values (their array leaves are traced)
         core = system.without_metadata()
-        ys, num_steps, ok = _solve(self, core, b0, jnp.asarray(v0), jnp.asarray(ts))
+        solve = _solve if system.holonomic is None else _solve_projected
+        ys, num_steps, ok = solve(self, core, b0, jnp.asarray(v0), jnp.asarray(ts))
         ys = ys[len(ts) - len(times):]
         meta = dict(system=system.name, method=self.name, h=float(h), coordinates=system.coordinates,
                     params=system.params, start="continuous", orientation=system.orientation_description)
@@ -73,6 +74,28 @@ def _nodes(system, ys):
     energy = jax.vmap(system.energy)(b, v)
     res = jax.vmap(system.constraint_residual)(b, v)
     return space.coordinates(b), space.orientation(b), v, p, energy, res
+
+
+@jit
+def _solve_projected(ref, system, b0, v0, times):
+    """:func:`_solve` for a system with holonomic constraints: from each saved time to the next,
+    then the state projected onto $\\varphi = 0$ and the velocity constraints
+    (:func:`gnipy.holonomic.project_state`), so that the drift of the index-2 equations off
+    $\\varphi = 0$ does not add up over the run."""
+    from .holonomic import project_state
+
+    space = system.space
+    N = v0.shape[0]
+
+    def segment(y, span):
+        ys, steps, ok = _solve(ref, system, space.unpack(y[:-N]), y[-N:], span)
+        b, v = project_state(system, space.unpack(ys[-1, :-N]), ys[-1, -N:])
+        y1 = jnp.concatenate([space.pack(b), v])
+        return y1, (y1, steps, ok)
+
+    y0 = jnp.concatenate([space.pack(b0), v0])
+    _, (ys, steps, ok) = jax.lax.scan(segment, y0, jnp.stack([times[:-1], times[1:]], axis=1))
+    return jnp.concatenate([y0[None], ys]), jnp.sum(steps), jnp.all(ok)
 
 
 @jit

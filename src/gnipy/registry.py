@@ -386,7 +386,7 @@ def _can_run(name: str, system: System, b0=None) -> bool:
         return True
     method = _METHOD_LOOKUP(name)
     try:
-        method.check(system, default_point(system) if b0 is None else b0)
+        method.validate(system, default_point(system) if b0 is None else b0)
     except MethodError:
         return False
     except Exception:

@@ -124,7 +124,7 @@ VARIABLES: Mapping[str, Variable] = _variables(
     Variable("v", (*_T, "velocity"), "reported velocity", dtype="float64", components="velocity"),
     Variable("p", (*_T, "velocity"), "reported momentum", dtype="float64", components="velocity"),
     Variable("energy", _T, "energy ½vᵀGv + V", dtype="float64"),
-    Variable("constraint_residual", (*_T, "constraint"), "constraint residual mu(q)(v - Y(q))",
+    Variable("constraint_residual", (*_T, "constraint"), "constraint residual mu(q)(v - Y(q)), then phi(q) (holonomic)",
              dtype="float64"),
     Variable("R", (*_T, "i", "j"), "orientation R (group matrix)", dtype="float64"),
     # the GNI family's diagnostics

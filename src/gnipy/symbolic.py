@@ -9,7 +9,8 @@ SymPy, in either of two forms.
   `potential_energy`), its constant loads (gravity, `System.apply_uniform_gravity`, and any other
   constant force on a point, whose potential is $-F\\cdot r$ from the system's `fixed_point`), its
   kinematic differential equations (u = q̇, or any relation linear in u and q̇: the kinetic
-  energy and the constraints are rewritten in q̇) and its nonholonomic constraints.
+  energy and the constraints are rewritten in q̇), its holonomic constraints and its nonholonomic
+  constraints.
 
 What gnipy integrates is $l(q, \\dot q) = T - V$ on $\\mathbb{R}^n$ ($q$ the coordinates in the
 order given, or the System's `q`; the velocities are $\\dot q$) with the constraints
@@ -19,7 +20,10 @@ $Y = -\\mu^T(\\mu\\mu^T)^{-1}c_0$ (the shortest vector with $\\mu Y = -c_0$). On
 the equations (the constraint set; in the GNI, $Q^*\\Pi = \\mu^T C^{-1}\\mu Y$), so any other choice
 gives the same motion; tests/test_symbolic.py holds the rotating-table ball built from SymPy equal
 to the zoo's, whose $Y$ is another, with four methods. A constraint with $c_0 \\equiv 0$ for every
-row makes the system linear (`is_affine` False).
+row makes the system linear (`is_affine` False). Holonomic constraints $\\varphi(q) = 0$ (the plain
+form's `holonomic`, a mechanics System's `holonomic_constraints`) become the System's `holonomic`
+(:mod:`gnipy.holonomic`); a mechanics System's velocity constraints then are its nonholonomic
+ones only, since gnipy adds the derivatives $d\\varphi\\,\\dot q = 0$ itself.
 
 The parameters (the symbols that are neither coordinates nor velocities) become the System's
 `args`, named by their symbols' names: `jax.grad` reaches them, `with_args` changes them, and
@@ -33,8 +37,8 @@ expression's own nodes, and a function SymPy cannot map (an undefined function, 
 in an expression) is refused by name when the System is built.
 
 What the conversion refuses, each with an :class:`~gnipy.InputError` naming the argument:
-holonomic constraints (gnipy does not integrate them yet: choose independent coordinates; a
-constraint expression without velocities is one), loads that are not constant (a force that
+a velocity constraint without velocities (a holonomic constraint: give it as `holonomic`), a
+holonomic constraint with velocities, loads that are not constant (a force that
 depends on q, u or t, a torque, an actuator), kinematic equations that are not linear in u with
 coefficients in q, explicit time dependence, a Lagrangian that is not of mechanical type (quadratic
 in the velocities, with no linear term), a constraint that is not affine in the velocities, a
@@ -75,6 +79,7 @@ def from_sympy(
     *,
     speeds: Sequence[Any] | None = None,
     constraints: Sequence[Any] = (),
+    holonomic: Sequence[Any] = (),
     params: Mapping[Any, float] | None = None,
     name: str = "sympy-system",
     coordinate_names: Sequence[str] | None = None,
@@ -91,6 +96,9 @@ def from_sympy(
             plain symbols; default: the coordinates' time derivatives (for `dynamicsymbols`).
         constraints: the plain form's constraint expressions c(q, q̇) (each = 0), affine in the
             velocities. Not given with a mechanics System (its nonholonomic constraints are used).
+        holonomic: the plain form's holonomic constraints φ(q) (each = 0), expressions in the
+            coordinates and parameters (:mod:`gnipy.holonomic`). Not given with a mechanics System
+            (its `holonomic_constraints` are used).
         params: the value of every other symbol of the model: `{symbol or name: float}`. They
             become the System's `args`, named by the symbols' names.
         name: the System's name (in reports and files).
@@ -99,7 +107,8 @@ def from_sympy(
         defaults: an optional default initial condition `(q0, v0)`.
 
     Returns:
-        The System, with `lagrangian(q, v, args)`, `constraints(q, args)` and, when the
+        The System, with `lagrangian(q, v, args)`, `constraints(q, args)` (None without
+        nonholonomic constraints), `holonomic(q, args)` with holonomic constraints, and, when the
         constraints are affine, `affine(q, args)`.
 
     Raises:
@@ -109,10 +118,11 @@ def from_sympy(
     sp = _sympy()
     me = require("sympy.physics.mechanics", extra="sympy")
     if isinstance(model, me.System):
-        if coordinates is not None or speeds is not None or _sequence(constraints, "constraints"):
-            raise InputError("from_sympy: coordinates, speeds and constraints are read from the mechanics System; "
-                             "do not pass them too")
-        lagrangian, coordinates, speeds, constraints = _from_mechanics_system(model)
+        if (coordinates is not None or speeds is not None or _sequence(constraints, "constraints")
+                or _sequence(holonomic, "holonomic")):
+            raise InputError("from_sympy: coordinates, speeds, constraints and holonomic are read from the mechanics "
+                             "System; do not pass them too")
+        lagrangian, coordinates, speeds, constraints, holonomic = _from_mechanics_system(model)
     elif isinstance(model, sp.Basic):
         if coordinates is None:
             raise InputError("from_sympy: coordinates is needed with a Lagrangian expression (the symbols of q)")
@@ -121,26 +131,33 @@ def from_sympy(
         raise InputError(f"from_sympy: model must be a SymPy expression (the Lagrangian) or a "
                          f"sympy.physics.mechanics.System, not {type(model).__name__}")
     constraints = _sequence(constraints, "constraints")
+    holonomic = _sequence(holonomic, "holonomic")
     q, qd, names = _coordinates_and_speeds(coordinates, speeds, coordinate_names)
     n = len(q)
-    exprs = {"model": sp.sympify(lagrangian), **{f"constraints[{i}]": sp.sympify(c) for i, c in enumerate(constraints)}}
+    exprs = {"model": sp.sympify(lagrangian), **{f"constraints[{i}]": sp.sympify(c) for i, c in enumerate(constraints)},
+             **{f"holonomic[{i}]": sp.sympify(c) for i, c in enumerate(holonomic)}}
     _check_symbols(exprs, q, qd)
     # plain symbols in place of q and q̇ (dynamicsymbols are applied functions of t); no symbol of
     # the model has these names (_check_symbols)
     qs, vs = _internal_symbols(n)
     swap = {**dict(zip(qd, vs)), **dict(zip(q, qs))}  # the velocities first: q̇ contains q
-    L, *cons = (_substituted(e, swap, where) for where, e in exprs.items())
-    if not cons:
-        raise InputError("from_sympy: constraints: no nonholonomic constraint given; gnipy integrates "
-                         "constrained systems")
-    values = _parameters(params, [L, *cons], set(qs) | set(vs))
+    L, *rest = (_substituted(e, swap, where) for where, e in exprs.items())
+    cons, hol = rest[:len(constraints)], rest[len(constraints):]
+    if not cons and not hol:
+        raise InputError("from_sympy: constraints: no constraint given (nonholonomic, or holonomic); gnipy "
+                         "integrates constrained systems")
+    for i, c in enumerate(hol):
+        if c.free_symbols & set(vs):
+            raise InputError(f"from_sympy: holonomic[{i}] = {holonomic[i]} involves the velocities: a holonomic "
+                             "constraint is a function of the coordinates (give a velocity constraint as constraints)")
+    values = _parameters(params, [L, *cons, *hol], set(qs) | set(vs))
     try:
-        lagrangian_fn, constraints_fn, affine_fn = _functions(L, tuple(cons), n)
+        lagrangian_fn, constraints_fn, affine_fn, holonomic_fn = _functions(L, tuple(cons), tuple(hol), n)
     except InputError as e:  # say it in the model's own symbols
         user = {f"{_INTERNAL}q{i}": str(c) for i, c in enumerate(q)} | {f"{_INTERNAL}v{i}": str(v) for i, v in enumerate(qd)}
         raise InputError(re.sub(rf"\b{_INTERNAL}[qv]\d+\b", lambda m: user[m.group(0)], str(e))) from None
-    return System(lagrangian_fn, constraints_fn, affine_fn, coordinates=names, name=name, args=values,
-                  defaults=defaults)
+    return System(lagrangian_fn, constraints_fn, affine_fn, holonomic=holonomic_fn, coordinates=names, name=name,
+                  args=values, defaults=defaults)
 
 
 def _internal_symbols(n: int):
@@ -155,8 +172,9 @@ _INTERNAL = "gnipy_"
 
 
 @functools.lru_cache(maxsize=64)
-def _functions(L, cons: tuple, n: int):
-    """The System's functions `(lagrangian, constraints, affine or None)` of the substituted
+def _functions(L, cons: tuple, hol: tuple, n: int):
+    """The System's functions `(lagrangian, constraints or None, affine or None, holonomic or None)`
+    of the substituted
     expressions (in `gnipy_q{i}`, `gnipy_v{i}` and the parameters' symbols), made once per model:
     Systems converted from the same expressions share the function objects, so that they differ
     only in `args` and run as one batch (a sweep's members, a fit's trials), as those of one
@@ -179,6 +197,7 @@ def _functions(L, cons: tuple, n: int):
     L_fn = converted(L, "model")
     mu_rows = [converted(list(row), f"constraints[{i}]") for i, row in enumerate(mu)]
     c0_fn = converted(list(c0), "constraints") if affine else None
+    phi_fn = converted(list(hol), "holonomic") if hol else None
 
     def mu_at(q, args):
         values = values_at(q, None, args)
@@ -202,7 +221,12 @@ def _functions(L, cons: tuple, n: int):
         c = jnp.stack([jnp.asarray(x, dtype=jnp.float64) * jnp.ones_like(q[0]) for x in c0_fn(**values_at(q, None, args))])
         return -m.T @ solve_spd(m @ m.T, c)  # μμᵀ is symmetric positive definite (μ of full rank)
 
-    return sympy_lagrangian, sympy_constraints, (sympy_affine if affine else None)
+    def sympy_holonomic(q, args):
+        return jnp.stack([jnp.asarray(x, dtype=jnp.float64) * jnp.ones_like(q[0])
+                          for x in phi_fn(**values_at(q, None, args))])
+
+    return (sympy_lagrangian, sympy_constraints if cons else None, (sympy_affine if affine else None),
+            sympy_holonomic if hol else None)
 
 
 def _matrix(rows) -> jnp.ndarray:
@@ -351,8 +375,7 @@ def _affine_parts(sp, cons, vs):
                 raise InputError(f"from_sympy: constraints[{i}] is not affine in the velocities: {c}")
         if all(_is_zero(sp, entry) for entry in row):
             raise InputError(f"from_sympy: constraints[{i}] = {c} does not involve the velocities: a "
-                             f"holonomic constraint, which gnipy does not integrate yet (give its derivative in time "
-                             f"only if you accept that the configuration drifts off it; better, eliminate a coordinate)")
+                             f"holonomic constraint; give it as holonomic=[...] (gnipy keeps it exactly)")
         rows.append(row)
         c0.append(sp.simplify(c.xreplace(dict.fromkeys(vs, 0))))
     return rows, c0
@@ -366,9 +389,6 @@ def _from_mechanics_system(system):
     """(Lagrangian, coordinates, speeds, constraints) of a `sympy.physics.mechanics.System`, in q and q̇."""
     sp = _sympy()
     me = require("sympy.physics.mechanics", extra="sympy")
-    if len(system.holonomic_constraints):
-        raise InputError("from_sympy: model: the mechanics System has holonomic constraints, which gnipy does not "
-                         "integrate yet; choose independent coordinates (eliminate the dependent ones)")
     if len(system.actuators):
         raise InputError("from_sympy: model: the mechanics System has actuators (springs, dampers, ...), which are "
                          "not supported: only constant forces (gravity), which have a potential")
@@ -412,7 +432,10 @@ def _from_mechanics_system(system):
             raise InputError(f"from_sympy: model: the potential of the force on {load.point} needs its position from "
                              f"the System's fixed point {origin}: {e}") from None
     L = (T - V).xreplace(to_qd)
-    # the nonholonomic constraints, or the velocity constraints when set by hand (there are no
-    # holonomic ones, whose derivatives they would otherwise hold too)
-    constraints = [sp.sympify(c).xreplace(to_qd) for c in system.velocity_constraints]
-    return L, q, None, constraints
+    # the nonholonomic constraints, or the velocity constraints when set by hand; with holonomic
+    # constraints only the nonholonomic ones (the velocity constraints then hold dφ/dt too, which
+    # gnipy adds itself from φ)
+    holonomic = [sp.sympify(c) for c in system.holonomic_constraints]
+    velocity = system.nonholonomic_constraints if holonomic else system.velocity_constraints
+    constraints = [sp.sympify(c).xreplace(to_qd) for c in velocity]
+    return L, q, None, constraints, holonomic

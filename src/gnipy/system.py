@@ -6,6 +6,8 @@ $Q = \\mathbb{R}^n \\times G$ with velocities $v = (\\dot x, \\xi)$ in left triv
 - a Lagrangian of mechanical type $l(b, v) = \\tfrac12 v^T \\mathbb{G}(b) v - V(b)$,
 - constraint one-forms $\\mu(b)$ ($m \\times N$, full row rank),
 - an optional affine vector field $Y(b)$; the constraints are $\\mu(b)(v - Y(b)) = 0$;
+- optional holonomic constraints $\\varphi(b) = 0$ (r of them), whose differentials $d\\varphi(b)$
+  join $\\mu$ as velocity constraints (:mod:`gnipy.holonomic`);
 - an optional generalized force $F(b, v, u, t)$ with inputs u (:mod:`gnipy.forcing`).
 
 On $\\mathbb{R}^n \\times G$ the system is *reduced* (paper §7) when l, μ, Y do not depend on the
@@ -44,8 +46,15 @@ class System(eqx.Module):
             `l(q, v)` on $\\mathbb{R}^n$; `l(x, v)` for a reduced system on $\\mathbb{R}^n \\times G$;
             `l(x, R, v)` when `depends_on_orientation=True`. On $\\mathbb{R}^n \\times G$,
             $v = (\\dot x, \\xi)$ with $\\xi = R^{-1}\\dot R$ in the group's `vee` coordinates.
-        constraints: the constraint one-forms as rows, `mu(q)` / `mu(x)` / `mu(x, R)` -> (m, N).
+        constraints: the constraint one-forms as rows, `mu(q)` / `mu(x)` / `mu(x, R)` -> (m, N);
+            may be None when `holonomic` is given (a system with holonomic constraints only).
         affine: optional `Y(q)` / `Y(x)` / `Y(x, R)` -> (N,); the constraints are $\\mu(v - Y) = 0$.
+        holonomic: optional holonomic constraints `phi(q)` / `phi(x)` / `phi(x, R)` -> (r,): the
+            motion stays on $\\varphi = 0$. Their differentials $d\\varphi$ are appended to the rows
+            of :meth:`mu` (the velocity constraints $d\\varphi\\,v = 0$), and the methods that
+            support them (:data:`gnipy.holonomic.HOLONOMIC_METHODS`) keep $\\varphi(q_k) = 0$ to
+            round-off with a position multiplier (:mod:`gnipy.holonomic`); the others refuse such a
+            system.
         n: dimension of the Euclidean factor (inferred from `coordinates` if omitted; may be 0
             when a group is given).
         group: a Lie group from :mod:`gnipy.lie_groups` (e.g. `SO3()`), or None for $\\mathbb{R}^n$.
@@ -87,7 +96,7 @@ class System(eqx.Module):
     """
 
     lagrangian: Callable[..., Any]
-    constraints: Callable[..., Any]
+    constraints: Callable[..., Any] | None
     affine: Callable[..., Any] | None
     space: Any
     depends_on_orientation: bool = eqx.field(static=True)
@@ -118,6 +127,8 @@ class System(eqx.Module):
     #: the named parameters the functions receive as their last argument (a dict of float64
     #: arrays, pytree leaves), or None for functions that take none (their parameters closed over)
     args: Any = None
+    #: the holonomic constraints $\\varphi$ (see the constructor), or None
+    holonomic: Callable[..., Any] | None = None
 
     def __init__(
         self,
@@ -125,6 +136,7 @@ class System(eqx.Module):
         constraints: Callable[..., Any],
         affine: Callable[..., Any] | None = None,
         *,
+        holonomic: Callable[..., Any] | None = None,
         n: int | None = None,
         group=None,
         retraction="cayley",
@@ -140,12 +152,13 @@ class System(eqx.Module):
         inputs: int = 0,
         args: Any = None,
     ):
-        check_functions(lagrangian, constraints, affine, force)
+        check_functions(lagrangian, constraints, affine, force, holonomic)
         n, coordinates = dimension(n, coordinates, group)
         space, group_names = configuration_space(n, group, retraction, depends_on_orientation, reconstruction)
         self.lagrangian = lagrangian
         self.constraints = constraints
         self.affine = affine
+        self.holonomic = holonomic
         self.space = space
         self.depends_on_orientation = bool(depends_on_orientation)
         self.coordinates = coordinates
@@ -294,16 +307,49 @@ class System(eqx.Module):
 
     @traced_once
     def mu(self, b):
-        """Constraint one-forms $\\mu(b)$ as an (m, N) array."""
+        """The velocity constraints' one-forms as an (m, N) array: the nonholonomic rows
+        (:meth:`nonholonomic_mu`) followed by the differentials of the holonomic constraints
+        (:meth:`holonomic_mu`), so that $\\mu(b)(v - Y(b)) = 0$ says everything the velocity must
+        satisfy."""
+        if self.holonomic is None:
+            return self.nonholonomic_mu(b)
+        return jnp.concatenate([self.nonholonomic_mu(b), self.holonomic_mu(b)], axis=0)
+
+    def nonholonomic_mu(self, b):
+        """The user's constraint one-forms (`constraints`) as an (m, N) array ((0, N) without any)."""
+        if self.constraints is None:
+            dtype = jnp.result_type(self.space.coordinates(b)) if self.n else jnp.float64
+            return jnp.zeros((0, self.dim), dtype=dtype)
         return jnp.atleast_2d(jnp.asarray(self._call(self.constraints, *self._args(b))))
 
     @traced_once
+    def phi(self, b):
+        """The holonomic constraints $\\varphi(b)$, shape (r,) ((0,) without any)."""
+        if self.holonomic is None:
+            dtype = jnp.result_type(self.space.coordinates(b)) if self.n else jnp.float64
+            return jnp.zeros((0,), dtype=dtype)
+        return jnp.atleast_1d(jnp.asarray(self._call(self.holonomic, *self._args(b)))).reshape(-1)
+
+    @traced_once
+    def holonomic_mu(self, b):
+        """The differentials $d\\varphi(b)$ as (r, N) rows in the velocity coordinates (on
+        $\\mathbb{R}^n\\times G$ left-trivialized: the derivative along :meth:`~gnipy.spaces.GroupSpace.move`)."""
+        return jax.jacfwd(lambda w: self.phi(self.space.move(b, w)))(jnp.zeros(self.dim))
+
+    @traced_once
     def Y(self, b):
-        """Affine part $Y(b)$ (zero for linear constraints)."""
+        """Affine part $Y(b)$ (zero for linear constraints). With holonomic constraints, the field
+        with the same $\\mu Y$ on the nonholonomic rows and $d\\varphi\\,Y = 0$
+        (:func:`gnipy.holonomic.affine_part`): only $\\mu Y$ enters the equations."""
         if self.affine is None:
             dtype = jnp.result_type(self.space.coordinates(b)) if self.n else jnp.float64
             return jnp.zeros(self.dim, dtype=dtype)
-        return jnp.asarray(self._call(self.affine, *self._args(b))).reshape(self.dim)
+        Y = jnp.asarray(self._call(self.affine, *self._args(b))).reshape(self.dim)
+        if self.holonomic is None:
+            return Y
+        from .holonomic import affine_part
+
+        return affine_part(self.metric(b), self.nonholonomic_mu(b), self.holonomic_mu(b), Y)
 
     def Pi(self, b):
         """The one-form $\\Pi = \\mathbb{G} Y$ of paper §6."""
@@ -315,8 +361,17 @@ class System(eqx.Module):
         return 0.5 * v @ self.metric(b) @ v + self.potential(b)
 
     def constraint_residual(self, b, v):
-        """$\\mu(b)(v - Y(b))$, one entry per constraint."""
-        return self.mu(b) @ (v - self.Y(b))
+        """$\\mu(b)(v - Y(b))$, one entry per row of :meth:`mu`, followed by $\\varphi(b)$ for the
+        holonomic constraints (:meth:`num_constraints` entries)."""
+        res = self.mu(b) @ (v - self.Y(b))
+        if self.holonomic is None:
+            return res
+        return jnp.concatenate([res, self.phi(b)])
+
+    @property
+    def is_holonomic(self) -> bool:
+        """Whether the system has holonomic constraints $\\varphi(b) = 0$."""
+        return self.holonomic is not None
 
     @property
     def is_affine(self) -> bool:
@@ -418,8 +473,23 @@ class System(eqx.Module):
     # Validation (host side, outside jit)
     # ----------------------------------------------------------------------------------------
     def num_constraints(self, b) -> int:
-        """Number of constraints m, evaluated at the base point b."""
-        return int(np.asarray(self.mu(b)).shape[0])
+        """The number of entries of :meth:`constraint_residual` at the base point b: the rows of
+        :meth:`mu`, plus the r holonomic constraints $\\varphi$ themselves."""
+        return int(jax.eval_shape(self.constraint_residual, b, jnp.zeros(self.dim)).shape[0])
+
+    def project_configuration(self, b):
+        """The configuration on the holonomic constraints $\\varphi = 0$ nearest to `b` in the
+        metric (Newton's iterations, :func:`gnipy.holonomic.project_configuration`): e.g. a
+        bicycle's pitch from its roll and steer, or a pendulum's coordinates rescaled to its
+        length. `b` is `q` on $\\mathbb{R}^n$, a :class:`~gnipy.spaces.Point` on
+        $\\mathbb{R}^n\\times G$; returned unchanged without holonomic constraints."""
+        from .holonomic import project_configuration
+
+        if self.holonomic is None:
+            return b
+        if self.group is None:
+            b = jnp.asarray(b, dtype=jnp.float64)
+        return project_configuration(self.without_metadata(), b)
 
     def initial_point(self, q0, R0=None):
         """The validated base point from coordinates `q0` and (on $\\mathbb{R}^n\\times G$) an

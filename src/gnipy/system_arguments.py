@@ -20,11 +20,16 @@ __all__ = ["check_functions", "dimension", "configuration_space", "velocity_name
            "Args", "system_args", "scalar_args", "takes_args_last"]
 
 
-def check_functions(lagrangian, constraints, affine, force) -> None:
-    """The user's functions are callables (`affine` and `force` may be None)."""
+def check_functions(lagrangian, constraints, affine, force, holonomic=None) -> None:
+    """The user's functions are callables (`affine`, `force` and `holonomic` may be None, and
+    `constraints` too when `holonomic` is given)."""
     if not callable(lagrangian):
         raise InputError(f"lagrangian: expected a callable l(q, v), got {type(lagrangian).__name__}")
-    if not callable(constraints):
+    if holonomic is not None and not callable(holonomic):
+        raise InputError(f"holonomic: expected a callable phi(q) or None, got {type(holonomic).__name__}")
+    if constraints is None and holonomic is None:
+        raise InputError("constraints: expected a callable mu(q) (None only with holonomic=phi)")
+    if constraints is not None and not callable(constraints):
         raise InputError(f"constraints: expected a callable mu(q), got {type(constraints).__name__}")
     if affine is not None and not callable(affine):
         raise InputError(f"affine: expected a callable Y(q) or None, got {type(affine).__name__}")

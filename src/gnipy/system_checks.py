@@ -165,6 +165,8 @@ def check_system(system, q0, v0=None, *, R0=None, project_v0: bool = False, tol:
     N = system.dim
     mu = check_constraint_forms(vals["mu"], N)
     Y = check_affine_field(vals["Y"], N)
+    if system.holonomic is not None:
+        check_holonomic(system, b0, tol)
     if system.force is not None:
         check_force(system, b0, np.zeros(N) if v0 is None else v0)
     if v0 is None:
@@ -179,6 +181,24 @@ def check_system(system, q0, v0=None, *, R0=None, project_v0: bool = False, tol:
             )
         v0 = np.asarray(_project_velocity(system.without_metadata(), b0, jnp.asarray(v0)))
     return b0, v0
+
+
+def check_holonomic(system, b0, tol: float) -> None:
+    """The initial configuration is on the holonomic constraints: $|\\varphi(b_0)| \\le$ `tol`
+    (relative to $|d\\varphi|\\max(1, |x_0|)$, the size of φ's terms)."""
+    from .holonomic import phi_scale
+
+    core = system.without_metadata()
+    phi = np.asarray(core.phi(b0))
+    if not np.all(np.isfinite(phi)):
+        raise InputError("holonomic: phi(q0) is not finite")
+    scale = max(1.0, float(phi_scale(core, b0, core.holonomic_mu(b0))))
+    if np.max(np.abs(phi), initial=0.0) > tol * scale:
+        raise InputError(
+            "q0: the initial configuration violates the holonomic constraints phi(q0) = 0 (max |phi| = "
+            f"{format_scientific(np.max(np.abs(phi)))}); system.project_configuration(q0) gives the nearest "
+            "configuration that satisfies them"
+        )
 
 
 def check_force(system, b0, v0) -> None:

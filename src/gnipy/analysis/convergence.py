@@ -302,7 +302,7 @@ def _resolve(methods, system, b0, MethodError) -> dict:
             raise MethodError(f"methods: expected method names or integrators, got {type(m).__name__}")
         if name in out:
             raise MethodError(f"methods: {name!r} given twice")
-        m.check(system, b0)
+        m.validate(system, b0)
         out[name] = m.prepare(system, b0)
     if not out:
         raise MethodError("methods: give at least one method")

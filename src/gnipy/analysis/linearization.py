@@ -270,7 +270,7 @@ def discrete_linearization(system, method, q, v, h: float) -> DiscreteLinearizat
     v = jnp.asarray(np.asarray(v, dtype=np.float64))
     integrator = get_method(method) if isinstance(method, str) else method
     system = system.without_metadata()
-    integrator.check(system, q)
+    integrator.validate(system, q)
     integrator = integrator.prepare(system, q)
     state = integrator.init(system, q, v, h)
     leaves, tree = jax.tree_util.tree_flatten(state)

@@ -33,7 +33,8 @@ def models():
 
 @app.command()
 def methods():
-    """List the method names with one-line descriptions and their expected orders."""
+    """List the method names with one-line descriptions, their expected orders, and whether they
+    keep holonomic constraints."""
     from rich.text import Text
 
     import gnipy
@@ -42,6 +43,9 @@ def methods():
     con = console()
     width = max(len(k) for k in METHOD_DESCRIPTIONS)
     for name, desc in METHOD_DESCRIPTIONS.items():
-        order = gnipy.get_method(name).order  # stated once, on the method
+        method = gnipy.get_method(name)
+        order = method.order  # stated once, on the method
         more = f" (order {order})" if order is not None else ""
+        if name == "reference" or getattr(method, "holonomic", False):
+            more += "; keeps holonomic constraints"
         con.print(Text.assemble((f"{safe(name):<{width}}", "bold"), "  ", safe(desc + more)))

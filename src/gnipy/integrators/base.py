@@ -299,8 +299,21 @@ class Integrator(eqx.Module):
     #: experiments, the tests) reads it.
     order: ClassVar[int | None] = None
 
+    #: Whether the method keeps holonomic constraints $\varphi(q_k) = 0$ with a position multiplier
+    #: (:mod:`gnipy.holonomic`); the others refuse a system that has them (:meth:`validate`).
+    holonomic: ClassVar[bool] = False
+
+    def validate(self, system, q0) -> None:
+        """Raise :class:`MethodError` if the method cannot integrate `system` (host side): holonomic
+        constraints it does not keep (:func:`gnipy.holonomic.require_support`), then :meth:`check`."""
+        from ..holonomic import require_support
+
+        require_support(self, system)
+        self.check(system, q0)
+
     def check(self, system, q0) -> None:
-        """Raise :class:`MethodError` if the method cannot integrate `system` (host side)."""
+        """Raise :class:`MethodError` if the method cannot integrate `system` (host side), beyond
+        holonomic constraints (:meth:`validate` checks those first)."""
 
     def prepare(self, system, q0) -> "Integrator":
         """Return a copy configured for `system` (host side; e.g. choosing the explicit fast path)."""

@@ -27,6 +27,7 @@ import jax.numpy as jnp
 from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
 from ..discrete_lagrangians import DiscreteLagrangian, Midpoint
 from ..forcing import discrete_forces
+from ..holonomic import phi_scale
 from ..spaces import compensated_add
 from .base import Integrator, momentum_constraint_scale, require_constant_metric, solve_step
 
@@ -102,6 +103,8 @@ class DiscreteLagrangeDAlembert(Integrator):
     root_finder: Any = None
     max_steps: int = eqx.field(static=True, default=50)
     name: ClassVar[str] = "dla"
+    #: keeps holonomic constraints with a position multiplier (:mod:`gnipy.holonomic`)
+    holonomic: ClassVar[bool] = True
 
     @property
     def order(self) -> int | None:  # type: ignore[override]
@@ -135,12 +138,20 @@ class DiscreteLagrangeDAlembert(Integrator):
                 momentum = momentum - discrete_forces(system, b, z, h, rule)[0]
             _, b_mid, _ = space.step_points(b, z, h)
             vel = space.constraint_velocity(z, h)  # (Δ, dτ⁻¹_σ σ/h) on a group: as FL∓ carry ∂l_d/∂σ
-            constraint = system.mu(b_mid) @ (vel - system.Y(b_mid))  # discrete constraint at q_{k+½}
-            return jnp.concatenate([momentum, constraint])
+            if system.holonomic is None:
+                constraint = system.mu(b_mid) @ (vel - system.Y(b_mid))  # discrete constraint at q_{k+½}
+                return jnp.concatenate([momentum, constraint])
+            # the multipliers of the rows dφ(q_k) are the position multiplier Λ: φ(q_{k+1}) = 0
+            # in place of the discrete velocity constraint on those rows (gnipy.holonomic)
+            constraint = system.nonholonomic_mu(b_mid) @ (vel - system.Y(b_mid))
+            return jnp.concatenate([momentum, constraint, system.phi(space.advance(b, z))])
 
         v = system.velocity(b, p_plus)
         guess = jnp.concatenate([space.initial_guess(b, v, h), jnp.zeros(m, dtype=p_plus.dtype)])
         scale = momentum_constraint_scale(n, p_plus, mu_k, v, system.Y(b))
+        if system.holonomic is not None:  # the φ rows: terms of the size |dφ||q|
+            r = system.phi(b).shape[0]
+            scale = scale.at[n + m - r:].set(phi_scale(system, b, system.holonomic_mu(b)))
         w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
                              floor_scale=scale)
         z, lam = w[:n], w[n:]

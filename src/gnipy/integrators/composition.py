@@ -151,8 +151,13 @@ class Composition(Integrator):
             return dataclasses.replace(self.base, start="consistent")
         return self.base
 
+    @property
+    def holonomic(self) -> bool:  # type: ignore[override]
+        """Whether the base method keeps holonomic constraints (then every substep does)."""
+        return bool(self.base.holonomic)
+
     def check(self, system, q0) -> None:
-        self.base.check(system, q0)
+        self.base.validate(system, q0)
 
     def prepare(self, system, q0):
         return dataclasses.replace(self, base=self._base().prepare(system, q0))

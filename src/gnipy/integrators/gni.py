@@ -24,6 +24,7 @@ import jax.numpy as jnp
 
 from ..discrete_lagrangians import CustomDiscreteLagrangian, DiscreteLagrangian, Trapezoid
 from ..forcing import discrete_forces
+from ..holonomic import with_position_multiplier
 from ..projectors import reflect_and_report
 from .base import Integrator, solve_step
 
@@ -78,6 +79,8 @@ class GNI(Integrator):
     max_steps: int = eqx.field(static=True, default=50)
     explicit: bool | None = eqx.field(static=True, default=None)
     start: str = eqx.field(static=True, default="consistent")
+    #: keeps holonomic constraints with a position multiplier (:mod:`gnipy.holonomic`)
+    holonomic: ClassVar[bool] = True
 
     def __check_init__(self):
         if self.start not in START_OPTIONS:
@@ -100,12 +103,13 @@ class GNI(Integrator):
             return self
         ld = self.discrete_lagrangian
         if isinstance(ld, CustomDiscreteLagrangian):
-            explicit = bool(ld.explicit)  # the user's declaration that FL⁻ is affine in q_{k+1}
+            # the user's declaration that FL⁻ is affine in q_{k+1} (not with φ(q_{k+1}) = 0 to solve)
+            explicit = bool(ld.explicit) and system.holonomic is None
         else:
             # on R^n x G, FL⁻ contains dτ⁻¹_σ and is never affine in σ: Newton
             explicit = bool(
                 type(ld).explicit_if_flat and system.group is None and system.force is None
-                and system.has_constant_metric(q0)
+                and system.holonomic is None and system.has_constant_metric(q0)
             )  # a force F(q, v, u, t) makes FL⁻ − f⁻ non-affine in general: Newton
         return dataclasses.replace(self, explicit=explicit)
 
@@ -147,17 +151,25 @@ class GNI(Integrator):
             return space.legendre_minus(ld, b, z) - p_minus
 
         guess = space.initial_guess(b, v_bar, h)
-        z, info = solve_step(
-            residual, guess, explicit=bool(self.explicit), solver=self.root_finder, max_steps=self.max_steps,
-            floor_scale=jnp.max(jnp.abs(p_minus)),  # FL⁻ − p⁻: terms of the size of the momentum
-        )
+        if system.holonomic is not None:  # FL⁻ = p⁻ + dφᵀΛ, φ(b_{k+1}) = 0 (gnipy.holonomic)
+            F, w0, scale = with_position_multiplier(system, b, residual, guess, jnp.max(jnp.abs(p_minus)))
+            w, info = solve_step(F, w0, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
+                                 floor_scale=scale)
+            z = w[:guess.shape[0]]
+            departure = p_minus + system.holonomic_mu(b).T @ w[guess.shape[0]:]  # FL⁻ at the solution
+        else:
+            z, info = solve_step(
+                residual, guess, explicit=bool(self.explicit), solver=self.root_finder, max_steps=self.max_steps,
+                floor_scale=jnp.max(jnp.abs(p_minus)),  # FL⁻ − p⁻: terms of the size of the momentum
+            )
+            departure = p_minus
         if x_err is None:
             b1 = space.advance(b, z)
         else:
             b1, x_err = space.advance_compensated(b, x_err, z)
         # p⁺_{k+1} = FL⁺ = p⁻_k + (FL⁺ − FL⁻) at the solution of FL⁻ = p⁻: the momentum is carried,
         # not rebuilt from the increment (gnipy.spaces: rebuilding rounds with a bias that adds up)
-        p1 = p_minus + space.legendre_jump(ld, b, z)
+        p1 = departure + space.legendre_jump(ld, b, z)
         if forced:  # p⁺_{k+1} = FL⁺ + f⁺ = p⁻ + f⁻ + (FL⁺ − FL⁻) + f⁺
             f_minus, f_plus = discrete_forces(system, b, z, h, rule)
             p1 = p1 + (f_minus + f_plus)

@@ -59,7 +59,7 @@ import jax.numpy as jnp
 from ..forcing import FORCE_RULES, discrete_forces
 from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
 from ..spaces import compensated_add
-from .base import (Integrator, StepInfo, all_finite, explicit_step_info, require_constant_metric,
+from .base import (Integrator, MethodError, StepInfo, all_finite, explicit_step_info, require_constant_metric,
                    solve_step)
 
 __all__ = [
@@ -124,14 +124,21 @@ def _kick_drift_kick(system, state: TildeState, h, s: float) -> TildeState:
     M = system.metric(q)  # constant metric: the same at q_k and q_{k+1}
     p_half, p_err = _add(p, -0.5 * h * (system.potential_gradient(q) + system.mu(q).T @ lam), p_err)  # (EuAHama)
     q1, q_err = _add(q, h * solve_spd(M, p_half), q_err)  # (EuAHamb)
+    return _end_kick(system, M, q1, q_err, p_half, p_err, h, s)
+
+
+def _end_kick(system, M, q1, q_err, p_half, p_err, h, s: float, f_plus=0.0) -> TildeState:
+    """The second kick at $q_{k+1}$, with the multiplier $\\tilde\\lambda_{k+1}$ of the discrete
+    constraint: (EuAHamd) substituted into (EuAHame),
+    $(h/2) C\\tilde\\lambda = \\mu M^{-1}(p_{k+1/2} + f^+ + (s - 1)(h/2)V_q - \\Pi)$, then
+    $\\tilde p_{k+1} = p_{k+1/2} + f^+ - (h/2)(V_q + \\mu^T\\tilde\\lambda_{k+1})$."""
     mu1 = system.mu(q1)
     Vq1 = system.potential_gradient(q1)
     Pi1 = system.Pi(q1)
     C1 = mu1 @ solve_spd(M, mu1.T)
-    # (EuAHamd) substituted into (EuAHame): (h/2) C λ̃ = μ M⁻¹ (p_{k+1/2} + (s − 1)(h/2) V_q − Π)
-    rhs = mu1 @ solve_spd(M, p_half + (s - 1.0) * 0.5 * h * Vq1 - Pi1)
+    rhs = mu1 @ solve_spd(M, p_half + f_plus + (s - 1.0) * 0.5 * h * Vq1 - Pi1)
     lam1 = (2.0 / h) * solve_spd(C1, rhs)
-    p1, p_err = _add(p_half, -0.5 * h * (Vq1 + mu1.T @ lam1), p_err)  # (EuAHamd)
+    p1, p_err = _add(p_half, f_plus - 0.5 * h * (Vq1 + mu1.T @ lam1), p_err)  # (EuAHamd)
     return TildeState(q1, p1, lam1, q_err, p_err)
 
 
@@ -164,22 +171,48 @@ def _forced_kick_drift_kick(system, state: TildeState, h, s: float) -> tuple[Til
     f_minus, f_plus = discrete_forces(system, q, z, h, rule)
     p_half, p_err = _add(p, kick + f_minus, p_err)
     q1, q_err = _add(q, z, q_err)
-    mu1 = system.mu(q1)
-    Vq1 = system.potential_gradient(q1)
-    Pi1 = system.Pi(q1)
-    C1 = mu1 @ solve_spd(M, mu1.T)
-    rhs = mu1 @ solve_spd(M, p_half + f_plus + (s - 1.0) * 0.5 * h * Vq1 - Pi1)
-    lam1 = (2.0 / h) * solve_spd(C1, rhs)
-    p1, p_err = _add(p_half, f_plus - 0.5 * h * (Vq1 + mu1.T @ lam1), p_err)
-    new = TildeState(q1, p1, lam1, q_err, p_err)
+    new = _end_kick(system, M, q1, q_err, p_half, p_err, h, s, f_plus)
     if info is None:
         return new, explicit_step_info(*new)
+    return new, StepInfo(info.ok & all_finite(*new), info.iterations, info.residual)
+
+
+def _holonomic_kick_drift_kick(system, state: TildeState, h, s: float) -> tuple[TildeState, StepInfo]:
+    """:func:`_kick_drift_kick` on a system with holonomic constraints $\\varphi(q) = 0$
+    (:mod:`gnipy.holonomic`): the first kick gains the position multiplier, found by Newton's
+    method in its r unknowns so that the drift ends on $\\varphi = 0$,
+
+        p_{k+1/2} = p̃_k − (h/2)(V_q(q_k) + μ̃(q_k)ᵀλ̃_k) + dφ(q_k)ᵀΛ_k,   φ(q_k + h M⁻¹ p_{k+1/2}) = 0,
+
+    and the second kick's λ̃_{k+1} has a component on each row of μ̃ = (μ; dφ): RATTLE's velocity
+    multiplier for the holonomic rows (Andersen 1983). The GNI's holonomic step in the paper's
+    variables, as the map without them is the GNI's (tested step for step). Unforced systems only
+    (:meth:`_TildeScheme.check`). Returns the state and the :class:`StepInfo` of the solve."""
+    from ..holonomic import phi_scale
+
+    q, p, lam, q_err, p_err = state
+    M = system.metric(q)
+    rows = system.holonomic_mu(q)
+    kick = -0.5 * h * (system.potential_gradient(q) + system.mu(q).T @ lam)
+    p_half0 = p + kick
+    Minv_rows = solve_spd(M, rows.T)
+
+    def residual(Lam):
+        return system.phi(q + h * solve_spd(M, p_half0) + h * Minv_rows @ Lam)
+
+    Lam, info = solve_step(residual, jnp.zeros(rows.shape[0], dtype=p.dtype), explicit=False,
+                           floor_scale=phi_scale(system, q, rows))
+    p_half, p_err = _add(p, kick + rows.T @ Lam, p_err)
+    q1, q_err = _add(q, h * solve_spd(M, p_half), q_err)
+    new = _end_kick(system, M, q1, q_err, p_half, p_err, h, s)
     return new, StepInfo(info.ok & all_finite(*new), info.iterations, info.residual)
 
 
 def _map_step(system, state, h, s: float):
     """`(state, StepInfo)` of one step of the map with sign s (the classes' steps)."""
     state = TildeState(*state)
+    if system.holonomic is not None:
+        return _holonomic_kick_drift_kick(system, state, h, s)
     if system.force is not None:
         return _forced_kick_drift_kick(system, state, h, s)
     new = _kick_drift_kick(system, state, h, s)
@@ -280,9 +313,19 @@ class _TildeScheme(Integrator):
     _s: ClassVar[float] = 0.0
     _fraction: ClassVar[float] = 1.0
 
+    #: the single maps (euler-a, euler-b, rattle) keep holonomic constraints, unforced
+    #: (:func:`_holonomic_kick_drift_kick`); the composition euler-ab does not
+    holonomic: ClassVar[bool] = True
+
     def check(self, system, q0) -> None:
-        """Raise :class:`~gnipy.MethodError` unless the metric is constant (paper §5)."""
+        """Raise :class:`~gnipy.MethodError` unless the metric is constant (paper §5), and for a
+        system with both holonomic constraints and a force."""
         require_constant_metric(self.name, system, q0)
+        if system.holonomic is not None and system.force is not None:
+            raise MethodError(
+                f"method {self.name!r} keeps holonomic constraints on unforced systems only; {system.name!r} has "
+                "a force as well: use the gni-* method it equals"
+            )
 
     def symmetric_on(self, system) -> bool:
         """:attr:`symmetric` (RATTLE); Euler A, Euler B and their composition too where V is constant
@@ -403,6 +446,7 @@ class EulerABComposition(_TildeScheme):
     """
 
     name: ClassVar[str] = "euler-ab"
+    holonomic: ClassVar[bool] = False  # its half maps are written without the position multiplier
     order: ClassVar[int | None] = 2
     _s: ClassVar[float] = _S_EULER_A
     _fraction: ClassVar[float] = 0.5

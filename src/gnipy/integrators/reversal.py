@@ -50,6 +50,10 @@ class _Wrapped(Integrator):
     def can_change_step(self) -> bool:  # type: ignore[override]
         return self.method.can_change_step
 
+    @property
+    def holonomic(self) -> bool:  # type: ignore[override]
+        return self.method.holonomic
+
     def prepare(self, system, q0):
         return dataclasses.replace(self, method=self.method.prepare(system, q0))
 
@@ -92,7 +96,7 @@ class Reversed(_Wrapped):
                 f"method {self.method.name!r} runs backward here (h < 0), and {system.name!r} has a force "
                 "F(q, v, u, t): forced systems run forward in time only (h > 0)"
             )
-        self.method.check(system, q0)
+        self.method.validate(system, q0)
 
     def init(self, system, q0, v0, h):
         """The method's start for a step of |h| (states keep the forward orientation)."""
@@ -127,7 +131,7 @@ class ForwardOnly(_Wrapped):
     choice under a transformation, the failed step is raised at run time."""
 
     def check(self, system, q0) -> None:
-        self.method.check(system, q0)
+        self.method.validate(system, q0)
 
     def init(self, system, q0, v0, h):
         return self.method.init(system, q0, v0, h)
@@ -169,7 +173,7 @@ def symmetric_methods(system) -> list[str]:
         try:
             if not m.symmetric_on(system):
                 continue
-            m.check(system, b0)
+            m.validate(system, b0)
         except Exception:  # refuses the system (MethodError), or cannot tell (traced parameters)
             continue
         out.append(name)

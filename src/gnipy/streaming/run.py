@@ -214,7 +214,7 @@ def _checked_run(system, method, q0, v0, R0, *, h, steps, t_final, save_every, c
     t0 = finite_number("t0", t0)
     q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
     b0, v0 = system.check(q0, v0, R0=R0, project_v0=project_v0)
-    method.check(system, b0)
+    method.validate(system, b0)
     method = method.prepare(system, b0)
     energy_invariant = energy_is_invariant(system, b0)
     attrs = dict(attrs or {})

@@ -262,7 +262,7 @@ def _preflight(sweep_spec, axes) -> tuple[int, str]:
     for i in range(len(idx)):
         s = systems[i] if isinstance(systems, list) else systems
         b0 = check_member(s, sweep_spec, columns, i, int(idx[i]), q0, v0, R0)
-        method.check(s, b0)
+        method.validate(s, b0)
         m = s.num_constraints(b0)
     if isinstance(systems, list) and len(systems) > 1:
         _check_batchable(systems, sweep_spec["model"])
