@@ -1,4 +1,7 @@
-"""The problem zoo: classic nonholonomic systems with exact solutions or invariants."""
+"""The problem zoo: classic nonholonomic systems with exact solutions or invariants.
+
+Not in the zoo's table (build it from its module): :mod:`gnipy.models.whipple_bicycle`, the
+Carvallo–Whipple bicycle of the Meijaard 2007 benchmark, with a holonomic constraint."""
 
 from . import (  # noqa: F401  (registration)
     chaplygin_sleigh,

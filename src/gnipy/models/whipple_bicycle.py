@@ -1,0 +1,255 @@
+r"""The Carvallo–Whipple bicycle (Meijaard, Papadopoulos, Ruina, Schwab, *Linearized dynamics
+equations for the balance and steer of a bicycle: a benchmark and review*, Proc. R. Soc. A 463
+(2007) 1955–1982; "Meijaard 2007" below), written as a nonlinear gnipy System with one holonomic
+constraint.
+
+Four rigid bodies: the rear wheel R, the rear frame B (with a rigid rider), the front frame H
+(handlebar and fork) and the front wheel F, hinged at the wheel axles and the steer axis; knife-edge
+wheels roll without slipping on level ground. Axes as Meijaard 2007: x forward, y to the right,
+z down; gravity along +z.
+
+**Coordinates** (8): the rear contact point $(x, y)$, yaw $\psi$, roll $\phi$ (lean to the right
+positive), pitch $\theta$ of the rear frame, the rear wheel's rotation $\theta_R$ (relative to the
+leaning frame), steer $\delta$ (to the right positive) and the front wheel's rotation $\theta_F$
+(relative to the front frame). The rear frame's orientation is $R_B = R_z(\psi)R_x(\phi)R_y(\theta)$;
+the front frame turns relative to it about the steer axis, tilted back by $\lambda$ from the
+vertical and passing through the ground point $(w + c, 0, 0)$ of the reference configuration
+(upright, straight ahead, both contact points on the ground: rear at the origin, front at
+$(w, 0, 0)$).
+
+**Constraints.** Holonomic: the front wheel touches the ground, $z_{P_F}(\phi, \theta, \delta) = 0$,
+with $P_F$ the lowest point of the front wheel (this fixes the pitch). Nonholonomic (4): the
+material points of both wheels at their contact points have no horizontal velocity (the vertical
+components are the derivative of the holonomic constraint and of the rear contact's height, which
+the coordinates hold at 0). So the configuration space has 7 dimensions and the velocities 3
+degrees of freedom (rates of roll, steer and rear wheel rotation), as Meijaard 2007 §2.
+
+**Lagrangian** $l = \sum_i \tfrac12 m_i|\dot r_i|^2 + \tfrac12\Omega_i^TI_i\Omega_i + g\,m_i z_i$
+(z down) over the four bodies, the centres' velocities and the body angular velocities
+$\hat\Omega_i = R_i^T\dot R_i$ computed by forward-mode differentiation of the positions and
+orientations: nothing is derived by hand beyond the geometry. The inertia tensors are Meijaard's
+(Table 1), given in the reference configuration's axes.
+
+**Benchmark.** :func:`benchmark_matrices` derives the linearized equations about the upright
+straight motion at speed v, $M\ddot q + vC_1\dot q + (gK_0 + v^2K_2)q = 0$ for $q = (\phi, \delta)$,
+from this nonlinear model by JAX derivatives (M from the kinetic energy on the constraints, the
+others from the Jacobian of the Lagrange–d'Alembert acceleration); the tests hold them to Meijaard
+2007 eq. (5.4) (:data:`PUBLISHED_MATRICES`) and derive the weave and capsize speeds.
+"""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..compilation import jit
+from ..system import System
+
+__all__ = ["BENCHMARK", "COORDINATES", "PUBLISHED_MATRICES", "build", "upright", "benchmark_matrices",
+           "contact_points"]
+
+#: Meijaard 2007 Table 1: the benchmark bicycle (values exact); lam = π/10 the steer axis tilt
+BENCHMARK = {
+    "w": 1.02, "c": 0.08, "lam": math.pi / 10, "g": 9.81,
+    "rR": 0.3, "mR": 2.0, "IRxx": 0.0603, "IRyy": 0.12,
+    "xB": 0.3, "zB": -0.9, "mB": 85.0, "IBxx": 9.2, "IByy": 11.0, "IBzz": 2.8, "IBxz": 2.4,
+    "xH": 0.9, "zH": -0.7, "mH": 4.0, "IHxx": 0.05892, "IHyy": 0.06, "IHzz": 0.00708, "IHxz": -0.00756,
+    "rF": 0.35, "mF": 3.0, "IFxx": 0.1405, "IFyy": 0.28,
+}
+
+#: Meijaard 2007 eq. (5.4): the benchmark's linearized equations' matrices (14 digits)
+PUBLISHED_MATRICES = {
+    "M": ((80.81722, 2.31941332208709), (2.31941332208709, 0.29784188199686)),
+    "C1": ((0.0, 33.86641391492494), (-0.85035641456978, 1.68540397397560)),
+    "K0": ((-80.95, -2.59951685249872), (-2.59951685249872, -0.80329488458618)),
+    "K2": ((0.0, 76.59734589573222), (0.0, 2.65431523794604)),
+}
+
+COORDINATES = ("x", "y", "yaw", "roll", "pitch", "rear_wheel", "steer", "front_wheel")
+_ROLL, _PITCH, _REAR, _STEER, _FRONT = 3, 4, 5, 6, 7
+
+
+def _rx(a):
+    c, s = jnp.cos(a), jnp.sin(a)
+    return jnp.array([[1.0, 0.0, 0.0], [0.0, c, -s], [0.0, s, c]])
+
+
+def _ry(a):
+    c, s = jnp.cos(a), jnp.sin(a)
+    return jnp.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
+def _rz(a):
+    c, s = jnp.cos(a), jnp.sin(a)
+    return jnp.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _about(axis, a):
+    """The rotation by `a` about the unit vector `axis` (Rodrigues)."""
+    K = jnp.array([[0.0, -axis[2], axis[1]], [axis[2], 0.0, -axis[0]], [-axis[1], axis[0], 0.0]])
+    return jnp.eye(3) + jnp.sin(a) * K + (1.0 - jnp.cos(a)) * (K @ K)
+
+
+def _inertia(xx, yy, zz, xz):
+    return jnp.array([[xx, 0.0, xz], [0.0, yy, 0.0], [xz, 0.0, zz]])
+
+
+def _bodies(q, p):
+    """The four bodies' centres, orientations, and the wheels' centres and contact points:
+    `(centres (4, 3), rotations (4, 3, 3), (C_R, P_R, C_F, P_F))`, bodies in the order R, B, H, F."""
+    x, y, psi, phi, theta, th_r, delta, th_f = (q[i] for i in range(8))
+    lean = _rz(psi) @ _rx(phi)
+    RB = lean @ _ry(theta)
+    P_R = jnp.stack([x, y, jnp.zeros_like(x)])
+    C_R = P_R - p["rR"] * lean[:, 2]  # the rear wheel's centre, rR above the contact in its plane
+    axis = jnp.stack([jnp.sin(p["lam"]), 0.0 * p["lam"], jnp.cos(p["lam"])])  # the steer axis, downward
+    a0 = jnp.stack([p["w"] + p["c"], 0.0 * p["w"], p["rR"]])  # its ground point, from the rear centre (body)
+    Rs = _about(axis, delta)
+    RH = RB @ Rs
+
+    def front(point):  # a point of the front frame given in the reference configuration (body coords)
+        return C_R + RB @ (a0 + Rs @ (point - a0))
+
+    C_B = C_R + RB @ jnp.stack([p["xB"], 0.0 * p["xB"], p["zB"] + p["rR"]])
+    C_H = front(jnp.stack([p["xH"], 0.0 * p["xH"], p["zH"] + p["rR"]]))
+    C_F = front(jnp.stack([p["w"], 0.0 * p["w"], p["rR"] - p["rF"]]))
+    n = RH[:, 1]  # the front axle
+    down = jnp.array([0.0, 0.0, 1.0]) - n[2] * n
+    P_F = C_F + p["rF"] * down / jnp.sqrt(down @ down)  # the front wheel's lowest point
+    rotations = jnp.stack([lean @ _ry(th_r), RB, RH, RH @ _ry(th_f)])
+    return jnp.stack([C_R, C_B, C_H, C_F]), rotations, (C_R, P_R, C_F, P_F)
+
+
+def contact_points(q, p):
+    """The rear and front contact points (3,) at the configuration `q` (the front one's height is
+    the holonomic constraint)."""
+    _, _, (_, P_R, _, P_F) = _bodies(q, p)
+    return P_R, P_F
+
+
+def _motion(q, v, p):
+    """The bodies' centres, rotations and their derivatives along the velocity `v`."""
+    return jax.jvp(lambda qq: _bodies(qq, p), (q,), (v,))
+
+
+def _lagrangian(q, v, p):
+    (centres, rotations, _), (dcentres, drotations, _) = _motion(q, v, p)
+    masses = jnp.stack([p["mR"], p["mB"], p["mH"], p["mF"]])
+    inertias = jnp.stack([
+        _inertia(p["IRxx"], p["IRyy"], p["IRxx"], 0.0 * p["IRxx"]),
+        _inertia(p["IBxx"], p["IByy"], p["IBzz"], p["IBxz"]),
+        _inertia(p["IHxx"], p["IHyy"], p["IHzz"], p["IHxz"]),
+        _inertia(p["IFxx"], p["IFyy"], p["IFxx"], 0.0 * p["IFxx"]),
+    ])
+    omega_hat = jnp.einsum("kji,kjl->kil", rotations, drotations)  # Rᵀ Ṙ, skew
+    omega = jnp.stack([omega_hat[:, 2, 1], omega_hat[:, 0, 2], omega_hat[:, 1, 0]], axis=1)
+    kinetic = 0.5 * jnp.sum(masses * jnp.sum(dcentres**2, axis=1)) + 0.5 * jnp.einsum("ki,kij,kj->", omega, inertias,
+                                                                                       omega)
+    return kinetic + p["g"] * jnp.sum(masses * centres[:, 2])  # V = −g Σ m z (z down)
+
+
+def _contact_velocities(q, v, p):
+    """The horizontal velocities of the wheels' material points at their contact points (4,)."""
+    (_, rotations, (C_R, P_R, C_F, P_F)), (_, drotations, (dC_R, _, dC_F, _)) = _motion(q, v, p)
+
+    def spin(R, dR):  # the angular velocity in space: (Ṙ Rᵀ)^vee
+        W = dR @ R.T
+        return jnp.stack([W[2, 1], W[0, 2], W[1, 0]])
+
+    rear = dC_R + jnp.cross(spin(rotations[0], drotations[0]), P_R - C_R)
+    front = dC_F + jnp.cross(spin(rotations[3], drotations[3]), P_F - C_F)
+    return jnp.concatenate([rear[:2], front[:2]])
+
+
+def _constraints(q, p):
+    return jax.jacfwd(lambda v: _contact_velocities(q, v, p))(jnp.zeros(8, dtype=q.dtype))
+
+
+def _holonomic(q, p):
+    return contact_points(q, p)[1][2:3]
+
+
+def build(params: dict | None = None) -> System:
+    """The Whipple bicycle as a System on R⁸ with the parameters `params` (default
+    :data:`BENCHMARK`; a partial dict updates it), named parameters as `args`."""
+    p = dict(BENCHMARK)
+    p.update(params or {})
+    return System(_lagrangian, _constraints, holonomic=_holonomic, coordinates=COORDINATES, name="whipple-bicycle",
+                  args={k: float(v) for k, v in p.items()})
+
+
+def upright(params: dict | None, v: float):
+    """The upright, straight steady motion at forward speed `v`: `(q, qdot)` (the wheels turning
+    at −v/r about their axles, which point to the right)."""
+    p = dict(BENCHMARK)
+    p.update(params or {})
+    qdot = np.zeros(8)
+    qdot[0], qdot[_REAR], qdot[_FRONT] = v, -v / p["rR"], -v / p["rF"]
+    return np.zeros(8), qdot
+
+
+def benchmark_matrices(system: System):
+    """`{"M", "C1", "K0", "K2"}`: the 2×2 matrices of the linearized equations of roll and steer
+    about the upright straight motion, $M\\ddot q + vC_1\\dot q + (gK_0 + v^2K_2)q = 0$ (Meijaard
+    2007 eq. (2.12)), derived from the nonlinear `system` (built by :func:`build`) by JAX:
+
+    - the pitch $\\theta(\\phi, \\delta)$ from the holonomic constraint (Newton's method), and the
+      dependent velocities from the constraints given $(\\dot\\phi, \\dot\\delta)$ and the rear
+      wheel's rate $-v/r_R$;
+    - $M$: the Hessian of the kinetic energy in $(\\dot\\phi, \\dot\\delta)$ at rest;
+    - from the Jacobian of the constrained acceleration $(\\ddot\\phi, \\ddot\\delta)$ of the
+      Lagrange–d'Alembert equations (:func:`gnipy.equations.lagrange_dalembert_acceleration`) in
+      $(\\phi, \\delta)$ and $(\\dot\\phi, \\dot\\delta)$: $gK_0 = -MJ_q(0)$,
+      $K_2 = -MJ_q(1) - gK_0$ and $C_1 = -MJ_{\\dot q}(1)$ (the equations are exactly linear in v and
+      quadratic in v²: the speeds 0 and 1 give them to round-off).
+    """
+    out = _benchmark_matrices(system.without_metadata())
+    return {k: np.asarray(x) for k, x in out.items()}
+
+
+@jit
+def _benchmark_matrices(core):
+    from ..equations import lagrange_dalembert_acceleration
+
+    p = core.args
+
+    def configuration(s):
+        def pitch_step(theta, _):
+            q = jnp.zeros(8).at[_ROLL].set(s[0]).at[_STEER].set(s[1]).at[_PITCH].set(theta)
+            f = lambda t: _holonomic(q.at[_PITCH].set(t), p)[0]  # noqa: E731
+            return theta - f(theta) / jax.grad(f)(theta), None
+
+        theta, _ = jax.lax.scan(pitch_step, jnp.zeros(()), None, length=12)
+        return jnp.zeros(8).at[_ROLL].set(s[0]).at[_STEER].set(s[1]).at[_PITCH].set(theta)
+
+    free = jnp.array([_ROLL, _STEER, _REAR])
+    dependent = jnp.array([i for i in range(8) if i not in (_ROLL, _STEER, _REAR)])
+
+    def velocity(q, rates, v):
+        mu = core.mu(q)  # the nonholonomic rows and dφ
+        given = jnp.zeros(8).at[free].set(jnp.stack([rates[0], rates[1], -v / p["rR"]]))
+        dep = jnp.linalg.solve(mu[:, dependent], -mu @ given)
+        return given.at[dependent].set(dep)
+
+    def acceleration(state, v):
+        s, rates = state[:2], state[2:]
+        q = configuration(s)
+        a, _ = lagrange_dalembert_acceleration(core, q, velocity(q, rates, v))
+        return jnp.stack([a[_ROLL], a[_STEER]])
+
+    def kinetic(rates):
+        q = configuration(jnp.zeros(2))
+        qd = velocity(q, rates, 0.0)
+        return core.L(q, qd) + core.potential(q)
+
+    M = jax.hessian(kinetic)(jnp.zeros(2))
+    # one derivative program for both speeds (vmapped): it is most of the compilation
+    J0, J1 = jax.vmap(lambda v: jax.jacfwd(acceleration)(jnp.zeros(4), v))(jnp.array([0.0, 1.0]))
+    gK0 = -M @ J0[:, :2]
+    K0 = gK0 / p["g"]
+    K2 = -M @ J1[:, :2] - gK0
+    C1 = -M @ J1[:, 2:]
+    return {"M": M, "C1": C1, "K0": K0, "K2": K2}
