@@ -259,7 +259,7 @@ def test_the_list_of_methods_is_the_methods_own_statement():
 
     methods = {name: get_method(name) for name in method_names()}
     single = {name for name, m in methods.items() if not isinstance(m, Composition)}
-    keeps = {name for name in single if name == "reference" or methods[name].holonomic}
+    keeps = {name for name in single if methods[name].holonomic}
     assert keeps == set(HOLONOMIC_METHODS)
     composed = [m for m in methods.values() if isinstance(m, Composition)]
     assert composed and all(m.holonomic == m.base.holonomic for m in composed)

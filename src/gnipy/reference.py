@@ -33,6 +33,8 @@ class ContinuousReference(eqx.Module):
     max_steps: int = eqx.field(static=True, default=1_000_000)
     name: ClassVar[str] = "reference"
     order: ClassVar[int | None] = None
+    #: keeps holonomic constraints: projects onto φ = 0 at every saved time (:mod:`gnipy.holonomic`)
+    holonomic: ClassVar[bool] = True
 
     def solve(self, system, b0, v0, times, *, h=float("nan"), t0=None) -> Solution:
         """Integrate from `t0` (default `times[0]`) and save at `times` (host arrays, monotone; a

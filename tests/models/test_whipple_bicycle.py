@@ -64,7 +64,7 @@ def test_linearize_and_stability_curve_give_the_benchmark_eigenvalues_and_speeds
         ours = lin.nonzero_eigenvalues
         ours = ours[np.lexsort((ours.imag, -ours.real))]
         np.testing.assert_allclose(ours, _eigenvalues(PUB, v), rtol=0, atol=1e-10)
-    curve = gnipy.analysis.stability_curve(bicycle, steady, np.linspace(3.0, 7.0, 9), tol=1e-12)
+    curve = gnipy.analysis.stability_curve(bicycle, steady, np.linspace(3.0, 7.0, 9))
     weave, capsize = _speeds(PUB)
     assert len(curve.transitions) == 2
     # stability_curve reads real parts within ZERO_TOL·|J| of 0 as 0, so its transitions sit where

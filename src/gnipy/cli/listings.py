@@ -46,6 +46,6 @@ def methods():
         method = gnipy.get_method(name)
         order = method.order  # stated once, on the method
         more = f" (order {order})" if order is not None else ""
-        if name == "reference" or getattr(method, "holonomic", False):
+        if method.holonomic:
             more += "; keeps holonomic constraints"
         con.print(Text.assemble((f"{safe(name):<{width}}", "bold"), "  ", safe(desc + more)))

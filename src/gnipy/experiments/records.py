@@ -156,7 +156,7 @@ def bare(system: System) -> System:
     model with different parameter values share compilations."""
     group = system.group
     return System(
-        system.lagrangian, system.constraints, system.affine, n=system.n, group=group,
+        system.lagrangian, system.constraints, system.affine, holonomic=system.holonomic, n=system.n, group=group,
         retraction=system.space.retraction if group is not None else "cayley",
         depends_on_orientation=system.depends_on_orientation, reconstruction=system.reconstruction or "left",
         name="theorem-table", args=system.args, params={},
