@@ -41,10 +41,11 @@ in place of the discrete velocity constraint on the rows $d\varphi$.
 
 Which methods keep $\varphi(q_k) = 0$: :data:`HOLONOMIC_METHODS` (the GNI with any discrete
 Lagrangian and its compositions; the paper's explicit maps `euler-a`, `euler-b` and `rattle`, which
-are the GNI in other variables, with a Newton solve for Λ in their drift; dla; and the continuous
-reference); the others refuse a system with holonomic constraints (:func:`require_support`):
-`sgni-*` (its one impulse per step acts at both ends, and a position multiplier would duplicate
-the start's), `euler-ab` (its half maps), `shake`, `rat`, `mp` and `discrete-gradient`.
+are the GNI in other variables, with a Newton solve for Λ in their drift; `sgni-*`, whose impulse
+acting at both ends of a step covers the rows $d\varphi$ too, with Λ at the start; dla; and the
+continuous reference); the others refuse a system with holonomic constraints
+(:func:`require_support`): `euler-ab` (its half maps), `shake`, `rat`, `mp` and
+`discrete-gradient`.
 """
 
 from __future__ import annotations
@@ -60,8 +61,8 @@ __all__ = ["HOLONOMIC_METHODS", "affine_part", "with_position_multiplier", "proj
 
 #: The methods that keep holonomic constraints $\varphi(q_k) = 0$ to round-off (and the continuous
 #: reference, which projects onto them); compositions of the GNI (`gni-*-s3`, …) too.
-HOLONOMIC_METHODS = ("gni-euler-a", "gni-euler-b", "gni-trapezoid", "gni-midpoint", "euler-a", "euler-b", "rattle",
-                     "dla", "reference")
+HOLONOMIC_METHODS = ("gni-euler-a", "gni-euler-b", "gni-trapezoid", "gni-midpoint", "sgni-trapezoid", "sgni-midpoint",
+                     "euler-a", "euler-b", "rattle", "dla", "reference")
 
 
 def require_support(method, system) -> None:

@@ -57,6 +57,7 @@ import jax.numpy as jnp
 
 from ..discrete_lagrangians import DiscreteLagrangian, Trapezoid
 from ..forcing import discrete_forces
+from ..holonomic import phi_scale
 from ..linalg import solve_spd
 from ..projectors import reported_momentum
 from .base import Integrator, momentum_constraint_scale, solve_step
@@ -88,6 +89,8 @@ class SymmetricImpulseGNI(Integrator):
 
     #: the state $(b, \\bar p)$ does not depend on h
     can_change_step: ClassVar[bool] = True
+    #: keeps holonomic constraints with a position multiplier at the start of each step (:meth:`step`)
+    holonomic: ClassVar[bool] = True
 
     @property
     def name(self) -> str:  # type: ignore[override]
@@ -138,39 +141,52 @@ class SymmetricImpulseGNI(Integrator):
         forced = system.force is not None
         rule = self.discrete_lagrangian.force_rule
 
-        def residual(w):
-            z, alpha = w[:n], w[n:]
+        # with holonomic constraints φ (gnipy.holonomic): α has a component on each row of μ = (μ; dφ),
+        # and a position multiplier Λ at the start, dφ(b_k)ᵀΛ, keeps φ(b_{k+1}) = 0 (r more unknowns
+        # and equations; the reversed step has −Λ at its start and α + 2Λ/h, so it stays symmetric)
+        rows = system.holonomic_mu(b) if system.holonomic is not None else None
+        r = 0 if rows is None else rows.shape[0]
+
+        def departure(alpha, lam):
             p_minus = p_bar + 0.5 * h * (mu.T @ alpha)
+            return p_minus if rows is None else p_minus + rows.T @ lam
+
+        def residual(w):
+            z, alpha, lam = w[:n], w[n:n + m], w[n + m:]
+            p_minus = departure(alpha, lam)
             b1 = space.advance(b, z)
             mu1 = system.mu(b1)
+            holds = [] if rows is None else [system.phi(b1)]
             if forced:  # the forced transforms (gnipy.forcing): FL⁻ − f⁻ = p⁻, p̄_{k+1} = FL⁺ + f⁺ + ...
                 f_minus, f_plus = discrete_forces(system, b, z, h, rule)
                 p1 = p_minus + (f_minus + f_plus) + space.legendre_jump(ld, b, z) + 0.5 * h * (mu1.T @ alpha)
                 return jnp.concatenate([
                     space.legendre_minus(ld, b, z) - f_minus - p_minus,
-                    mu1 @ (system.velocity(b1, p1) - system.Y(b1)),
+                    mu1 @ (system.velocity(b1, p1) - system.Y(b1)), *holds,
                 ])
             p1 = p_minus + space.legendre_jump(ld, b, z) + 0.5 * h * (mu1.T @ alpha)
             return jnp.concatenate([
                 space.legendre_minus(ld, b, z) - p_minus,
-                mu1 @ (system.velocity(b1, p1) - system.Y(b1)),
+                mu1 @ (system.velocity(b1, p1) - system.Y(b1)), *holds,
             ])
 
         # α = 0 as the first guess: measured cheaper than the continuous multiplier λ(b, v̄), whose
         # evaluation costs more than the iteration it saves
-        guess = jnp.concatenate([space.initial_guess(b, v_bar, h), jnp.zeros(m, dtype=p_bar.dtype)])
+        guess = jnp.concatenate([space.initial_guess(b, v_bar, h), jnp.zeros(m + r, dtype=p_bar.dtype)])
         scale = momentum_constraint_scale(n, p_bar, mu, v_bar, system.Y(b))
+        if rows is not None:  # the φ rows: terms of the size |dφ||q|
+            scale = jnp.concatenate([scale, jnp.full((r,), phi_scale(system, b, rows), dtype=scale.dtype)])
         w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
                              floor_scale=scale)
-        z, alpha = w[:n], w[n:]
+        z, alpha, lam = w[:n], w[n:n + m], w[n + m:]
         b1, x_err = space.advance_compensated(b, x_err, z)
+        p_minus = departure(alpha, lam)
         if forced:  # summed as in the residual, so that the constraint holds at the stored p̄_{k+1}
             f_minus, f_plus = discrete_forces(system, b, z, h, rule)
-            p1 = (p_bar + 0.5 * h * (mu.T @ alpha) + (f_minus + f_plus) + space.legendre_jump(ld, b, z)
+            p1 = (p_minus + (f_minus + f_plus) + space.legendre_jump(ld, b, z)
                   + 0.5 * h * (system.mu(b1).T @ alpha))
         else:
-            p1 = (p_bar + 0.5 * h * (mu.T @ alpha) + space.legendre_jump(ld, b, z)
-                  + 0.5 * h * (system.mu(b1).T @ alpha))
+            p1 = p_minus + space.legendre_jump(ld, b, z) + 0.5 * h * (system.mu(b1).T @ alpha)
         return SymmetricImpulseState(b1, p1, x_err), info
 
     def observe(self, system, state, h):
