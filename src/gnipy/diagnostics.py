@@ -210,8 +210,9 @@ class HiddenMomentumVerdict:
             f"(|p+ - p̄|/|p̄| up to {self.max_ratio:.3g}, {self.max_band_ratio:.3g}x the band): the GNI's "
             f"normal impulse has taken over, and the motion of {system} is qualitatively wrong from there on "
             "(energy drained or pumped, looping paths) even though the constraints hold. A smaller h only "
-            "delays it. Use dla (or mp on R^n with a constant metric): they carry no hidden momentum and follow "
-            "the reference on the sleigh and Suslov; check against method='reference'; see the methods guide, "
+            "delays it. Use dla, sgni-trapezoid, or mp on R^n with a constant metric and no holonomic constraints: "
+            "they carry no hidden momentum (dla follows the reference on the sleigh and Suslov, dla and "
+            "sgni-trapezoid on the Whipple bicycle); check against method='reference'; see the methods guide, "
             "'Where the GNI struggles'."
         )
 
