@@ -105,9 +105,10 @@ def with_position_multiplier(system, b, residual, guess, floor_scale):
     ($b\oplus z$ the configuration the step reaches, :meth:`~gnipy.spaces.EuclideanSpace.advance`).
 
     Returns:
-        `(F, w0, scale)`: the residual of w, the first guess `(guess, 0)`, and the magnitude of
+        `(F, w0, scale, rows)`: the residual of w, the first guess `(guess, 0)`, the magnitude of
         the terms of each row (`floor_scale` for the momentum rows, :func:`phi_scale` for φ), for
-        :func:`gnipy.integrators.base.solve_step`; the step's z and Λ are `w[:N]`, `w[N:]`.
+        :func:`gnipy.integrators.base.solve_step`, and the rows $d\varphi(b)$; the step's z and Λ
+        are `w[:N]`, `w[N:]`.
     """
     space = system.space
     rows = system.holonomic_mu(b)
@@ -119,7 +120,7 @@ def with_position_multiplier(system, b, residual, guess, floor_scale):
 
     scale = jnp.concatenate([jnp.broadcast_to(jnp.asarray(floor_scale, guess.dtype), (N,)),
                              jnp.full((r,), phi_scale(system, b, rows), dtype=guess.dtype)])
-    return F, jnp.concatenate([guess, jnp.zeros(r, dtype=guess.dtype)]), scale
+    return F, jnp.concatenate([guess, jnp.zeros(r, dtype=guess.dtype)]), scale, rows
 
 
 #: The cap on Newton's iterations of the projection onto φ = 0 (from a drift of the solver's

@@ -64,9 +64,7 @@ class Solution(eqx.Module):
         v: reported velocities, (T, n) (for the GNI $\\bar v = \\mathbb{G}^{-1}\\bar p$, see docs/conventions.md).
         p: reported momenta, (T, n).
         energy: $\\tfrac12 v^T\\mathbb{G}v + V$, (T,).
-        constraint_residual: $\\mu(q)(v - Y(q))$, (T, m); with holonomic constraints the rows of
-            $d\\varphi$ included, followed by $\\varphi(q)$ itself
-            (:meth:`gnipy.System.constraint_residual`).
+        constraint_residual: $\\mu(q)(v - Y(q))$, then $\\varphi(q)$ (:meth:`gnipy.System.constraint_residual`).
         iterations: total and maximum Newton iterations per step, `(total, max)`.
         R: orientations $R_k$ on $\\mathbb{R}^n \\times G$, (T, k, k) (reconstructed
             $R_{k+1} = R_k\\tau(h\\xi_k)$, paper §7.2 Remark, or $\\tau(h\\xi_k)R_k$ for a system with

@@ -237,6 +237,10 @@ class System(eqx.Module):
             return ("q",)
         return ("x", "R") if self.depends_on_orientation else ("x",)
 
+    def _dtype(self, b):
+        """The floating type of the base point's coordinates (float64 without any)."""
+        return jnp.result_type(self.space.coordinates(b)) if self.n else jnp.float64
+
     def _call(self, f, *xs):
         """`f(*xs)`, or `f(*xs, args)` for a system with named parameters (:attr:`args`)."""
         return f(*xs) if self.args is None else f(*xs, self.args)
@@ -318,16 +322,14 @@ class System(eqx.Module):
     def nonholonomic_mu(self, b):
         """The user's constraint one-forms (`constraints`) as an (m, N) array ((0, N) without any)."""
         if self.constraints is None:
-            dtype = jnp.result_type(self.space.coordinates(b)) if self.n else jnp.float64
-            return jnp.zeros((0, self.dim), dtype=dtype)
+            return jnp.zeros((0, self.dim), dtype=self._dtype(b))
         return jnp.atleast_2d(jnp.asarray(self._call(self.constraints, *self._args(b))))
 
     @traced_once
     def phi(self, b):
         """The holonomic constraints $\\varphi(b)$, shape (r,) ((0,) without any)."""
         if self.holonomic is None:
-            dtype = jnp.result_type(self.space.coordinates(b)) if self.n else jnp.float64
-            return jnp.zeros((0,), dtype=dtype)
+            return jnp.zeros((0,), dtype=self._dtype(b))
         return jnp.atleast_1d(jnp.asarray(self._call(self.holonomic, *self._args(b)))).reshape(-1)
 
     @traced_once
@@ -342,8 +344,7 @@ class System(eqx.Module):
         with the same $\\mu Y$ on the nonholonomic rows and $d\\varphi\\,Y = 0$
         (:func:`gnipy.holonomic.affine_part`): only $\\mu Y$ enters the equations."""
         if self.affine is None:
-            dtype = jnp.result_type(self.space.coordinates(b)) if self.n else jnp.float64
-            return jnp.zeros(self.dim, dtype=dtype)
+            return jnp.zeros(self.dim, dtype=self._dtype(b))
         Y = jnp.asarray(self._call(self.affine, *self._args(b))).reshape(self.dim)
         if self.holonomic is None:
             return Y
@@ -367,11 +368,6 @@ class System(eqx.Module):
         if self.holonomic is None:
             return res
         return jnp.concatenate([res, self.phi(b)])
-
-    @property
-    def is_holonomic(self) -> bool:
-        """Whether the system has holonomic constraints $\\varphi(b) = 0$."""
-        return self.holonomic is not None
 
     @property
     def is_affine(self) -> bool:

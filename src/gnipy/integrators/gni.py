@@ -152,11 +152,11 @@ class GNI(Integrator):
 
         guess = space.initial_guess(b, v_bar, h)
         if system.holonomic is not None:  # FL⁻ = p⁻ + dφᵀΛ, φ(b_{k+1}) = 0 (gnipy.holonomic)
-            F, w0, scale = with_position_multiplier(system, b, residual, guess, jnp.max(jnp.abs(p_minus)))
+            F, w0, scale, rows = with_position_multiplier(system, b, residual, guess, jnp.max(jnp.abs(p_minus)))
             w, info = solve_step(F, w0, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
                                  floor_scale=scale)
             z = w[:guess.shape[0]]
-            departure = p_minus + system.holonomic_mu(b).T @ w[guess.shape[0]:]  # FL⁻ at the solution
+            departure = p_minus + rows.T @ w[guess.shape[0]:]  # FL⁻ at the solution
         else:
             z, info = solve_step(
                 residual, guess, explicit=bool(self.explicit), solver=self.root_finder, max_steps=self.max_steps,
