@@ -21,6 +21,28 @@ if os.environ.get("GNIPY_TEST_SHIPPED_XLA", "").strip() in ("", "0"):
     if SUITE_XLA_FLAGS not in _flags.split():
         os.environ["XLA_FLAGS"] = f"{_flags} {SUITE_XLA_FLAGS}".strip()
 
+#: JAX's persistent compilation cache, shared by every process of the session: the pytest-xdist
+#: workers, the doc pages' processes and the `gni` commands tests start. The suite compiles the
+#: same programs in several processes (two workers; the pages and commands each start afresh; a
+#: worker that releases its compiled programs, :func:`_release_compiled_programs`, compiles them
+#: again), and a program found in the cache is loaded instead. It changes how long a test takes,
+#: not what it computes: the cache is keyed by the program and the compiler's flags. The folder is
+#: made by the first process (pytest's, or the only one without xdist), private (mkdtemp: 0700,
+#: what gnipy.compilation requires), and removed when that process exits;
+#: `GNIPY_TEST_NO_COMPILATION_CACHE=1` turns it off.
+SESSION_CACHE = "GNIPY_TEST_SESSION_CACHE"
+if os.environ.get("GNIPY_TEST_NO_COMPILATION_CACHE", "").strip() in ("", "0"):
+    if not os.environ.get(SESSION_CACHE):
+        import atexit
+        import shutil
+        import tempfile
+
+        os.environ[SESSION_CACHE] = tempfile.mkdtemp(prefix="gnipy-test-session-")
+        atexit.register(shutil.rmtree, os.environ[SESSION_CACHE], True)
+    from gnipy.compilation import enable_compilation_cache  # noqa: E402
+
+    enable_compilation_cache(os.environ[SESSION_CACHE], min_compile_seconds=0.1)
+
 import gnipy  # noqa: E402
 
 

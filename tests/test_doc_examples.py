@@ -191,7 +191,10 @@ def _cache_dir() -> str:
     """A private folder (0700, removed at exit) for the compiled programs of this module's `gni`
     commands: many pages run the same model with the same method, and JAX's compilation cache
     (gnipy.compilation, opt-in with GNIPY_COMPILATION_CACHE) lets a later command load the program an
-    earlier one compiled. It changes how long a command takes, not what it computes."""
+    earlier one compiled. It changes how long a command takes, not what it computes. The session's
+    cache (conftest.SESSION_CACHE) where there is one, so that the pages load what the tests compiled."""
+    if not _CACHE_DIR and os.environ.get("GNIPY_TEST_SESSION_CACHE"):
+        _CACHE_DIR.append(os.environ["GNIPY_TEST_SESSION_CACHE"])
     if not _CACHE_DIR:
         import atexit
         import shutil
@@ -405,6 +408,10 @@ def page_main(rel: str, cwd: str) -> None:
     """The child process of one page: run it in `cwd`, then its :data:`CHECKS`."""
     cwd_path = pathlib.Path(cwd)
     os.chdir(cwd_path)
+    if os.environ.get("GNIPY_COMPILATION_CACHE") == "1":  # the Python blocks too (:func:`_cache_dir`)
+        from gnipy.compilation import enable_compilation_cache
+
+        enable_compilation_cache()
     namespace = run_page(ROOT / rel, cwd_path)
     check = CHECKS.get(rel)
     if check is not None:

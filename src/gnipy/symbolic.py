@@ -6,7 +6,10 @@ SymPy, in either of two forms.
   velocities) or `sympy.physics.mechanics.dynamicsymbols` (then the velocities are their time
   derivatives, as `sympy.physics.mechanics` writes them).
 - **A `sympy.physics.mechanics.System`**: its bodies (particles and rigid bodies, with their
-  `potential_energy`), its constant loads (gravity, `System.apply_uniform_gravity`, and any other
+  `potential_energy`; the kinetic energy is formed from the time derivatives of their mass
+  centres' positions and of their orientations, not from the velocities stored on their points,
+  which a model made for Kane's method may store with the constraints already imposed), its
+  constant loads (gravity, `System.apply_uniform_gravity`, and any other
   constant force on a point, whose potential is $-F\\cdot r$ from the system's `fixed_point`), its
   kinematic differential equations (u = q̇, or any relation linear in u and q̇: the kinetic
   energy and the constraints are rewritten in q̇), its holonomic constraints and its nonholonomic
@@ -45,6 +48,14 @@ in the velocities, with no linear term), a constraint that is not affine in the 
 symbol whose value is not given (or a value for a symbol the model does not have), coordinates
 declared with assumptions on their values (`positive=True`: SymPy may already have simplified
 `Abs(x)` to `x`), and the imaginary unit.
+
+**Models written by others.** SymBRiM's Whipple bicycle (the `symbrim` package, bicycle–rider
+models for `sympy.physics.mechanics`), converted by :func:`from_sympy` with the benchmark's
+parameters, gives the accelerations of Basu-Mandal et al. (2007) Table 1 to 1.1e-12, as
+:mod:`gnipy.models.whipple_bicycle` does (tests/test_symbolic.py); its conversion takes about 6 s.
+Which constraint rows have no velocities, and whether there is an affine part, is decided by
+evaluating the expressions at random points in 30-digit arithmetic (:func:`_is_zero`), not by
+`sympy.simplify`, which took minutes on that bicycle's constraints.
 
 Conversions are cached (:func:`_functions`): Systems made from the same expressions share their
 functions, differ only in `args`, and so run as one batch (a sweep over a parameter of a function
@@ -351,6 +362,30 @@ def _parameters(params, exprs, known) -> dict[str, float]:
     return {name: given[name] for name in free}
 
 
+def _kinetic_energy(sp, body, frame, origin):
+    """The kinetic energy of `body` in `frame` from the time derivatives of its mass centre's position
+    (from the System's fixed point `origin`) and of its orientation: the unconstrained velocities.
+
+    Not `body.kinetic_energy(frame)`, which uses the velocities stored on the points: a model built
+    for Kane's method may store them with the constraints already imposed (SymBRiM's tires set the
+    contact point's velocity to zero, so the rear contact point's coordinates x, y then do not enter
+    the kinetic energy at all and its metric is singular), whereas the Lagrangian of the
+    Lagrange–d'Alembert principle is the unconstrained one."""
+    if body.mass == 0:
+        return sp.Integer(0)
+    try:
+        r = body.masscenter.pos_from(origin)
+    except ValueError as e:  # no path of positions from the System's fixed point
+        raise InputError(f"from_sympy: model: the kinetic energy of {body.name} needs the position of its mass "
+                         f"centre {body.masscenter} from the System's fixed point {origin}: {e}") from None
+    v = r.dt(frame)
+    T = body.mass * v.dot(v) / 2
+    if hasattr(body, "central_inertia"):  # a rigid body (a particle has none)
+        w = body.frame.ang_vel_in(frame)
+        T += w.dot(body.central_inertia.dot(w)) / 2
+    return T
+
+
 def _check_mechanical_type(sp, L, vs) -> None:
     try:
         poly = sp.Poly(sp.expand(L), *vs)
@@ -377,12 +412,27 @@ def _affine_parts(sp, cons, vs):
             raise InputError(f"from_sympy: constraints[{i}] = {c} does not involve the velocities: a "
                              f"holonomic constraint; give it as holonomic=[...] (gnipy keeps it exactly)")
         rows.append(row)
-        c0.append(sp.simplify(c.xreplace(dict.fromkeys(vs, 0))))
+        c0.append(c.xreplace(dict.fromkeys(vs, 0)))
     return rows, c0
 
 
 def _is_zero(sp, expr) -> bool:
-    return sp.simplify(expr) == 0
+    """Whether `expr` is identically zero: structurally, else by its values at three random points
+    (every free symbol in [0.5, 1.5], a fixed seed) in 30-digit arithmetic, each within 1e-20 of 0.
+    An analytic expression that is not identically zero vanishes on a set of measure zero, so this
+    errs with probability zero; `sympy.simplify`, which proves it, took 12 s an entry on the
+    constraints of SymBRiM's Whipple bicycle (and minutes in all)."""
+    expr = sp.sympify(expr)
+    if expr == 0:
+        return True
+    symbols = sorted(expr.free_symbols, key=str)
+    rng = __import__("random").Random(20071955)
+    for _ in range(3):
+        point = {x: sp.Float(rng.uniform(0.5, 1.5), 30) for x in symbols}
+        value = expr.evalf(30, subs=point)
+        if not value.is_number or abs(complex(value)) > 1e-20:
+            return False
+    return True
 
 
 def _from_mechanics_system(system):
@@ -413,8 +463,8 @@ def _from_mechanics_system(system):
         to_qd = dict(zip(u, list(A.LUsolve(b))))
     frame, origin = system.frame, system.fixed_point
     try:
-        T = sum((body.kinetic_energy(frame) for body in system.bodies), sp.Integer(0))
-    except ValueError as e:  # a velocity that is not defined
+        T = sum((_kinetic_energy(sp, body, frame, origin) for body in system.bodies), sp.Integer(0))
+    except ValueError as e:  # a position or an orientation that is not defined
         raise InputError(f"from_sympy: model: the kinetic energy cannot be formed: {e}") from None
     V = sum((sp.sympify(body.potential_energy) for body in system.bodies), sp.Integer(0))
     for load in system.loads:

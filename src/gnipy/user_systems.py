@@ -2,7 +2,7 @@
 `package.module:make_sleigh` (as `uvicorn module:app` or `pytest path::name` name theirs).
 
 Wherever gnipy takes a zoo model's name (:func:`gnipy.get_model`, `gni run`, `gni sweep`, `gni
-fit`, `gni control`, `gni convergence`, `gni atlas`, :func:`gnipy.run_sweep`, :func:`gnipy.fit`),
+fit`, `gni control`, `gni convergence`, `gni stability`, `gni atlas`, :func:`gnipy.run_sweep`, :func:`gnipy.fit`),
 it also takes a reference `SOURCE:NAME` to a function of the user's that returns a
 :class:`gnipy.System` (or to a System itself). The registry (:func:`gnipy.registry.get_model`) turns
 the function into a model: its keyword parameters with numeric defaults are the model's parameters

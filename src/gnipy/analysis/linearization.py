@@ -32,19 +32,22 @@ between neighbouring samples cancel and are not seen: sample finely enough).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+import dataclasses
 from dataclasses import dataclass
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import scipy.linalg
+import scipy.optimize
 
+from ..compilation import jit
 from ..equations import lagrange_dalembert_acceleration
 from ..errors import InputError
 from ..inputs import finite_vector, real_number
 
 __all__ = ["Linearization", "linearize", "DiscreteLinearization", "discrete_linearization", "StabilityCurve",
-           "stability_curve"]
+           "stability_curve", "MAP_GROWTH_TOL"]
 
 
 #: eigenvalues within ZERO_TOL·max(1, ‖J‖₂) of zero are zero (and real or imaginary parts that
@@ -55,6 +58,13 @@ __all__ = ["Linearization", "linearize", "DiscreteLinearization", "discrete_line
 #: collision of two pairs) are computed only to about √ε‖J‖, so `stable` is decided to that
 #: accuracy there
 ZERO_TOL = 1e-10
+
+#: a method's one-step map is stable where its growth rate (:attr:`DiscreteLinearization.growth_rate`,
+#: 1/s) is at most this: the multipliers of conserved quantities and ignorable coordinates are 1,
+#: computed to about √ε where they form Jordan blocks (a coordinate that drifts with its
+#: perturbation), which is a growth rate of about √ε/h (measured on the Whipple bicycle at 5 m/s:
+#: 3e-8 to 1e-7 /s for dla and sgni-trapezoid at h = 0.01 and 0.005)
+MAP_GROWTH_TOL = 1e-5
 
 
 @dataclass(frozen=True)
@@ -108,6 +118,42 @@ class Linearization:
         return bool(np.all(self.eigenvalues.real <= 0))
 
 
+# Compiled, one program per system structure (Systems that differ only in `args` share it): a
+# stability curve linearizes the same system at many values. Measured on the Whipple bicycle at -O0
+# (the test suite's XLA flags): op by op, 22 s at the first call (each primitive of the nested
+# derivatives compiled alone) and 0.25 s at each later one; compiled, 11 s once and 6 ms a call.
+@jit
+def _at_point(system, state):
+    """The constraints' residual, the vector field (v, a) and μ at the state (q, v)."""
+    n = system.n
+    qq, vv = state[:n], state[n:]
+    mu = system.mu(qq)
+    r = mu @ vv
+    if system.is_affine:
+        r = r - mu @ system.Y(qq)
+    return r, jnp.concatenate([vv, lagrange_dalembert_acceleration(system, qq, vv)[0]]), mu
+
+
+@jit  # dep and ind: tuples of Python ints, static (part of the program)
+def _reduced_jacobian(system, z, dep: tuple, ind: tuple):
+    """The Jacobian of the equations on the constraint manifold in the state z = (q, w), w the
+    velocities `ind` (the others, `dep`, solved from the constraints)."""
+    n = system.n
+    dep, ind = np.array(dep, dtype=int), np.array(ind, dtype=int)
+
+    def full_velocity(qq, w):
+        mu = system.mu(qq)
+        rhs = -mu[:, ind] @ w + (mu @ system.Y(qq) if system.is_affine else 0.0)
+        return jnp.zeros(n, dtype=w.dtype).at[ind].set(w).at[dep].set(jnp.linalg.solve(mu[:, dep], rhs))
+
+    def reduced_field(zz):
+        qq, w = zz[:n], zz[n:]
+        vv = full_velocity(qq, w)
+        return jnp.concatenate([vv, lagrange_dalembert_acceleration(system, qq, vv)[0][ind]])
+
+    return jax.jacfwd(reduced_field)(z)
+
+
 def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
     """The linearized equations of `system` about the steady motion `(q, v)` (module docstring).
 
@@ -140,41 +186,23 @@ def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
     # stability curve over a parameter: 0.8 s per value before, 0.05 s after, measured on the sleigh)
     system = system.without_metadata()
 
-    def residual(state):
-        qq, vv = state[:n], state[n:]
-        r = system.mu(qq) @ vv
-        return r - system.mu(qq) @ system.Y(qq) if system.is_affine else r
-
-    def field(state):
-        qq, vv = state[:n], state[n:]
-        return jnp.concatenate([vv, lagrange_dalembert_acceleration(system, qq, vv)[0]])
-
     state = jnp.concatenate([q, v])
-    off = float(jnp.max(jnp.abs(residual(state))))
+    off, field, mu = (np.asarray(x) for x in _at_point(system, state))
+    off = float(np.max(np.abs(off)))
     if off > tol * scale:
         raise InputError(f"linearize: (q, v) is not on the constraints: residual {off:.3g}")
-    acceleration = np.asarray(field(state))[n:]
+    acceleration = field[n:]
     if np.max(np.abs(acceleration)) > tol * scale:
         i = int(np.argmax(np.abs(acceleration)))
         raise InputError(f"linearize: (q, v) is not a steady motion: the velocity {system.velocities[i]!r} changes "
                          f"at rate {acceleration[i]:.3g}")
     # the equations on the constraint manifold as an ODE in (q, w), w the independent velocities
     # (the complement of the best-conditioned columns of μ at q, by QR with column pivoting)
-    m = int(np.asarray(system.mu(q)).shape[0])
-    _, _, pivots = scipy.linalg.qr(np.asarray(system.mu(q)), pivoting=True)
-    dep, ind = np.sort(pivots[:m]), np.sort(pivots[m:])
-
-    def full_velocity(qq, w):
-        mu = system.mu(qq)
-        rhs = -mu[:, ind] @ w + (mu @ system.Y(qq) if system.is_affine else 0.0)
-        return jnp.zeros(n, dtype=w.dtype).at[ind].set(w).at[dep].set(jnp.linalg.solve(mu[:, dep], rhs))
-
-    def reduced_field(z):
-        qq, w = z[:n], z[n:]
-        vv = full_velocity(qq, w)
-        return jnp.concatenate([vv, lagrange_dalembert_acceleration(system, qq, vv)[0][ind]])
-
-    J = np.asarray(jax.jacfwd(reduced_field)(jnp.concatenate([q, v[ind]])))
+    m = int(mu.shape[0])
+    _, _, pivots = scipy.linalg.qr(mu, pivoting=True)
+    dep = tuple(int(i) for i in np.sort(pivots[:m]))
+    ind = tuple(int(i) for i in np.sort(pivots[m:]))
+    J = np.asarray(_reduced_jacobian(system, jnp.concatenate([q, v[np.array(ind, dtype=int)]]), dep, ind))
     names = (*system.coordinates, *(system.velocities[i] for i in ind))
     # ignorable coordinates: those no kept equation depends on, dropped with their own equation
     # (their perturbation just drifts); dropping one can make another ignorable (the heading of a
@@ -242,6 +270,31 @@ class DiscreteLinearization:
         return float(np.max(np.log(np.abs(self.multipliers))) / self.h) if self.multipliers.size else 0.0
 
 
+@jit  # h traced (one program for every step size), warmup static
+def _map_jacobian(integrator, system, q, v, h, warmup: int):
+    """The Jacobian of one step of `integrator` with respect to every floating-point part of its
+    state, at the state `warmup` steps after its start from (q, v)."""
+    state = integrator.init(system, q, v, h)
+    for _ in range(warmup):
+        state, _ = integrator.step(system, state, h)
+    leaves, tree = jax.tree_util.tree_flatten(state)
+    floating = [i for i, leaf in enumerate(leaves) if jnp.issubdtype(jnp.asarray(leaf).dtype, jnp.floating)]
+
+    def pack(parts):
+        return jnp.concatenate([jnp.ravel(jnp.asarray(parts[i])) for i in floating])
+
+    def step(z):
+        parts, offset = list(leaves), 0
+        for i in floating:
+            size = int(np.size(leaves[i]))
+            parts[i] = z[offset:offset + size].reshape(jnp.shape(leaves[i]))
+            offset += size
+        new, _ = integrator.step(system, jax.tree_util.tree_unflatten(tree, parts), h)
+        return pack(jax.tree_util.tree_leaves(new))
+
+    return jax.jacfwd(step)(pack(leaves))
+
+
 def discrete_linearization(system, method, q, v, h: float, *, warmup: int = 1) -> DiscreteLinearization:
     """The eigenvalues of `method`'s one-step map about the steady motion `(q, v)` with step `h`.
 
@@ -249,7 +302,7 @@ def discrete_linearization(system, method, q, v, h: float, *, warmup: int = 1) -
     and then advanced by `warmup` steps, and the Jacobian of one step with respect to every
     floating-point part of that state is taken by JAX (forward mode, through the step's solves).
     The warm-up puts the state on the map's own steady motion where `init` is O(h) off it: dla
-    starts from $p^+_0 = \mathbb{G}v_0$, while its steady $p^+$ is $\mathbb{G}v - \tfrac h2 V_q$
+    starts from $p^+_0 = \\mathbb{G}v_0$, while its steady $p^+$ is $\\mathbb{G}v - \\tfrac h2 V_q$
     when a constraint force holds a potential (the Whipple bicycle's contact forces hold its
     weight), reached in one step; linearized at its start, an O(h) error in a multiplier μ is an
     O(1) error in log(μ)/h (measured on the bicycle at 5 m/s: exponents −13.07 and −2.74 ± 5.40i
@@ -283,27 +336,8 @@ def discrete_linearization(system, method, q, v, h: float, *, warmup: int = 1) -
     integrator = integrator.prepare(system, q)
     if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or warmup < 0:
         raise InputError(f"warmup: expected a non-negative integer, got {warmup!r}")
-    state = integrator.init(system, q, v, h)
-    for _ in range(int(warmup)):
-        state, _ = integrator.step(system, state, h)
-    leaves, tree = jax.tree_util.tree_flatten(state)
-    floating = [i for i, leaf in enumerate(leaves) if jnp.issubdtype(jnp.asarray(leaf).dtype, jnp.floating)]
-
-    def pack(parts):
-        return jnp.concatenate([jnp.ravel(jnp.asarray(parts[i])) for i in floating])
-
-    def step(z):
-        parts, offset = list(leaves), 0
-        for i in floating:
-            size = int(np.size(leaves[i]))
-            parts[i] = z[offset:offset + size].reshape(jnp.shape(leaves[i]))
-            offset += size
-        new, _ = integrator.step(system, jax.tree_util.tree_unflatten(tree, parts), h)
-        return pack(jax.tree_util.tree_leaves(new))
-
-    # op by op, not compiled: one Jacobian per call, and compiling it took longer (measured on the
-    # rolling disk: 16 s against 7 s for three step sizes of gni-midpoint)
-    multipliers = np.linalg.eigvals(np.asarray(jax.jacfwd(step)(pack(leaves))))
+    jacobian = np.asarray(_map_jacobian(integrator, system, q, v, jnp.asarray(h, dtype=q.dtype), int(warmup)))
+    multipliers = np.linalg.eigvals(jacobian)
     multipliers = multipliers[np.abs(multipliers) > 1e-12]
     return DiscreteLinearization(method=integrator.name, h=float(h), multipliers=multipliers,
                                  exponents=np.log(multipliers.astype(complex)) / h)
@@ -319,12 +353,17 @@ class StabilityCurve:
         eigenvalues: (len(values), k) complex: each value's eigenvalues (:class:`Linearization`).
         growth_rate: each value's largest real part (0 where stable).
         stable: each value's stability to first order.
-        transitions: the parameter values where the stability changes, each refined by bisection
-            between the two samples that bracket it (to `tol` relative). A real part within
+        transitions: the parameter values where the stability changes, each located between the
+            two samples that bracket it (to `tol` relative): by Brent's method on the largest real
+            part of the nonzero eigenvalues where it changes sign (asymptotically stable on one
+            side), else by bisection on the stability. A real part within
             :data:`ZERO_TOL`·‖J‖ of zero counts as zero, so a transition is found where the
             crossing eigenvalue's real part is that small: off by that over the real part's slope
             (measured on the Whipple bicycle: 2e-9 m/s at the weave speed, 4e-8 m/s at the capsize
             speed, whose eigenvalue crosses slowly).
+        h: the step size of the methods' maps (None without `methods`).
+        method_growth: method name -> the growth rate of its one-step map at each value
+            (:attr:`DiscreteLinearization.growth_rate`, its hidden state included).
     """
 
     values: np.ndarray
@@ -332,10 +371,26 @@ class StabilityCurve:
     growth_rate: np.ndarray
     stable: np.ndarray
     transitions: tuple[float, ...]
+    h: float | None = None
+    method_growth: dict = dataclasses.field(default_factory=dict)
+
+    def method_stable(self, method: str) -> np.ndarray:
+        """Where `method`'s map is stable at step :attr:`h`: its growth rate at most
+        :data:`MAP_GROWTH_TOL`."""
+        return np.asarray(self.method_growth[method]) <= MAP_GROWTH_TOL
+
+    def method_agrees(self, method: str) -> np.ndarray:
+        """Where `method`'s map has the motion's own stability (stable where it is, unstable where
+        it is not)."""
+        return self.method_stable(method) == np.asarray(self.stable, dtype=bool)
 
 
-def stability_curve(system, steady: Callable[[float], Sequence], values, *, tol: float = 1e-10) -> StabilityCurve:
-    """Linearize a family of steady motions and find where their stability changes.
+def stability_curve(system, steady: Callable[[float], Sequence], values, *, tol: float = 1e-10, methods=(),
+                    h: float | None = None,
+                    progress: Callable[[int, int, str], None] | None = None) -> StabilityCurve:
+    """Linearize a family of steady motions and find where their stability changes; with `methods`,
+    also whether each method's one-step map keeps the stability (:func:`discrete_linearization`
+    at each value).
 
     Arguments:
         system: the System (:func:`linearize`).
@@ -344,30 +399,67 @@ def stability_curve(system, steady: Callable[[float], Sequence], values, *, tol:
             rolling at speed `value`.
         values: the parameter's values (at least two, increasing).
         tol: the relative accuracy of the transitions.
+        methods: method names (or Integrators) whose one-step maps are linearized at each value,
+            with step `h` (required with them).
+        h: the methods' step size.
+        progress: called as `progress(done, total, what)` before each linearization of a value
+            (the bisections of the transitions are not counted).
 
     Returns:
         A :class:`StabilityCurve`; :func:`gnipy.plots.plot_stability` draws it.
 
     Raises:
-        InputError: on values that are not increasing, or a steady motion that is not one
-            (:func:`linearize`, naming the value).
+        InputError: on values that are not increasing, a steady motion that is not one
+            (:func:`linearize`, naming the value), or `methods` without a positive `h`.
+        MethodError: a method that does not apply to the system.
     """
     values = np.asarray(values, dtype=np.float64)
     if values.ndim != 1 or values.size < 2 or not np.all(np.diff(values) > 0) or not np.all(np.isfinite(values)):
         raise InputError("stability_curve: values must be at least two finite numbers, increasing")
+    methods = [methods] if isinstance(methods, str) else list(methods)
+    if methods:
+        if h is None:
+            raise InputError("h: the methods' step size is required with methods")
+        h = real_number("h", h, lower=0.0, strict=True)
+    total = values.size * (1 + len(methods))
+    done = 0
 
-    def at(value: float) -> Linearization:
+    def tick(what: str) -> None:
+        nonlocal done
+        if progress is not None:
+            progress(done, total, what)
+        done += 1
+
+    def motion_at(value: float):
         motion = steady(float(value))
         if not isinstance(motion, (tuple, list)) or len(motion) not in (2, 3):
             raise InputError(f"stability_curve: steady({value:.12g}) must return (q, v) or (system, q, v), "
                              f"got {type(motion).__name__}")
-        sys_, q, v = motion if len(motion) == 3 else (system, *motion)
+        return motion if len(motion) == 3 else (system, *motion)
+
+    def at(value: float) -> Linearization:
         try:
-            return linearize(sys_, q, v)
+            return linearize(*motion_at(value))
         except InputError as e:
             raise InputError(f"stability_curve: at {value:.12g}: {e}") from None
 
-    lins = [at(x) for x in values]
+    def counted(value: float) -> Linearization:
+        tick(f"{value:.6g}")
+        return at(value)
+
+    lins = [counted(x) for x in values]
+    method_growth = {}
+    for method in methods:
+        name = method if isinstance(method, str) else method.name
+        rates = []
+        for x in values:
+            tick(f"{name} at {x:.6g}")
+            try:
+                sys_, q, v = motion_at(x)
+                rates.append(discrete_linearization(sys_, method, q, v, h).growth_rate)
+            except InputError as e:
+                raise InputError(f"stability_curve: {name} at {x:.12g}: {e}") from None
+        method_growth[name] = np.array(rates)
     width = max(lin.eigenvalues.size for lin in lins)
     eig = np.full((values.size, width), np.nan + 0j)
     for i, lin in enumerate(lins):
@@ -375,10 +467,23 @@ def stability_curve(system, steady: Callable[[float], Sequence], values, *, tol:
     stable = np.array([lin.stable for lin in lins])
     transitions = []
     span = float(values[-1] - values[0])
+
+    def signed(lin: Linearization) -> float:  # the largest real part of the nonzero eigenvalues
+        nonzero = lin.nonzero_eigenvalues
+        return float(np.max(nonzero.real)) if nonzero.size else 0.0
+
     for i in np.flatnonzero(stable[1:] != stable[:-1]):
         lo, hi, lo_stable = values[i], values[i + 1], stable[i]
-        for _ in range(200):  # relative to the values, and to their span where a transition is at 0
-            if hi - lo <= tol * max(abs(lo), abs(hi), span):
+        width = tol * max(abs(lo), abs(hi), span)  # relative to the values, and to their span at 0
+        if signed(lins[i]) * signed(lins[i + 1]) < 0:
+            # asymptotically stable on one side: the largest real part changes sign, a continuous
+            # function of the value; Brent's method finds its zero in a few linearizations (the
+            # Whipple bicycle's weave and capsize speeds: 8-10 each, against 35 by bisection)
+            transitions.append(float(scipy.optimize.brentq(lambda x: signed(at(x)), lo, hi, xtol=width,
+                                                           rtol=max(tol, 4 * np.finfo(float).eps))))
+            continue
+        for _ in range(200):  # neutrally stable on one side (real parts 0): bisection on `stable`
+            if hi - lo <= width:
                 break
             mid = 0.5 * (lo + hi)
             if at(mid).stable == lo_stable:
@@ -387,4 +492,5 @@ def stability_curve(system, steady: Callable[[float], Sequence], values, *, tol:
                 hi = mid
         transitions.append(0.5 * (lo + hi))
     return StabilityCurve(values=values, eigenvalues=eig, growth_rate=np.array([lin.growth_rate for lin in lins]),
-                          stable=stable, transitions=tuple(transitions))
+                          stable=stable, transitions=tuple(transitions), h=None if not methods else float(h),
+                          method_growth=method_growth)

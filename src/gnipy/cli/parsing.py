@@ -7,7 +7,7 @@ import math
 
 from .errors import UsageError
 
-__all__ = ["MAX_CONVERGENCE_COUNT", "MAX_STEPS", "check_positive", "parse_R0", "parse_methods", "parse_set",
+__all__ = ["MAX_CONVERGENCE_COUNT", "MAX_STEPS", "check_positive", "model_spec", "parse_R0", "parse_methods", "parse_set",
            "parse_vector", "prepare", "prepare_model", "step_counts"]
 
 #: Bounds of `gni convergence`: step sizes per study, and steps per run (int32 step counters).
@@ -65,7 +65,8 @@ def check_positive(option: str, value, kind: str = "number") -> None:
         raise UsageError(option, f"must be a positive {kind}, got {value!r}")
 
 
-def _model(name: str):
+def model_spec(name: str):
+    """The model MODEL names (a zoo name or a reference to the user's function), or a UsageError."""
     import gnipy
 
     try:
@@ -79,7 +80,7 @@ def prepare_model(model: str, set_items, q0_text, v0_text):
     model's defaults); returns `(spec, params, q0, v0)`."""
     import gnipy
 
-    spec = _model(model)
+    spec = model_spec(model)
     try:
         params = spec.resolve_params(parse_set(set_items))
     except gnipy.InputError as e:
@@ -96,7 +97,7 @@ def prepare(model: str, method: str, h, steps, t_final, set_items, q0_text, v0_t
     """Check the options of a run (`gni run`, `gni demo`); returns `(spec, params, q0, v0)`."""
     import gnipy
 
-    _model(model)
+    model_spec(model)
     if not gnipy.methods.is_method_name(method):
         raise UsageError("--method", f"unknown method {method!r} (known: {', '.join(gnipy.method_names())})")
     check_positive("--h", h)
