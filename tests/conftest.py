@@ -73,7 +73,8 @@ SLOW_FILES = frozenset({
     "native/test_backend.py", "native/test_primitives.py",
     "control/test_optimal_control.py", "control/test_identification.py",
     "models/test_group_models.py", "models/test_rolling_ball.py", "models/test_default_methods.py",
-    "models/test_decisive_models.py", "models/test_whipple_bicycle.py", "test_symbolic.py", "test_holonomic.py",
+    "models/test_decisive_models.py", "models/test_whipple_bicycle.py", "models/test_rattleback.py",
+    "test_symbolic.py", "test_holonomic.py",
     "experiments", "cli",
 })
 

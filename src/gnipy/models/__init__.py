@@ -1,7 +1,8 @@
 """The problem zoo: classic nonholonomic systems with exact solutions or invariants.
 
-Not in the zoo's table (build it from its module): :mod:`gnipy.models.whipple_bicycle`, the
-Carvallo–Whipple bicycle of the Meijaard 2007 benchmark, with a holonomic constraint."""
+Not in the zoo's table (build them from their modules), both with a holonomic constraint:
+:mod:`gnipy.models.whipple_bicycle`, the Carvallo–Whipple bicycle of the Meijaard 2007 benchmark;
+:mod:`gnipy.models.rattleback`, Kane and Levinson's rattleback, whose spin reverses."""
 
 from . import (  # noqa: F401  (registration)
     chaplygin_sleigh,
