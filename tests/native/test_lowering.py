@@ -163,6 +163,18 @@ def test_runtime_indices_gather_dynamic_slice():
                              a[:, k % 5]), x, np.int32(i))
 
 
+def test_scatter_at_known_positions_with_drop_mode():
+    """`x.at[i].set(y)` and `.add` (XLA's FILL_OR_DROP scatter) at positions known when the code is
+    made, a window out of range included: XLA drops such a window whole, and so does the native code."""
+    x = np.arange(12.0).reshape(3, 4)
+
+    def f(a, y):
+        return (a.at[1].set(y[:4]), a.at[0, 2].add(y[0]), a.at[:, 1].set(y[:3]), a.at[5].set(y[:4]),
+                jnp.zeros(6).at[jnp.array([0, 2, 9])].set(y[:3]))
+
+    _assert_native_equals_xla(f, x, np.array([-1.5, 2.0, 0.25, 7.0]))
+
+
 def test_while_cond_scan_loops():
     def f(x, n):
         def body(c):

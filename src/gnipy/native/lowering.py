@@ -404,14 +404,18 @@ def _scatter(fn, eqn, ins):
     if not all(isinstance(i, Const) for i in ind.flat):
         raise Unsupported("scatter at runtime positions")
     dn = eqn.params["dimension_numbers"]
-    if dn.operand_batching_dims or "FILL_OR_DROP" in str(eqn.params["mode"]):
+    if dn.operand_batching_dims:
         raise Unsupported("scatter mode")
+    # FILL_OR_DROP (what `x.at[i].set(y)` makes): a window not wholly inside the operand is dropped;
+    # with the positions known here that is decided now, and the windows inside are the plain scatter's
+    drop = "FILL_OR_DROP" in str(eqn.params["mode"])
     out = x.copy()
     uwd, iwd, sdims = dn.update_window_dims, dn.inserted_window_dims, dn.scatter_dims_to_operand_dims
     scatter_dims = [d for d in range(upd.ndim) if d not in uwd]
     window_operand_dims = [d for d in range(x.ndim) if d not in iwd]
     add = eqn.primitive.name != "scatter"
-    for u in np.ndindex(upd.shape):
+
+    def position(u):
         g = tuple(u[d] for d in scatter_dims)
         vec = ind[g] if ind.ndim > 1 else ind
         vec = [int(v.value) for v in np.asarray(vec, dtype=object).reshape(-1)]
@@ -420,9 +424,15 @@ def _scatter(fn, eqn, ins):
             full[d] = vec[k]
         for j, d in enumerate(window_operand_dims):
             full[d] += u[uwd[j]]
-        if any(not 0 <= full[d] < x.shape[d] for d in range(x.ndim)):
-            raise Unsupported("scatter out of bounds")
-        full = tuple(full)
+        return g, tuple(full), all(0 <= full[d] < x.shape[d] for d in range(x.ndim))
+
+    positions = [position(u) for u in np.ndindex(upd.shape)]
+    outside = {g for g, _, inside in positions if not inside}
+    if outside and not drop:
+        raise Unsupported("scatter out of bounds")
+    for u, (g, full, _) in zip(np.ndindex(upd.shape), positions):
+        if g in outside:  # FILL_OR_DROP drops a window that is not wholly inside
+            continue
         out[full] = fn.binary("add", out[full], upd[u]) if add else upd[u]
     return [out]
 
