@@ -107,6 +107,7 @@ def test_methods_maps_are_reported_against_the_motions_stability(study):
     (["--over", "spin=2:1:3"], "--over", "increasing"),
     (["--over", "spin"], "--over", "expected NAME="),
     (["--over", "spin=1:2:3", "--set", "spin=2"], "--set", "set it there"),
+    (["--over", "spin=1:2:3", "--set", "mass=2"], "--set", "unknown parameter 'mass'"),
     (["--over", "spin=1:2:3", "--methods", "dla", "--h", "-1"], "--h", ""),
     (["--over", "spin=1:2:3", "--methods", "no-such-method"], "--methods", "no-such-method"),
 ])

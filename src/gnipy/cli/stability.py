@@ -61,7 +61,8 @@ def stability(
     At each value the steady motion (q, v) is linearized with JAX derivatives of the
     Lagrange–d'Alembert equations on the constraint manifold (gnipy.analysis.linearize: ignorable
     coordinates dropped, conserved quantities' zero eigenvalues left out); where the stability
-    changes between two values, the change is located by bisection. Prints the changes and the
+    changes between two values, the change is located to 1e-10 relative (Brent's method on the
+    largest real part, or bisection where one side is neutrally stable). Prints the changes and the
     stable ranges (for the benchmark bicycle, its weave and capsize speeds: Meijaard et al. 2007);
     with --methods, the growth rate of each method's one-step map (log|μ|/h, its hidden state
     included) at each value and where the method keeps the motion's stability. Writes
@@ -87,9 +88,11 @@ def stability(
         fixed = parse_set(set_)
         if axis.name in fixed:
             raise UsageError("--set", f"{axis.name!r} is the parameter of --over; set it there")
+        import gnipy
+
         try:
             params = spec.resolve_params(fixed)
-        except Exception as e:  # InputError: unknown name or bad value
+        except gnipy.InputError as e:  # an unknown name or a bad value
             raise UsageError("--set", str(e).partition(":")[2].strip()) from None
         probe = spec.build(params)
         if probe.group is not None:
@@ -107,8 +110,6 @@ def stability(
             p = dict(params, **{axis.name: value})
             dq, dv = spec.initial_condition(p)
             return spec.build(p), (dq if q_fixed is None else q_fixed), (dv if v_fixed is None else v_fixed)
-
-        import gnipy
 
         try:
             with Progress("stability", unit="linearizations") as progress:
