@@ -65,6 +65,8 @@ that calls :func:`from_sympy` each time).
 from __future__ import annotations
 
 import functools
+import math
+import random
 import re
 from collections.abc import Mapping, Sequence
 from typing import Any
@@ -426,12 +428,15 @@ def _is_zero(sp, expr) -> bool:
     if expr == 0:
         return True
     symbols = sorted(expr.free_symbols, key=str)
-    rng = __import__("random").Random(20071955)
+    rng = random.Random(20071955)
     for _ in range(3):
         point = {x: sp.Float(rng.uniform(0.5, 1.5), 30) for x in symbols}
         value = expr.evalf(30, subs=point)
-        if not value.is_number or abs(complex(value)) > 1e-20:
+        if not value.is_number:
             return False
+        z = complex(value)
+        if not (math.isfinite(z.real) and math.isfinite(z.imag)) or abs(z) > 1e-20:
+            return False  # a value that is not small, or none (0/0 at that point): not shown to be zero
     return True
 
 

@@ -32,8 +32,7 @@ between neighbouring samples cancel and are not seen: sample finely enough).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-import dataclasses
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import jax
 import jax.numpy as jnp
@@ -187,11 +186,11 @@ def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
     system = system.without_metadata()
 
     state = jnp.concatenate([q, v])
-    off, field, mu = (np.asarray(x) for x in _at_point(system, state))
+    off, flow, mu = (np.asarray(x) for x in _at_point(system, state))
     off = float(np.max(np.abs(off)))
     if off > tol * scale:
         raise InputError(f"linearize: (q, v) is not on the constraints: residual {off:.3g}")
-    acceleration = field[n:]
+    acceleration = flow[n:]
     if np.max(np.abs(acceleration)) > tol * scale:
         i = int(np.argmax(np.abs(acceleration)))
         raise InputError(f"linearize: (q, v) is not a steady motion: the velocity {system.velocities[i]!r} changes "
@@ -306,8 +305,8 @@ def discrete_linearization(system, method, q, v, h: float, *, warmup: int = 1) -
     when a constraint force holds a potential (the Whipple bicycle's contact forces hold its
     weight), reached in one step; linearized at its start, an O(h) error in a multiplier μ is an
     O(1) error in log(μ)/h (measured on the bicycle at 5 m/s: exponents −13.07 and −2.74 ± 5.40i
-    for the continuous −14.08 and −0.78 ± 4.46i, at h = 0.01 and 0.005 alike). A method that keeps the motion's stability has
-    exponents log(μ)/h near the continuous eigenvalues, converging at its order (compare with
+    for the continuous −14.08 and −0.78 ± 4.46i, at h = 0.01 and 0.005 alike). A method that keeps
+    the motion's stability has exponents log(μ)/h near the continuous eigenvalues, converging at its order (compare with
     :func:`linearize` through :meth:`DiscreteLinearization.nearest`); a real part of the wrong
     sign where the continuous one is 0 is numerical damping or growth.
 
@@ -372,7 +371,7 @@ class StabilityCurve:
     stable: np.ndarray
     transitions: tuple[float, ...]
     h: float | None = None
-    method_growth: dict = dataclasses.field(default_factory=dict)
+    method_growth: dict = field(default_factory=dict)
 
     def method_stable(self, method: str) -> np.ndarray:
         """Where `method`'s map is stable at step :attr:`h`: its growth rate at most

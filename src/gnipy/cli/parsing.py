@@ -7,8 +7,8 @@ import math
 
 from .errors import UsageError
 
-__all__ = ["MAX_CONVERGENCE_COUNT", "MAX_STEPS", "check_positive", "model_spec", "parse_R0", "parse_methods", "parse_set",
-           "parse_vector", "prepare", "prepare_model", "step_counts"]
+__all__ = ["MAX_CONVERGENCE_COUNT", "MAX_STEPS", "check_positive", "model_spec", "parse_R0", "parse_methods",
+           "parse_set", "parse_vector", "prepare", "prepare_model", "step_counts"]
 
 #: Bounds of `gni convergence`: step sizes per study, and steps per run (int32 step counters).
 MAX_CONVERGENCE_COUNT = 1000
