@@ -1,25 +1,37 @@
 """Shared test configuration: float64 JAX (gnipy enables it on import), and XLA's programs compiled
-without LLVM's optimization passes (:data:`SUITE_XLA_FLAGS`)."""
+for compile time rather than run time (:data:`SUITE_XLA_FLAGS`)."""
 
 import os
 
 #: The XLA flags of the test processes (this one, pytest-xdist's workers and every process a test
-#: starts: the doc pages, the CLI's subprocesses, dask's workers): LLVM's optimization passes off.
-#: Most of the suite's time is XLA compiling programs that then run a few hundred steps; at -O0
-#: they compile about a quarter faster and run about twice slower (measured on the 2-core machine:
-#: the first call of the rolling ball 3.06 → 2.22 s, of the Chaplygin top 6.03 → 4.27 s; the suite
-#: 16 min 46 s → 12 min 34 s). The programs users run keep XLA's default (-O2), which rounds some
-#: operations differently (fused multiply-adds: runs of 200 steps agree to ≤ 4e-15):
-#: tests/test_compiled_as_shipped.py runs one model of each structure with each family of solves
-#: compiled both ways and holds them equal to round-off, and `GNIPY_TEST_SHIPPED_XLA=1 pytest`
-#: runs the whole suite as shipped.
-SUITE_XLA_FLAGS = "--xla_backend_optimization_level=0"
+#: starts: the doc pages, the CLI's subprocesses, dask's workers). Most of the suite's time is XLA
+#: compiling programs that then run a few hundred steps, so the flags trade run time for compile
+#: time; none changes what a program computes except the first (measured on the 2-core machine):
+#:
+#: - LLVM's optimization passes off: programs compile about a quarter faster and run about twice
+#:   slower (the first call of the rolling ball 3.06 → 2.22 s, of the Chaplygin top 6.03 → 4.27 s;
+#:   the suite 16 min 46 s → 12 min 34 s). The programs users run keep XLA's default (-O2), which
+#:   rounds some operations differently (fused multiply-adds: runs of 200 steps agree to ≤ 4e-15):
+#:   tests/test_compiled_as_shipped.py runs one model of each structure with each family of solves
+#:   compiled both ways and holds them equal to round-off, and `GNIPY_TEST_SHIPPED_XLA=1 pytest`
+#:   runs the whole suite as shipped;
+#: - LLVM's code generation in one piece rather than split into parallel parts (the split costs
+#:   CPU that the two workers already use): a process running the rolling ball's and the Chaplygin
+#:   top's first calls 5.5 → 5.05 s of CPU;
+#: - two HLO passes off that only move computations (no arithmetic changes): hoisting what a loop
+#:   does not change out of the loop, and moving reshapes across elementwise operations. The
+#:   bicycle's gni-trapezoid program (36,000 HLO instructions) compiles in 16 s instead of 25 s;
+#:   the two first calls above, 4.1 s of CPU instead of 4.7 s.
+SUITE_XLA_FLAGS = (
+    "--xla_backend_optimization_level=0",
+    "--xla_cpu_parallel_codegen_split_count=1",
+    "--xla_disable_hlo_passes=while-loop-invariant-code-motion,reshape-mover",
+)
 if os.environ.get("GNIPY_TEST_SHIPPED_XLA", "").strip() in ("", "0"):
     # before the first computation: XLA reads the flags when JAX starts its backend (importing gnipy
     # starts none: tests/test_compiled_as_shipped.py checks it)
-    _flags = os.environ.get("XLA_FLAGS", "")
-    if SUITE_XLA_FLAGS not in _flags.split():
-        os.environ["XLA_FLAGS"] = f"{_flags} {SUITE_XLA_FLAGS}".strip()
+    _flags = os.environ.get("XLA_FLAGS", "").split()
+    os.environ["XLA_FLAGS"] = " ".join([*_flags, *(f for f in SUITE_XLA_FLAGS if f not in _flags)])
 
 #: JAX's persistent compilation cache, shared by every process of the session: the pytest-xdist
 #: workers, the doc pages' processes and the `gni` commands tests start. The suite compiles the
@@ -74,6 +86,7 @@ SLOW_FILES = frozenset({
     "control/test_optimal_control.py", "control/test_identification.py",
     "models/test_group_models.py", "models/test_rolling_ball.py", "models/test_default_methods.py",
     "models/test_decisive_models.py", "models/test_whipple_bicycle.py", "models/test_rattleback.py",
+    "models/test_rolling_disk.py", "models/test_differential_drive.py",
     "test_symbolic.py", "test_holonomic.py",
     "experiments", "cli",
 })

@@ -23,6 +23,9 @@ from gnipy.errors import InputError, MethodError
 from gnipy.holonomic import HOLONOMIC_METHODS, affine_part
 from gnipy.models.chaplygin_sleigh import exact_body_velocities, exact_heading
 
+#: numerics, and the verdicts at the saved nodes: simulate checks the saved nodes only (tests/conftest.py)
+CHECK_EVERY_NODE = False
+
 G_ACC, LENGTH = 9.81, 1.0
 
 

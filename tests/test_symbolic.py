@@ -28,6 +28,9 @@ import sympy.physics.mechanics as me
 
 import gnipy
 
+#: numerics, and the verdicts at the saved nodes: simulate checks the saved nodes only (tests/conftest.py)
+CHECK_EVERY_NODE = False
+
 T = me.dynamicsymbols._t
 
 

@@ -57,9 +57,10 @@ def simulate(
             Default: for a system the zoo built, its model's measured default
             (`gnipy.get_model(system.model).default_method`, shown by `gni models`); for other
             systems (a System written by hand, whatever its `name`) `"sgni-trapezoid"` (`gnipy.registry.FALLBACK_METHOD`),
-            the method that qualifies on every zoo model by the atlas's rule (`gni-trapezoid` fails it
-            on the Chaplygin sleighs and Suslov), or the next of `gnipy.registry.FALLBACK_METHODS`
-            that can run the system.
+            the method that qualifies on 16 of the 17 zoo models by the atlas's rule (`gni-trapezoid`
+            fails it on the Chaplygin sleighs, Suslov and the differential-drive robot; the sgni let
+            the robot's heading drift from its wheels' angles), or the next of
+            `gnipy.registry.FALLBACK_METHODS` that can run the system.
         q0, v0: the initial coordinates and velocity (default: the system's documented ones); on
             $\\mathbb{R}^n \\times G$, `q0` holds x and `v0` the velocity $(\\dot x, \\xi)$.
             Arrays with a leading batch axis, (B, n) and (B, N), run B trajectories at once.

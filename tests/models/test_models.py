@@ -15,7 +15,8 @@ import pytest
 
 import gnipy
 from gnipy.models import chaplygin_sleigh, knife_edge
-from gnipy.models.elementary import sine_defect_ratio, sinc, versine_ratio
+from gnipy.models.elementary import (cosh_ratio, gudermannian, log_cosh_ratio, sine_defect_ratio, sinc,
+                                     versine_ratio)
 
 #: numerics, not verdicts: simulate checks the saved nodes only (tests/conftest.py)
 CHECK_EVERY_NODE = False
@@ -173,6 +174,20 @@ def test_elementary_ratios():
         series += term
         term = -term * x**2 / ((2 * k + 4) * (2 * k + 5))
     assert sine_defect_ratio(x) == pytest.approx(series, rel=1e-12)
+
+
+def test_hyperbolic_ratios():
+    """cosh c0/cosh s and log(cosh s/cosh c0) against the direct forms where those do not overflow
+    (and finite where they would), gd(s) against the integral of sech (SciPy's quad)."""
+    from scipy.integrate import quad
+
+    c0, s = np.array([-3.0, 0.0, 0.4, 5.0]), np.array([2.0, -1.5, 0.0, 20.0])
+    assert cosh_ratio(c0, s) == pytest.approx(np.cosh(c0) / np.cosh(s), rel=1e-14)
+    assert log_cosh_ratio(s, c0) == pytest.approx(np.log(np.cosh(s) / np.cosh(c0)), rel=1e-13, abs=1e-15)
+    assert np.isfinite(cosh_ratio(800.0, 900.0)) and cosh_ratio(800.0, 900.0) == pytest.approx(np.exp(-100.0))
+    assert log_cosh_ratio(900.0, 800.0) == pytest.approx(100.0, rel=1e-15)
+    for x in (-4.0, -0.3, 0.0, 1.0, 7.0):
+        assert gudermannian(x) == pytest.approx(quad(lambda u: 1 / np.cosh(u), 0.0, x, epsabs=1e-14)[0], abs=1e-13)
 
 
 @pytest.mark.parametrize("name", EXACT_MODELS)

@@ -22,6 +22,9 @@ from scipy.optimize import brentq
 import gnipy
 from gnipy.models import whipple_bicycle as wb
 
+#: numerics and the verdicts at the saved nodes: simulate checks the saved nodes only (tests/conftest.py)
+CHECK_EVERY_NODE = False
+
 PUB = {k: np.array(v) for k, v in wb.PUBLISHED_MATRICES.items()}
 G = wb.BENCHMARK["g"]
 

@@ -47,6 +47,7 @@ import numpy as np
 
 from ..system import System
 from ..registry import ModelSpec, register
+from .elementary import cosh_ratio, gudermannian
 
 __all__ = ["MODEL", "exact_body_velocities", "exact_heading", "body_velocities"]
 
@@ -98,16 +99,6 @@ def _constants(p, q0, v0):
     return u0, w0, U, kappa
 
 
-def _cosh_ratio(c0, s):
-    """$\\cosh c_0/\\cosh s$ without overflow."""
-    c0, s = abs(c0), np.abs(s)
-    return np.exp(c0 - s) * (1 + np.exp(-2 * c0)) / (1 + np.exp(-2 * s))
-
-
-def _gd(s):
-    return 2 * np.arctan(np.tanh(0.5 * s))
-
-
 def exact_body_velocities(p, q0, v0, t):
     """Exact forward speed $u(t)$ and angular velocity $\\omega(t)$, arrays (T,), from t = 0.
 
@@ -119,7 +110,7 @@ def exact_body_velocities(p, q0, v0, t):
         return u0 + 0 * t, w0 + 0 * t
     c0 = np.arctanh(u0 / U)
     s = kappa * t + c0
-    return U * np.tanh(s), w0 * _cosh_ratio(c0, s)
+    return U * np.tanh(s), w0 * cosh_ratio(c0, s)
 
 
 def exact_heading(p, q0, v0, t):
@@ -130,7 +121,7 @@ def exact_heading(p, q0, v0, t):
     if w0 == 0.0 or kappa == 0.0:
         return th0 + w0 * t
     c0 = np.arctanh(u0 / U)
-    return th0 + w0 * np.cosh(c0) / kappa * (_gd(kappa * t + c0) - _gd(c0))
+    return th0 + w0 * np.cosh(c0) / kappa * (gudermannian(kappa * t + c0) - gudermannian(c0))
 
 
 def _energy(p, q, v):

@@ -58,6 +58,11 @@ DEFAULT_METHODS: dict[str, tuple[str, str]] = {
         "; next suzuki4-gni-trapezoid 6.1e-09, yoshida4-gni-trapezoid 2.8e-07"
         "; disqualified: gni-euler-a, gni-euler-b, euler-a, euler-b",
     ),
+    "differential-drive": (
+        "dla",
+        "best error against the reference among the methods without warnings, ties within a factor 1.5 or below 1e-09 broken by the rule (h = 0.01, T = 1000, error over t <= 200): 1.9e-02, invariants to 3.9e-05"
+        "; disqualified: gni-euler-a, gni-euler-b, gni-trapezoid, gni-midpoint, sgni-trapezoid, sgni-midpoint, discrete-gradient, yoshida4-gni-trapezoid, suzuki4-gni-trapezoid",
+    ),
     "knife-edge": (
         "kahanli6-mp",
         "best error against the reference among the methods without warnings, ties within a factor 1.5 or below 1e-09 broken by the rule (h = 0.01, T = 1000, error over t <= 200): 8.0e-11, invariants to 6.6e-10"
@@ -80,6 +85,12 @@ DEFAULT_METHODS: dict[str, tuple[str, str]] = {
         "suzuki4-gni-trapezoid",
         "best error against the reference among the methods without warnings, ties within a factor 1.5 or below 1e-09 broken by the rule (h = 0.01, T = 1000, error over t <= 200): 1.0e-04, invariants to 1.6e-07"
         "; next yoshida4-gni-trapezoid 7.0e-03, discrete-gradient 1.5e-01",
+    ),
+    "rolling-disk": (
+        "suzuki4-gni-trapezoid",
+        "best error against the reference among the methods without warnings, ties within a factor 1.5 or below 1e-09 broken by the rule (h = 0.01, T = 1000, error over t <= 200): 2.9e-09, invariants to 2.9e-12"
+        "; next yoshida4-gni-trapezoid 2.2e-08, discrete-gradient 5.5e-04"
+        "; disqualified: gni-euler-a, gni-euler-b",
     ),
     "rotating-table-ball": (
         "kahanli6-mp",

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["sinc", "versine_ratio", "sine_defect_ratio"]
+__all__ = ["sinc", "versine_ratio", "sine_defect_ratio", "cosh_ratio", "log_cosh_ratio", "gudermannian"]
 
 
 def sinc(x):
@@ -37,3 +37,23 @@ def sine_defect_ratio(x):
     xl = np.where(small, 1.0, x)
     direct = (xl - np.sin(xl)) / xl**3
     return np.where(small, series, direct)
+
+
+def cosh_ratio(c0, s):
+    """$\\cosh c_0/\\cosh s$ without overflow (for large $|c_0|$, $|s|$)."""
+    c0, s = np.abs(np.asarray(c0, dtype=np.float64)), np.abs(np.asarray(s, dtype=np.float64))
+    return np.exp(c0 - s) * (1 + np.exp(-2 * c0)) / (1 + np.exp(-2 * s))
+
+
+def log_cosh_ratio(s, c0):
+    """$\\log(\\cosh s/\\cosh c_0)$ without overflow."""
+    def log_cosh(x):
+        x = np.abs(np.asarray(x, dtype=np.float64))
+        return x + np.log1p(np.exp(-2 * x)) - np.log(2.0)
+
+    return log_cosh(s) - log_cosh(c0)
+
+
+def gudermannian(s):
+    """The Gudermannian $\\operatorname{gd}(s) = 2\\arctan\\tanh(s/2) = \\int_0^s \\operatorname{sech}$."""
+    return 2 * np.arctan(np.tanh(0.5 * np.asarray(s, dtype=np.float64)))
