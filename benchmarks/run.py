@@ -50,6 +50,11 @@ What is measured (all gnipy runs in float64, the step size is h = 0.01 unless sa
 9. **startup** -- what `import gnipy` (net of the interpreter, target ≤ 1.5 s) and the `gni`
    command (``gni --help``, ``gni methods``) cost in fresh processes, best of 5, and which optional
    packages `import gnipy` loads (none; issue 30, :mod:`benchmarks.startup`).
+10. **bicycle** -- the Whipple bicycle written once (SymBRiM's, a `sympy.physics.mechanics` System)
+   in gnipy (`from_sympy`, dla and sgni-trapezoid) and as PyDy users simulate it (Kane's equations,
+   PyDy's Cython right-hand side, SciPy's DOP853 at matched accuracy): error, time per simulated
+   second, energy and front-contact drift over 100 s (issue 32, :mod:`benchmarks.bicycle`; needs
+   the `pydy` and `cython` packages).
 6. **GPU** -- if JAX sees a GPU, sections 1 and 2 are run on it as well (the CPU rows are always
    run on the CPU device); the subprocess sections (3, 4) run on the CPU (``JAX_PLATFORMS=cpu``).
 
@@ -124,7 +129,7 @@ QUICK = Config(
     accuracy_T=(100.0,), accuracy_h=(0.01,), dop_reps=3, idle_sample_s=0.3,
 )
 
-SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy", "native", "monitor", "startup")
+SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy", "native", "monitor", "startup", "bicycle")
 
 #: (case, method) of section 1; the case names are those of benchmarks.numpy_gni.
 PER_STEP_CASES = (
@@ -1083,6 +1088,9 @@ def targets(results: dict) -> list[list[str]]:
     from benchmarks.startup import startup_targets
 
     rows += startup_targets(results, _how_far, g)
+    from benchmarks.bicycle import bicycle_targets
+
+    rows += bicycle_targets(results, _how_far, g)
     return rows
 
 
@@ -1166,6 +1174,12 @@ def _bench_startup(cfg, rep, results, load) -> None:
     bench_startup(cfg, rep, results, load)
 
 
+def _bench_bicycle(cfg, rep, results, load) -> None:
+    from benchmarks.bicycle import bench_bicycle
+
+    bench_bicycle(cfg, rep, results, load)
+
+
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = parse_args(argv)
@@ -1206,6 +1220,7 @@ def main(argv=None) -> int:
         "native": lambda load: _bench_native(cfg, rep, results, load),
         "monitor": lambda load: _bench_monitor(cfg, rep, results, load),
         "startup": lambda load: _bench_startup(cfg, rep, results, load),
+        "bicycle": lambda load: _bench_bicycle(cfg, rep, results, load),
     }
     for key in SECTIONS:
         if key not in args.sections:

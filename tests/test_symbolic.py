@@ -370,11 +370,9 @@ def _symbrim_whipple():
     """SymBRiM's Whipple bicycle as a sympy.physics.mechanics System, gravity along −ground.normal,
     with the benchmark's parameters in Moore's set (J. K. Moore, *Human control of a bicycle*, UC
     Davis 2012: the relations of `dtk.bicycle.benchmark_to_moore`)."""
-    import math
-
     import symbrim as sb
 
-    from gnipy.models.whipple_bicycle import BENCHMARK as b
+    from gnipy.models.whipple_bicycle import moore_parameters
 
     bicycle = sb.WhippleBicycle("bicycle")
     bicycle.front_frame = sb.RigidFrontFrame("front_frame")
@@ -388,26 +386,7 @@ def _symbrim_whipple():
     system = bicycle.to_system()
     g = sp.Symbol("g")
     system.apply_uniform_gravity(-g * bicycle.ground.get_normal(bicycle.ground.origin))
-    lam = b["lam"]
-    c, s = math.cos(lam), math.sin(lam)
-    d1 = c * (b["c"] + b["w"] - b["rR"] * math.tan(lam))
-    d3 = -c * (b["c"] - b["rF"] * math.tan(lam))
-    l4 = (b["zH"] + b["rF"]) * c + (b["xH"] - b["w"]) * s
-    rot = np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])  # the frames' inertia, rotated by λ
-    IB = rot @ np.array([[b["IBxx"], 0, b["IBxz"]], [0, b["IByy"], 0], [b["IBxz"], 0, b["IBzz"]]]) @ rot.T
-    IH = rot @ np.array([[b["IHxx"], 0, b["IHxz"]], [0, b["IHyy"], 0], [b["IHxz"], 0, b["IHzz"]]]) @ rot.T
-    values = {
-        "rear_frame_body_mass": b["mB"], "rear_frame_ixx": IB[0, 0], "rear_frame_iyy": IB[1, 1],
-        "rear_frame_izz": IB[2, 2], "rear_frame_izx": IB[2, 0], "rear_frame_d1": d1,
-        "rear_frame_l1": b["xB"] * c - b["zB"] * s - b["rR"] * s, "rear_frame_l2": b["xB"] * s + b["zB"] * c + b["rR"] * c,
-        "front_frame_body_mass": b["mH"], "front_frame_ixx": IH[0, 0], "front_frame_iyy": IH[1, 1],
-        "front_frame_izz": IH[2, 2], "front_frame_izx": IH[2, 0], "front_frame_d3": d3,
-        "front_frame_d2": (b["rR"] + d1 * s - b["rF"] + d3 * s) / c,
-        "front_frame_l3": (b["xH"] - b["w"] - l4 * s) / c, "front_frame_l4": l4,
-        "rear_wheel_mass": b["mR"], "rear_wheel_ixx": b["IRxx"], "rear_wheel_iyy": b["IRyy"], "rear_wheel_r": b["rR"],
-        "front_wheel_mass": b["mF"], "front_wheel_ixx": b["IFxx"], "front_wheel_iyy": b["IFyy"], "front_wheel_r": b["rF"],
-        "g": b["g"],
-    }
+    values = moore_parameters()
     return gnipy.from_sympy(system, params={sp.Symbol(k): float(v) for k, v in values.items()}, name="symbrim-whipple")
 
 

@@ -60,7 +60,7 @@ import numpy as np
 from ..compilation import jit
 from ..system import System
 
-__all__ = ["BENCHMARK", "BASU_MANDAL_TABLE1", "COORDINATES", "PUBLISHED_MATRICES", "build", "upright",
+__all__ = ["BENCHMARK", "BASU_MANDAL_TABLE1", "moore_parameters", "COORDINATES", "PUBLISHED_MATRICES", "build", "upright",
            "benchmark_matrices", "contact_points", "from_basu_mandal", "basu_mandal_accelerations", "riding"]
 
 #: Meijaard 2007 Table 1: the benchmark bicycle (values exact); lam = π/10 the steer axis tilt
@@ -289,6 +289,37 @@ def _benchmark_matrices(core):
     K2 = -M @ J1[:, :2] - gK0
     C1 = -M @ J1[:, 2:]
     return {"M": M, "C1": C1, "K0": K0, "K2": K2}
+
+
+def moore_parameters(params: dict | None = None) -> dict[str, float]:
+    """The benchmark's parameters (`params` over :data:`BENCHMARK`) in Moore's set, as SymBRiM's
+    Whipple bicycle names them (`rear_frame_d1`, `front_frame_l4`, ...; J. K. Moore, *Human control
+    of a bicycle*, UC Davis 2012: the relations of `dtk.bicycle.benchmark_to_moore`), the frames'
+    inertia rotated by the steer axis tilt λ. Checked by SymBRiM's bicycle reproducing Basu-Mandal's
+    Table 1 (tests/test_symbolic.py)."""
+    b = dict(BENCHMARK)
+    b.update(params or {})
+    lam = b["lam"]
+    c, s = math.cos(lam), math.sin(lam)
+    d1 = c * (b["c"] + b["w"] - b["rR"] * math.tan(lam))
+    d3 = -c * (b["c"] - b["rF"] * math.tan(lam))
+    l4 = (b["zH"] + b["rF"]) * c + (b["xH"] - b["w"]) * s
+    rot = np.array([[c, 0.0, -s], [0.0, 1.0, 0.0], [s, 0.0, c]])
+    IB = rot @ np.array([[b["IBxx"], 0, b["IBxz"]], [0, b["IByy"], 0], [b["IBxz"], 0, b["IBzz"]]]) @ rot.T
+    IH = rot @ np.array([[b["IHxx"], 0, b["IHxz"]], [0, b["IHyy"], 0], [b["IHxz"], 0, b["IHzz"]]]) @ rot.T
+    values = {
+        "rear_frame_body_mass": b["mB"], "rear_frame_ixx": IB[0, 0], "rear_frame_iyy": IB[1, 1],
+        "rear_frame_izz": IB[2, 2], "rear_frame_izx": IB[2, 0], "rear_frame_d1": d1,
+        "rear_frame_l1": b["xB"] * c - b["zB"] * s - b["rR"] * s, "rear_frame_l2": b["xB"] * s + b["zB"] * c + b["rR"] * c,
+        "front_frame_body_mass": b["mH"], "front_frame_ixx": IH[0, 0], "front_frame_iyy": IH[1, 1],
+        "front_frame_izz": IH[2, 2], "front_frame_izx": IH[2, 0], "front_frame_d3": d3,
+        "front_frame_d2": (b["rR"] + d1 * s - b["rF"] + d3 * s) / c,
+        "front_frame_l3": (b["xH"] - b["w"] - l4 * s) / c, "front_frame_l4": l4,
+        "rear_wheel_mass": b["mR"], "rear_wheel_ixx": b["IRxx"], "rear_wheel_iyy": b["IRyy"], "rear_wheel_r": b["rR"],
+        "front_wheel_mass": b["mF"], "front_wheel_ixx": b["IFxx"], "front_wheel_iyy": b["IFyy"], "front_wheel_r": b["rF"],
+        "g": b["g"],
+    }
+    return {k: float(v) for k, v in values.items()}
 
 
 def _basu_mandal_coordinates(q, p):
