@@ -24,7 +24,8 @@ error is at most gnipy's; times are the median of `reps` warm calls, per simulat
 energy error is over a long run (T_long), where the constraint residual of the front contact is
 read too.
 
-    python -m benchmarks.bicycle            # this section alone, printed
+    python -m benchmarks --sections bicycle     # this section (not in the default run: the [bench] extra)
+    python -m benchmarks.bicycle                # its numbers, printed
 """
 
 from __future__ import annotations
@@ -137,7 +138,7 @@ def measure(reps: int = 3, long: bool = True) -> dict:
 
     q0, v0 = initial_state(bicycle)
     names = list(bicycle.coordinates)
-    q_order = [names.index(sp.Symbol(str(s).replace("(t)", "")).name) for s in system.q]
+    q_order = [names.index(str(s).replace("(t)", "")) for s in system.q]
     u_order = [names.index(str(s).replace("(t)", "").replace("_u", "_q")) for s in system.u]
     x0 = np.concatenate([q0[q_order], v0[u_order]])
     nq = len(q_order)
@@ -230,7 +231,8 @@ def bench_bicycle(cfg, rep, results: dict, load) -> None:
         results["bicycle"] = m
         for method, r in m["gnipy"].items():
             rep.row(sec, [f"gnipy {method}, h = {H:g}", g(r["error"]), g(r["per_second"]), g(r["energy"]), g(r["phi"]),
-                          f"first call {g(r['first_s'])} s (compilation)"],
+                          f"first call {g(r['first_s'])} s (compilation); "
+                          + ("healthy" if r["healthy"] else "flagged by its run-time verdicts")],
                     f"gnipy {method}: error {g(r['error'])}, {g(r['per_second'])} s per simulated s")
         r = m["pydy"]
         rep.row(sec, [f"PyDy + DOP853, rtol = atol = {r['rtol']:.2g}", g(r["error"]), g(r["per_second"]), g(r["energy"]),

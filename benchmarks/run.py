@@ -54,7 +54,7 @@ What is measured (all gnipy runs in float64, the step size is h = 0.01 unless sa
    in gnipy (`from_sympy`, dla and sgni-trapezoid) and as PyDy users simulate it (Kane's equations,
    PyDy's Cython right-hand side, SciPy's DOP853 at matched accuracy): error, time per simulated
    second, energy and front-contact drift over 100 s (issue 32, :mod:`benchmarks.bicycle`; needs
-   the `pydy` and `cython` packages).
+   the `[bench]` extra, and runs only when named: ``--sections bicycle``).
 6. **GPU** -- if JAX sees a GPU, sections 1 and 2 are run on it as well (the CPU rows are always
    run on the CPU device); the subprocess sections (3, 4) run on the CPU (``JAX_PLATFORMS=cpu``).
 
@@ -130,6 +130,9 @@ QUICK = Config(
 )
 
 SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy", "native", "monitor", "startup", "bicycle")
+#: the sections a plain `python -m benchmarks` runs: all but the bicycle's, which needs the [bench]
+#: extra (PyDy, Cython) and about 5 minutes (its compilations alone take 2): ask for it by name
+DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s != "bicycle")
 
 #: (case, method) of section 1; the case names are those of benchmarks.numpy_gni.
 PER_STEP_CASES = (
@@ -1151,8 +1154,8 @@ def parse_args(argv):
     p = argparse.ArgumentParser(prog="python -m benchmarks", description="Run the gnipy benchmark suite (issue 5).")
     p.add_argument("--quick", action="store_true", help="smoke test (< 2 min): fewer steps and repetitions")
     p.add_argument("--out", default=str(REPO / "BENCHMARKS.md"), help="the Markdown report (default: %(default)s)")
-    p.add_argument("--sections", default=",".join(SECTIONS),
-                   help=f"comma-separated subset of {', '.join(SECTIONS)} (default: all)")
+    p.add_argument("--sections", default=",".join(DEFAULT_SECTIONS),
+                   help=f"comma-separated subset of {', '.join(SECTIONS)} (default: all but bicycle)")
     p.add_argument("--plain", action="store_true", help="plain-text console output (no rich tables)")
     args = p.parse_args(argv)
     args.sections = [s.strip() for s in args.sections.split(",") if s.strip()]

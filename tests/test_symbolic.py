@@ -27,6 +27,7 @@ import sympy as sp  # the `sympy` extra, installed with [test] (through [all])
 import sympy.physics.mechanics as me
 
 import gnipy
+from sympy_models import rolling_disk_system
 
 #: numerics, and the verdicts at the saved nodes: simulate checks the saved nodes only (tests/conftest.py)
 CHECK_EVERY_NODE = False
@@ -263,32 +264,6 @@ def test_mechanics_system_refusals():
         gnipy.from_sympy(pushed, params=spec.params)
 
 
-def _rolling_disk():
-    """A uniform thin disk rolling without slipping on a horizontal plane (the tilted rolling disk,
-    Euler's disk without dissipation): the contact point (x, y), heading ψ, lean θ from the
-    vertical and spin φ; speeds u = q̇, the contact point's two velocity components dependent."""
-    x, y, psi, th, phi = q = me.dynamicsymbols("x y psi theta phi")
-    u = me.dynamicsymbols("u_x u_y u_psi u_theta u_phi")
-    m, R, g = sp.symbols("m R g")
-    N = me.ReferenceFrame("N")
-    A = N.orientnew("A", "Axis", (psi, N.z))
-    B = A.orientnew("B", "Axis", (th, A.x))  # B.y the disk's axis, B.z from the contact to the centre
-    D = B.orientnew("D", "Axis", (phi, B.y))
-    D.set_ang_vel(N, u[2] * N.z + u[3] * A.x + u[4] * B.y)
-    O = me.Point("O")
-    O.set_vel(N, 0)
-    G = O.locatenew("C", x * N.x + y * N.y).locatenew("G", R * B.z)
-    G.set_vel(N, G.pos_from(O).dt(N).subs({qi.diff(T): ui for qi, ui in zip(q, u)}))
-    system = me.System(N, O)
-    system.add_bodies(me.RigidBody("disk", G, D, m, (me.inertia(B, m * R ** 2 / 4, m * R ** 2 / 2, m * R ** 2 / 4), G)))
-    system.q_ind, system.u_ind, system.u_dep = q, u[2:], u[:2]
-    system.kdes = [ui - qi.diff(T) for qi, ui in zip(q, u)]
-    slip = G.vel(N) + D.ang_vel_in(N).cross(-R * B.z)  # the velocity of the disk's material contact point
-    system.add_nonholonomic_constraints(slip.dot(N.x), slip.dot(N.y))
-    system.apply_uniform_gravity(-g * N.z)
-    return system
-
-
 def test_the_rolling_disk_converges_to_sympys_own_equations_of_motion():
     """The tilted rolling disk, built once as a sympy.physics.mechanics System: gnipy's GNI on the
     System that from_sympy makes (l = T − V and the constraints, differentiated by JAX) converges at
@@ -298,7 +273,7 @@ def test_the_rolling_disk_converges_to_sympys_own_equations_of_motion():
     (t = 1, a lean of 0.3 rad, spin 3 rad/s, heading rate 1 rad/s): slope 1.99."""
     from scipy.integrate import solve_ivp
 
-    system = _rolling_disk()
+    system = rolling_disk_system()
     params = {"m": 1.0, "R": 0.5, "g": 9.81}
     disk = gnipy.from_sympy(system, params=params, name="rolling-disk")
     assert disk.coordinates == ("x", "y", "psi", "theta", "phi") and not disk.is_affine

@@ -119,7 +119,7 @@ class ModelSpec:
 _REGISTRY: dict[str, ModelSpec] = {}
 
 #: The default for systems the atlas has not measured (a user's own System, a zoo model without a
-#: record): the method qualified on the most zoo models by the atlas's rule
+#: record): a method qualified on all but one of the zoo models by the atlas's rule
 #: (:attr:`gnipy.experiments.method_choice.MethodMeasurement.qualifies`: the long run completes,
 #: raises no run-time warning and keeps the energy and every registered invariant to 1e-2). Measured
 #: on 2026-11-26 (commit d0204c7) with the atlas's own measurement
@@ -148,7 +148,7 @@ _REGISTRY: dict[str, ModelSpec] = {}
 #: above); dla, next in FALLBACK_METHODS, is the one method that qualifies on all 17.
 FALLBACK_METHOD = "sgni-trapezoid"
 
-#: The methods qualified on the most zoo models (the measurements above), in the order the default tries
+#: The methods qualified on all the zoo models or all but one (the measurements above), in the order the default tries
 #: them: a system that the first cannot run (its :meth:`~gnipy.integrators.base.Integrator.check`
 #: raises :class:`~gnipy.MethodError`) gets the next that can (:func:`default_method_for`).
 FALLBACK_METHODS = ("sgni-trapezoid", "sgni-midpoint", "dla")

@@ -2,8 +2,8 @@
 gnipy.experiments.method_choice) works on its model: it accepts the model, and a long run raises
 no run-time warning and keeps the model's registered invariants (numbers from the invariants and the
 continuous reference; the long runs on one model per structure, LONG_RUN_MODELS).
-A system the atlas has not measured (a user's own System) gets the fallback qualified on the most
-models, 16 of 17 (gnipy.registry.FALLBACK_METHOD), or the next of FALLBACK_METHODS that can run it."""
+A system the atlas has not measured (a user's own System) gets the fallback, qualified on 16 of the 17
+models (gnipy.registry.FALLBACK_METHOD), or the next of FALLBACK_METHODS that can run it."""
 
 import warnings
 

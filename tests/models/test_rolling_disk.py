@@ -6,7 +6,7 @@
 - the upright disk rolling straight: gnipy.linearize's lean eigenvalues against the closed form
   λ² = (mgR − C(C + mR²)Ω²/A)/(A + mR²), stable above Ω_c = √(g/3R);
 - a nutating motion (the steady motion pushed in θ̇): the zoo's hand-written model and the same disk
-  written independently with sympy.physics.mechanics (tests/test_symbolic.py: contact-point
+  written independently with sympy.physics.mechanics (tests/sympy_models.py: contact-point
   coordinates, another Euler sequence, Kane's method integrated by SciPy's DOP853) follow the same
   centre of mass, and the energy is conserved.
 """
@@ -31,11 +31,12 @@ def test_registered_with_its_steady_default():
     q0, v0 = spec.initial_condition(spec.params)
     system = spec.system()
     assert np.max(np.abs(np.asarray(system.constraint_residual(np.array(q0), np.array(v0))))) < 1e-15
-    # the condition of a steady motion, from the documented formula
-    s = v0[4] + v0[3] * math.cos(q0[2])
-    th, om = rd.THETA0, rd.OMEGA0
-    assert s == pytest.approx((P["A"] * om**2 * math.sin(th) * math.cos(th) - P["m"] * P["g"] * P["R"] * math.cos(th))
-                              / ((P["C"] + P["m"] * P["R"] ** 2) * om * math.sin(th)), rel=1e-15)
+    # the documented condition of a steady motion holds for the default's lean, turning rate and spin
+    s, th, om = v0[4] + v0[3] * math.cos(q0[2]), q0[2], v0[3]
+    assert (th, om, v0[2]) == (rd.THETA0, rd.OMEGA0, 0.0)
+    m, R, A, C, g = (P[k] for k in ("m", "R", "A", "C", "g"))
+    condition = A * om**2 * math.sin(th) * math.cos(th) - (C + m * R**2) * s * om * math.sin(th) - m * g * R * math.cos(th)
+    assert abs(condition) < 1e-15
     assert rd.exact(P, q0, (*v0[:2], 1e-3, *v0[3:]), [0.0, 1.0]) is None  # not steady: no closed form
     with pytest.raises(ValueError, match="omega"):
         rd.steady_spin(P, 1.0, 0.0)
@@ -80,13 +81,13 @@ def test_upright_rolling_lean_eigenvalues_are_the_closed_form():
 
 
 def _sympy_disk_centre(q_s, u_s, t):
-    """The disk of tests/test_symbolic.py with the zoo's default parameters, integrated by SciPy's
+    """The disk of tests/sympy_models.py with the zoo's default parameters, integrated by SciPy's
     DOP853 from Kane's equations (System.form_eoms, rhs): its centre of mass at the times `t`, (T, 3)."""
     import sympy as sp
     from scipy.integrate import solve_ivp
-    from test_symbolic import _rolling_disk
+    from sympy_models import rolling_disk_system
 
-    system = _rolling_disk()
+    system = rolling_disk_system()
     system.form_eoms()
     symbols, values = sp.symbols("m R g"), [P["m"], P["R"], P["g"]]
     state = [*system.q, *system.u]
@@ -100,7 +101,7 @@ def _sympy_disk_centre(q_s, u_s, t):
 
 
 def test_nutation_matches_sympys_disk_and_keeps_the_energy():
-    """The zoo's disk against tests/test_symbolic.py's, written independently: the contact point
+    """The zoo's disk against tests/sympy_models.py's, written independently: the contact point
     (x_c, y_c), heading ψ, lean θ_s about the horizontal diameter A.x, spin φ_s about the axis B.y,
     centre = contact + R B.z. The zoo's axis is k = −B.y, so θ = π/2 + θ_s, φ = ψ, ψ_zoo = −φ_s."""
     R = P["R"]

@@ -56,10 +56,12 @@ from ..registry import ModelSpec, register
 from ..system import System
 from .elementary import cosh_ratio, gudermannian, log_cosh_ratio
 
-__all__ = ["MODEL", "exact_body_velocities", "exact_angles", "body_velocities", "energy", "wheel_heading"]
+__all__ = ["MODEL", "exact_body_velocities", "exact_angles", "body_velocities", "energy", "wheel_heading",
+           "rolling_velocity"]
 
 COORDINATES = ("x", "y", "phi", "theta_R", "theta_L")
 PARAMS = {"m_c": 1.0, "I_c": 0.05, "d": 0.1, "b": 0.15, "r": 0.05, "m_w": 0.1, "I_w": 1.25e-4, "I_m": 6.25e-5}
+#: the default initial condition's forward speed (m/s) and turning rate (rad/s)
 U0, OMEGA0 = 0.5, 2.0
 
 

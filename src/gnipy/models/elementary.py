@@ -1,4 +1,5 @@
-"""Elementary functions that closed-form solutions need, safe at small arguments.
+"""Elementary functions that closed-form solutions need, safe at small arguments (the ratios of sines)
+and at large ones (the ratios of hyperbolic cosines, which overflow when written directly).
 
 Closed forms such as $(\\sin(\\phi_0 + \\omega t) - \\sin\\phi_0)/\\omega$ cancel catastrophically when
 $\\omega t \\to 0$ (and divide by zero at $\\omega = 0$). Written with the ratios below they are exact

@@ -1,5 +1,5 @@
 """The rolling disk free to tilt (Euler's disk, a rolling coin): O'Reilly, *Nonlinear Dynamics* 10
-(1996) 287–305; Borisov, Mamaev and Kilin, *Regul. Chaotic Dyn.* 7 (2002) 201–219; Bloch,
+(1996) 287–305; Borisov, Mamaev and Kilin, *Regul. Chaotic Dyn.* 8 (2003) 201–212; Bloch,
 *Nonholonomic Mechanics and Control*, §1.4 for the upright case (:mod:`gnipy.models.vertical_disk`).
 
 A disk of radius $R$, mass $m$ and moments $A$ (about a diameter) and $C$ (about its axis) rolls
@@ -35,8 +35,8 @@ Korteweg reduced it to hypergeometric functions).
 Chaplygin's, through hypergeometric functions of $\\cos\\theta$; they are not registered.)
 
 **Linear stability.** Upright and rolling straight at speed $V = R|\\dot\\psi|$ the uniform disk
-($A = mR^2/4$, $C = mR^2/2$) is stable when $V^2 > gR/3$ (`gni stability rolling-disk` shows it:
-the docs' models guide).
+($A = mR^2/4$, $C = mR^2/2$) is stable when $V^2 > gR/3$ (`gnipy.linearize` at that motion gives
+the lean's eigenvalues: the docs' models guide).
 
 Default parameters: the uniform disk $m = R = g = 1$, $A = 1/4$, $C = 1/2$. Default initial
 condition: the steady motion leaning at $\\theta_0 = 1.2$ (0.37 rad from upright) and turning at
