@@ -1,5 +1,6 @@
 """SymPy models shared by several test modules, written with sympy.physics.mechanics independently of
-gnipy's hand-written zoo (tests/test_symbolic.py, tests/models/test_rolling_disk.py)."""
+gnipy's hand-written zoo (tests/test_symbolic.py, tests/models/test_rolling_disk.py,
+tests/analysis/test_linearization.py, and the user's file of tests/cli/test_stability_cli.py)."""
 
 import sympy as sp
 import sympy.physics.mechanics as me

@@ -14,13 +14,13 @@ uniform disk (A = mR²/4, C = mR²/2) that is v² = R²Ω² > gR/3; for a hoop (
 v² > gR/4, the textbook thresholds. The ignorable coordinates x, y, φ and then ψ (it entered only
 the contact point's velocity) are dropped, leaving the state (θ, ψ̇, θ̇, φ̇): its other two
 eigenvalues are zero, of the conserved spin and ψ̇ − (CΩ/A)θ.
-The disk is built with sympy.physics.mechanics (tests/test_symbolic.py) and differentiated by JAX
+The disk is built with sympy.physics.mechanics (tests/sympy_models.py) and differentiated by JAX
 through gnipy's Lagrange–d'Alembert equations: an independent formulation of the same physics.
 """
 
 import numpy as np
 import pytest
-from test_symbolic import _rolling_disk
+from sympy_models import rolling_disk_system
 
 import gnipy
 
@@ -31,7 +31,7 @@ CRITICAL_SPIN = np.sqrt(M * G * R * A / (C * (C + M * R ** 2)))  # = sqrt(g / 3R
 
 @pytest.fixture(scope="module")
 def disk():
-    return gnipy.from_sympy(_rolling_disk(), params={"m": M, "R": R, "g": G}, name="rolling-disk")
+    return gnipy.from_sympy(rolling_disk_system(), params={"m": M, "R": R, "g": G}, name="rolling-disk")
 
 
 def _upright(spin):

@@ -1,7 +1,7 @@
 """`gni stability`: the eigenvalues of a user's family of steady motions against a parameter, at the
 command line, against the closed form of the upright rolling disk.
 
-The system is a file of the user's (the uniform disk of tests/test_symbolic.py, built with
+The system is a file of the user's (the uniform disk of tests/sympy_models.py, built with
 sympy.physics.mechanics through gnipy.from_sympy), whose default initial condition is the upright
 rolling at the spin rate `spin`. Reference values (tests/analysis/test_linearization.py): the lean
 mode's eigenvalues ±λ with λ² = (m g R − C(C + mR²)Ω²/A)/(A + mR²), real below the critical spin
@@ -28,12 +28,12 @@ CRITICAL_SPIN = np.sqrt(G / (3 * R))
 DISK = '''
 import numpy as np
 import gnipy
-from test_symbolic import _rolling_disk
+from sympy_models import rolling_disk_system
 
 
 def disk(spin: float = 4.0, R: float = 0.5):
     """A uniform disk rolling upright and straight at the spin rate `spin`."""
-    return gnipy.from_sympy(_rolling_disk(), params={"m": 1.0, "R": R, "g": 9.81}, name="rolling-disk",
+    return gnipy.from_sympy(rolling_disk_system(), params={"m": 1.0, "R": R, "g": 9.81}, name="rolling-disk",
                             defaults=(np.zeros(5), np.array([R * spin, 0.0, 0.0, 0.0, spin])))
 '''
 
