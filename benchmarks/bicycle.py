@@ -105,7 +105,6 @@ def _median_time(fn, reps):
 
 def measure(reps: int = 3, long: bool = True) -> dict:
     """The section's numbers (see the module docstring)."""
-    import sympy as sp
     from scipy.integrate import solve_ivp
 
     try:
