@@ -21,6 +21,7 @@ independent formulation of the same physics) and against central differences; an
 """
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 import sympy as sp  # the `sympy` extra, installed with [test] (through [all])
@@ -227,20 +228,14 @@ def test_mechanics_system_refusals():
     with pytest.raises(gnipy.InputError, match="read from the mechanics System"):
         gnipy.from_sympy(system, [sp.Symbol("x")])
     spec = gnipy.get_model("knife-edge")
-    # a force that depends on the configuration (a spring) has no constant potential here
-    spring = _knife_edge_system()
-    blade = spring.bodies[0]
-    spring.add_loads(me.Force(blade.masscenter, -sp.Symbol("k") * spring.q[0] * spring.frame.x))
-    with pytest.raises(gnipy.InputError, match="depends on x"):
-        gnipy.from_sympy(spring, params={**spec.params, "k": 1.0})
+    # a function of time in a load that is not named as an input (a torque someone else sets)
     torqued = _knife_edge_system()
-    torqued.add_loads(me.Torque(torqued.bodies[0].frame, sp.Symbol("tau") * torqued.frame.z))
-    with pytest.raises(gnipy.InputError, match="torque"):
-        gnipy.from_sympy(torqued, params={**spec.params, "tau": 1.0})
+    torqued.add_loads(me.Torque(torqued.bodies[0].frame, me.dynamicsymbols("tau") * torqued.frame.z))
+    with pytest.raises(gnipy.InputError, match=r"forces\[2\]: tau\(t\) is not a coordinate.*inputs=\[\.\.\.\]"):
+        gnipy.from_sympy(torqued, params=spec.params)
+    with pytest.raises(gnipy.InputError, match="coordinates, speeds, constraints, holonomic and forces are read"):
+        gnipy.from_sympy(torqued, forces=[0, 0, 1], params=spec.params)
     sprung = _knife_edge_system()
-    sprung.add_actuators(me.LinearSpring(sp.Symbol("k"), me.LinearPathway(sprung.fixed_point, sprung.bodies[0].masscenter)))
-    with pytest.raises(gnipy.InputError, match="actuators"):
-        gnipy.from_sympy(sprung, params=spec.params)
     # kinematic equations: u in terms of q̇, linear in u with coefficients in q only
     x = sprung.q[0]
     u1 = sprung.u[0]
@@ -262,6 +257,137 @@ def test_mechanics_system_refusals():
     pushed.add_loads(me.Force(me.Point("P"), sp.Symbol("g") * pushed.frame.z))
     with pytest.raises(gnipy.InputError, match="needs its position from the System's fixed point"):
         gnipy.from_sympy(pushed, params=spec.params)
+
+
+# ------------------------------------------------------------------------------------------------
+# Loads: forces, torques, actuators and inputs, against forces written by hand
+# ------------------------------------------------------------------------------------------------
+def _loaded_knife_edge():
+    """The knife edge on the incline with a torque τ(t) on the blade (an input), a damper −c u₁
+    along the blade on its centre, and a linear spring (stiffness k, natural length l0) from the
+    fixed point O to the centre (sympy.physics.mechanics' LinearSpring actuator)."""
+    system = _knife_edge_system()
+    blade = system.bodies[0]
+    tau = me.dynamicsymbols("tau")
+    c, k, l0 = sp.symbols("c k l0")
+    system.add_loads(me.Torque(blade.frame, tau * system.frame.z),
+                     me.Force(blade.masscenter, -c * system.u[0] * blade.frame.x))
+    system.add_actuators(me.LinearSpring(k, me.LinearPathway(system.fixed_point, blade.masscenter), l0))
+    return system, tau
+
+
+def _hand_written_knife_edge_force(c, k, l0):
+    """The same loads' generalized force on (x, y, φ), derived by hand: the damper's −c u₁ (cos φ,
+    sin φ) with u₁ = ẋ cos φ + ẏ sin φ, the spring's −k(ℓ − l0)(x, y)/ℓ with ℓ = |(x, y)|, the torque
+    on φ."""
+    def force(q, v, u, t):
+        x, y, phi = q[0], q[1], q[2]
+        u1 = v[0] * jnp.cos(phi) + v[1] * jnp.sin(phi)
+        ell = jnp.sqrt(x * x + y * y)
+        pull = -k * (ell - l0) / ell
+        return jnp.stack([-c * u1 * jnp.cos(phi) + pull * x, -c * u1 * jnp.sin(phi) + pull * y, u[0]])
+    return force
+
+
+def test_a_mechanics_systems_loads_are_the_hand_written_generalized_force():
+    spec = gnipy.get_model("knife-edge")
+    system, tau = _loaded_knife_edge()
+    values = {"c": 0.3, "k": 2.0, "l0": 0.5}
+    loaded = gnipy.from_sympy(system, inputs=[tau], params={**spec.params, **values}, name="loaded-knife-edge")
+    assert loaded.inputs == 1 and loaded.is_forced and set(loaded.args) == {*spec.params, *values}
+    by_hand = spec.system().with_force(_hand_written_knife_edge_force(**values), inputs=1)
+    rng = np.random.default_rng(7)
+    for _ in range(5):
+        q, v, u, t = rng.uniform(-2, 2, 3), rng.uniform(-2, 2, 3), rng.uniform(-2, 2, 1), rng.uniform(0, 5)
+        np.testing.assert_allclose(np.asarray(loaded._call_force(*loaded._args(q), v, u, t)),
+                                   np.asarray(by_hand.force(q, v, u, t)), rtol=1e-13, atol=1e-13)
+    # a driven run: the same motion step by step (the forced discrete Lagrange–d'Alembert principle)
+    q0 = np.array([0.4, 0.2, 0.3])
+    v0 = np.array([np.cos(0.3), np.sin(0.3), 1.0])
+    controls = np.sin(0.05 * np.arange(200))[:, None]
+    a = gnipy.simulate(loaded, "gni-trapezoid", q0, v0, h=0.01, steps=200, controls=controls)
+    b = gnipy.simulate(by_hand, "gni-trapezoid", q0, v0, h=0.01, steps=200, controls=controls)
+    assert a.healthy and float(np.max(np.abs(np.asarray(a.q[-1] - q0)))) > 0.5
+    np.testing.assert_allclose(np.asarray(a.q), np.asarray(b.q), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(np.asarray(a.v), np.asarray(b.v), rtol=0, atol=1e-12)
+
+
+def _forced_sleighs(params, c):
+    """The Chaplygin sleigh with a torque τ(t) (an input) and a viscous drag −c v on its contact
+    point, three ways: a LagrangesMethod with a forcelist, the plain form with `forces`, and the
+    zoo's sleigh with the force written by hand."""
+    x, y, th = me.dynamicsymbols("x y theta")
+    tau = me.dynamicsymbols("tau")
+    m, I, a, drag = sp.symbols("m I a c")
+    N = me.ReferenceFrame("N")
+    B = N.orientnew("B", "Axis", (th, N.z))
+    P = me.Point("P")
+    P.set_vel(N, x.diff(T) * N.x + y.diff(T) * N.y)
+    L = m / 2 * (x.diff(T) ** 2 + y.diff(T) ** 2) + I / 2 * th.diff(T) ** 2
+    knife = -sp.sin(th) * x.diff(T) + sp.cos(th) * y.diff(T) - a * th.diff(T)
+    values = {"m": params["m"], "I": params["I"], "a": params["a"], "c": c}
+    method = me.LagrangesMethod(L, [x, y, th], forcelist=[(B, tau * N.z), (P, -drag * P.vel(N))], frame=N,
+                                nonhol_coneqs=[knife])
+    from_method = gnipy.from_sympy(method, inputs=[tau], params=values, name="lagranges-sleigh")
+    plain = gnipy.from_sympy(L, [x, y, th], constraints=[knife], inputs=[tau], params=values,
+                             forces=[-drag * x.diff(T), -drag * y.diff(T), tau], name="plain-sleigh")
+    zoo = gnipy.make_system("chaplygin-sleigh").with_force(
+        lambda q, v, u, t: jnp.stack([-c * v[0], -c * v[1], u[0]]), inputs=1)
+    return from_method, plain, zoo
+
+
+def test_a_lagranges_method_and_the_plain_forms_forces_are_the_forced_zoo_sleigh():
+    zoo = gnipy.make_system("chaplygin-sleigh")
+    systems = _forced_sleighs(_args(zoo), c=0.2)
+    q0, v0 = zoo.defaults[:2]
+    controls = 0.5 * np.cos(0.1 * np.arange(100))[:, None]
+    runs = [gnipy.simulate(s, "gni-midpoint", q0, v0, h=0.05, steps=100, controls=controls) for s in systems]
+    assert all(r.healthy for r in runs)
+    for r in runs[:2]:
+        np.testing.assert_allclose(np.asarray(r.q), np.asarray(runs[2].q), rtol=0, atol=1e-13)
+        np.testing.assert_allclose(np.asarray(r.v), np.asarray(runs[2].v), rtol=0, atol=1e-13)
+    # the drag takes energy out: the energy falls (the torque's work is small against it here)
+    energy = np.asarray(runs[0].energy)
+    assert energy[-1] < 0.9 * energy[0]
+
+
+def test_a_force_that_depends_on_time():
+    """forces in the time t (`dynamicsymbols._t`) without inputs: a periodic push on the sleigh's
+    heading, against the same force written by hand."""
+    x, y, th = me.dynamicsymbols("x y theta")
+    A, w = sp.symbols("A omega")
+    L = (x.diff(T) ** 2 + y.diff(T) ** 2) / 2 + th.diff(T) ** 2 / 4
+    knife = -sp.sin(th) * x.diff(T) + sp.cos(th) * y.diff(T) - th.diff(T) / 5
+    pushed = gnipy.from_sympy(L, [x, y, th], constraints=[knife], forces=[0, 0, A * sp.sin(w * T)],
+                              params={A: 0.7, w: 3.0})
+    assert pushed.inputs == 0 and pushed.is_forced
+    for t in (0.0, 0.3, 1.7):
+        np.testing.assert_allclose(np.asarray(pushed._call_force(*pushed._args(np.zeros(3)), np.ones(3), jnp.zeros(0), t)),
+                                   [0.0, 0.0, 0.7 * np.sin(3.0 * t)], rtol=1e-15, atol=1e-16)
+
+
+def test_load_refusals():
+    x, y, th = me.dynamicsymbols("x y theta")
+    tau, other = me.dynamicsymbols("tau other")
+    L = (x.diff(T) ** 2 + y.diff(T) ** 2) / 2 + th.diff(T) ** 2 / 4
+    knife = [-sp.sin(th) * x.diff(T) + sp.cos(th) * y.diff(T)]
+    for kwargs, match in (
+        (dict(forces=[0, 0]), "forces has 2 entries for 3 coordinates"),
+        (dict(forces=[0, 0, 1], inputs=[tau]), r"inputs\[0\] = tau\(t\) does not appear in the forces"),
+        (dict(inputs=[tau]), "inputs are given but the model has no forces"),
+        (dict(forces=[0, 0, tau], inputs=[tau, tau]), "inputs repeats a symbol"),
+        (dict(forces=[0, 0, tau], inputs=[x]), r"inputs\[0\] = x\(t\) is a coordinate"),
+        (dict(forces=[0, 0, tau + other], inputs=[tau]), r"forces\[2\]: other\(t\) is not a coordinate"),
+        (dict(forces=[0, 0, tau], inputs=[tau + 1]), "neither a symbol nor a dynamicsymbol"),
+    ):
+        with pytest.raises(gnipy.InputError, match=match):
+            gnipy.from_sympy(L, [x, y, th], constraints=knife, **kwargs)
+    with pytest.raises(gnipy.InputError, match=r"model involves inputs\[0\] = tau\(t\)"):
+        gnipy.from_sympy(L + tau * th, [x, y, th], constraints=knife, forces=[0, 0, tau], inputs=[tau])
+    N = me.ReferenceFrame("N")
+    unframed = me.LagrangesMethod(L, [x, y, th], forcelist=[(N, tau * N.z)], nonhol_coneqs=knife)
+    with pytest.raises(gnipy.InputError, match="has loads but no frame"):
+        gnipy.from_sympy(unframed, inputs=[tau])
 
 
 def test_the_rolling_disk_converges_to_sympys_own_equations_of_motion():

@@ -9,11 +9,24 @@ SymPy, in either of two forms.
   `potential_energy`; the kinetic energy is formed from the time derivatives of their mass
   centres' positions and of their orientations, not from the velocities stored on their points,
   which a model made for Kane's method may store with the constraints already imposed), its
-  constant loads (gravity, `System.apply_uniform_gravity`, and any other
-  constant force on a point, whose potential is $-F\\cdot r$ from the system's `fixed_point`), its
-  kinematic differential equations (u = q̇, or any relation linear in u and q̇: the kinetic
-  energy and the constraints are rewritten in q̇), its holonomic constraints and its nonholonomic
-  constraints.
+  loads and actuators, its kinematic differential equations (u = q̇, or any relation linear in u
+  and q̇: the kinetic energy, the loads and the constraints are rewritten in q̇), its holonomic
+  constraints and its nonholonomic constraints.
+- **A `sympy.physics.mechanics.LagrangesMethod`**: its Lagrangian, coordinates, `forcelist`, and
+  holonomic and nonholonomic constraints.
+
+**Loads.** A constant force on a point (gravity, `System.apply_uniform_gravity`) becomes the
+potential $-F\cdot r$ from the System's `fixed_point`, so that a model without other loads is
+unforced and keeps the energy behaviour of the methods. Every other load (a force that depends on
+q, u, t or an input; a torque on a frame; the loads of an actuator: `LinearSpring`,
+`LinearDamper`, `TorqueActuator`, ...) becomes the generalized force
+$F_j = \sum F\cdot\partial v_P/\partial\dot q_j + \sum\tau\cdot\partial\omega_B/\partial\dot q_j$
+(the virtual work of the Lagrange–d'Alembert principle with forcing, :mod:`gnipy.forcing`),
+and the System is forced (`force(q, v, u, t, args)`). The plain form takes the generalized forces
+as `forces`. The functions of time that a controller sets (motor torques) are named in `inputs`:
+they become the System's inputs, in that order (`controls=` of :func:`gnipy.simulate`, the
+inputs of :mod:`gnipy.control`). A spring written as a load is a force, not a potential: give its
+potential energy to a body (`potential_energy`) to keep the system unforced.
 
 What gnipy integrates is $l(q, \\dot q) = T - V$ on $\\mathbb{R}^n$ ($q$ the coordinates in the
 order given, or the System's `q`; the velocities are $\\dot q$) with the constraints
@@ -41,13 +54,13 @@ in an expression) is refused by name when the System is built.
 
 What the conversion refuses, each with an :class:`~gnipy.InputError` naming the argument:
 a velocity constraint without velocities (a holonomic constraint: give it as `holonomic`), a
-holonomic constraint with velocities, loads that are not constant (a force that
-depends on q, u or t, a torque, an actuator), kinematic equations that are not linear in u with
-coefficients in q, explicit time dependence, a Lagrangian that is not of mechanical type (quadratic
-in the velocities, with no linear term), a constraint that is not affine in the velocities, a
-symbol whose value is not given (or a value for a symbol the model does not have), coordinates
-declared with assumptions on their values (`positive=True`: SymPy may already have simplified
-`Abs(x)` to `x`), and the imaginary unit.
+holonomic constraint with velocities, a function of time in a load that is not named in `inputs`
+(or an input in the Lagrangian or the constraints), kinematic equations that are not linear in u
+with coefficients in q, explicit time dependence of the Lagrangian or the constraints, a
+Lagrangian that is not of mechanical type (quadratic in the velocities, with no linear term), a
+constraint that is not affine in the velocities, a symbol whose value is not given (or a value for
+a symbol the model does not have), coordinates declared with assumptions on their values
+(`positive=True`: SymPy may already have simplified `Abs(x)` to `x`), and the imaginary unit.
 
 **Models written by others.** SymBRiM's Whipple bicycle (the `symbrim` package, bicycle–rider
 models for `sympy.physics.mechanics`), converted by :func:`from_sympy` with the benchmark's
@@ -93,6 +106,8 @@ def from_sympy(
     speeds: Sequence[Any] | None = None,
     constraints: Sequence[Any] = (),
     holonomic: Sequence[Any] = (),
+    forces: Sequence[Any] = (),
+    inputs: Sequence[Any] = (),
     params: Mapping[Any, float] | None = None,
     name: str = "sympy-system",
     coordinate_names: Sequence[str] | None = None,
@@ -102,7 +117,9 @@ def from_sympy(
 
     Arguments:
         model: the Lagrangian, a SymPy expression in the coordinates, their velocities and the
-            parameters (the plain form); or a `sympy.physics.mechanics.System`.
+            parameters (the plain form); a `sympy.physics.mechanics.System`; or a
+            `sympy.physics.mechanics.LagrangesMethod` (its Lagrangian, coordinates, loads and
+            constraints).
         coordinates: the plain form's coordinates q, SymPy symbols or `dynamicsymbols`, in the
             order of the System's q. Not given with a mechanics System (its `q` is used).
         speeds: the plain form's velocity symbols, one per coordinate, when the coordinates are
@@ -112,6 +129,13 @@ def from_sympy(
         holonomic: the plain form's holonomic constraints φ(q) (each = 0), expressions in the
             coordinates and parameters (:mod:`gnipy.holonomic`). Not given with a mechanics System
             (its `holonomic_constraints` are used).
+        forces: the plain form's generalized forces, one expression per coordinate (the virtual
+            work is $\\sum_j F_j\\,\\delta q_j$), in the coordinates, the velocities, the time
+            `t` (`dynamicsymbols._t`), the `inputs` and the parameters. Not given with a mechanics
+            System or a LagrangesMethod (their loads are used).
+        inputs: the symbols (usually `dynamicsymbols`) of the forces that a controller chooses:
+            the System's inputs u, in this order (`controls=` of :func:`gnipy.simulate`, the
+            inputs of :mod:`gnipy.control`). Every other function of time in a load is refused.
         params: the value of every other symbol of the model: `{symbol or name: float}`. They
             become the System's `args`, named by the symbols' names.
         name: the System's name (in reports and files).
@@ -121,8 +145,9 @@ def from_sympy(
 
     Returns:
         The System, with `lagrangian(q, v, args)`, `constraints(q, args)` (None without
-        nonholonomic constraints), `holonomic(q, args)` with holonomic constraints, and, when the
-        constraints are affine, `affine(q, args)`.
+        nonholonomic constraints), `holonomic(q, args)` with holonomic constraints, when the
+        constraints are affine `affine(q, args)`, and with forces `force(q, v, u, t, args)` and
+        `len(inputs)` inputs.
 
     Raises:
         InputError: on what the conversion cannot take (module docstring), naming the argument.
@@ -130,32 +155,55 @@ def from_sympy(
     """
     sp = _sympy()
     me = require("sympy.physics.mechanics", extra="sympy")
-    if isinstance(model, me.System):
+    if isinstance(model, (me.System, me.LagrangesMethod)):
+        kind = "mechanics System" if isinstance(model, me.System) else "LagrangesMethod"
         if (coordinates is not None or speeds is not None or _sequence(constraints, "constraints")
-                or _sequence(holonomic, "holonomic")):
-            raise InputError("from_sympy: coordinates, speeds, constraints and holonomic are read from the mechanics "
-                             "System; do not pass them too")
-        lagrangian, coordinates, speeds, constraints, holonomic = _from_mechanics_system(model)
+                or _sequence(holonomic, "holonomic") or _sequence(forces, "forces")):
+            raise InputError(f"from_sympy: coordinates, speeds, constraints, holonomic and forces are read from the "
+                             f"{kind}; do not pass them too")
+        read = _from_mechanics_system if isinstance(model, me.System) else _from_lagranges_method
+        lagrangian, coordinates, speeds, constraints, holonomic, forces = read(model)
     elif isinstance(model, sp.Basic):
         if coordinates is None:
             raise InputError("from_sympy: coordinates is needed with a Lagrangian expression (the symbols of q)")
         lagrangian = sp.sympify(model)
     else:
-        raise InputError(f"from_sympy: model must be a SymPy expression (the Lagrangian) or a "
-                         f"sympy.physics.mechanics.System, not {type(model).__name__}")
+        raise InputError(f"from_sympy: model must be a SymPy expression (the Lagrangian), a "
+                         f"sympy.physics.mechanics.System or a LagrangesMethod, not {type(model).__name__}")
     constraints = _sequence(constraints, "constraints")
     holonomic = _sequence(holonomic, "holonomic")
+    forces = _sequence(forces, "forces")
     q, qd, names = _coordinates_and_speeds(coordinates, speeds, coordinate_names)
     n = len(q)
+    if forces and len(forces) != n:
+        raise InputError(f"from_sympy: forces has {len(forces)} entries for {n} coordinates (one generalized force "
+                         f"per coordinate)")
     exprs = {"model": sp.sympify(lagrangian), **{f"constraints[{i}]": sp.sympify(c) for i, c in enumerate(constraints)},
              **{f"holonomic[{i}]": sp.sympify(c) for i, c in enumerate(holonomic)}}
-    _check_symbols(exprs, q, qd)
+    force_exprs = {f"forces[{i}]": sp.sympify(f) for i, f in enumerate(forces)}
+    us = _inputs(inputs, q, qd)
+    _check_symbols({**exprs, **force_exprs}, [*q, *us], qd)
     # plain symbols in place of q and q̇ (dynamicsymbols are applied functions of t); no symbol of
     # the model has these names (_check_symbols)
     qs, vs = _internal_symbols(n)
-    swap = {**dict(zip(qd, vs)), **dict(zip(q, qs))}  # the velocities first: q̇ contains q
+    swap = {**dict(zip(qd, vs)), **dict(zip(q, qs))}  # xreplace matches q̇ = Derivative(q(t), t) before q(t)
+    for where, e in exprs.items():
+        for i, u in enumerate(us):
+            if e.has(u):
+                raise InputError(f"from_sympy: {where} involves inputs[{i}] = {u}: inputs enter the forces only")
     L, *rest = (_substituted(e, swap, where) for where, e in exprs.items())
     cons, hol = rest[:len(constraints)], rest[len(constraints):]
+    time = _time_symbol(params)
+    input_symbols, t_internal = _internal_inputs(len(us))
+    force_swap = {**swap, **dict(zip(us, input_symbols)), **({time: t_internal} if time is not None else {})}
+    F = [_substituted(e, force_swap, where) for where, e in force_exprs.items()]
+    if F and all(f == 0 for f in F):
+        F = []
+    if us and not F:
+        raise InputError("from_sympy: inputs are given but the model has no forces for them to enter")
+    for i, (u, s_) in enumerate(zip(us, input_symbols)):
+        if not any(f.has(s_) for f in F):
+            raise InputError(f"from_sympy: inputs[{i}] = {u} does not appear in the forces")
     if not cons and not hol:
         raise InputError("from_sympy: constraints: no constraint given (nonholonomic, or holonomic); gnipy "
                          "integrates constrained systems")
@@ -163,14 +211,44 @@ def from_sympy(
         if c.free_symbols & set(vs):
             raise InputError(f"from_sympy: holonomic[{i}] = {holonomic[i]} involves the velocities: a holonomic "
                              "constraint is a function of the coordinates (give a velocity constraint as constraints)")
-    values = _parameters(params, [L, *cons, *hol], set(qs) | set(vs))
+    values = _parameters(params, [L, *cons, *hol, *F], set(qs) | set(vs) | set(input_symbols) | {t_internal})
     try:
-        lagrangian_fn, constraints_fn, affine_fn, holonomic_fn = _functions(L, tuple(cons), tuple(hol), n)
+        lagrangian_fn, constraints_fn, affine_fn, holonomic_fn, force_fn = _functions(
+            L, tuple(cons), tuple(hol), n, tuple(F), len(us))
     except InputError as e:  # say it in the model's own symbols
-        user = {f"{_INTERNAL}q{i}": str(c) for i, c in enumerate(q)} | {f"{_INTERNAL}v{i}": str(v) for i, v in enumerate(qd)}
-        raise InputError(re.sub(rf"\b{_INTERNAL}[qv]\d+\b", lambda m: user[m.group(0)], str(e))) from None
+        user = ({f"{_INTERNAL}q{i}": str(c) for i, c in enumerate(q)} | {f"{_INTERNAL}v{i}": str(v) for i, v in enumerate(qd)}
+                | {f"{_INTERNAL}u{i}": str(u) for i, u in enumerate(us)} | {f"{_INTERNAL}t": "t"})
+        raise InputError(re.sub(rf"\b{_INTERNAL}([qvu]\d+|t)\b", lambda m: user[m.group(0)], str(e))) from None
     return System(lagrangian_fn, constraints_fn, affine_fn, holonomic=holonomic_fn, coordinates=names, name=name,
-                  args=values, defaults=defaults)
+                  args=values, defaults=defaults, force=force_fn, inputs=len(us))
+
+
+def _inputs(inputs, q, qd) -> list:
+    """The `inputs` argument checked: distinct symbols or dynamicsymbols, not coordinates or speeds."""
+    sp = _sympy()
+    us = _sequence(inputs, "inputs")
+    for i, u in enumerate(us):
+        if not (isinstance(u, sp.Symbol) or (isinstance(u, sp.core.function.AppliedUndef) and len(u.args) == 1)):
+            raise InputError(f"from_sympy: inputs[{i}] = {u} is neither a symbol nor a dynamicsymbol")
+        if u in q or u in qd:
+            raise InputError(f"from_sympy: inputs[{i}] = {u} is a coordinate or a speed")
+    if len(set(us)) != len(us):
+        raise InputError("from_sympy: inputs repeats a symbol")
+    return us
+
+
+def _time_symbol(params):
+    """The symbol of time in the forces: `dynamicsymbols._t` (the symbol `t`), unless `params` gives
+    a parameter named t."""
+    me = require("sympy.physics.mechanics", extra="sympy")
+    named = {k if isinstance(k, str) else getattr(k, "name", None) for k in (params or {})}
+    return None if "t" in named else me.dynamicsymbols._t
+
+
+def _internal_inputs(m: int):
+    """The plain symbols that stand for the inputs and for the time inside the conversion."""
+    sp = _sympy()
+    return [sp.Symbol(f"{_INTERNAL}u{k}", real=True) for k in range(m)], sp.Symbol(f"{_INTERNAL}t", real=True)
 
 
 def _internal_symbols(n: int):
@@ -185,9 +263,9 @@ _INTERNAL = "gnipy_"
 
 
 @functools.lru_cache(maxsize=64)
-def _functions(L, cons: tuple, hol: tuple, n: int):
-    """The System's functions `(lagrangian, constraints or None, affine or None, holonomic or None)`
-    of the substituted
+def _functions(L, cons: tuple, hol: tuple, n: int, forces: tuple = (), m: int = 0):
+    """The System's functions `(lagrangian, constraints or None, affine or None, holonomic or None,
+    force or None)` of the substituted
     expressions (in `gnipy_q{i}`, `gnipy_v{i}` and the parameters' symbols), made once per model:
     Systems converted from the same expressions share the function objects, so that they differ
     only in `args` and run as one batch (a sweep's members, a fit's trials), as those of one
@@ -211,6 +289,9 @@ def _functions(L, cons: tuple, hol: tuple, n: int):
     mu_rows = [converted(list(row), f"constraints[{i}]") for i, row in enumerate(mu)]
     c0_fn = converted(list(c0), "constraints") if affine else None
     phi_fn = converted(list(hol), "holonomic") if hol else None
+    force_fn = converted(list(forces), "forces") if forces else None
+    unames = [s.name for s in _internal_inputs(m)[0]]
+    tname = _internal_inputs(0)[1].name
 
     def mu_at(q, args):
         values = values_at(q, None, args)
@@ -238,8 +319,15 @@ def _functions(L, cons: tuple, hol: tuple, n: int):
         return jnp.stack([jnp.asarray(x, dtype=jnp.float64) * jnp.ones_like(q[0])
                           for x in phi_fn(**values_at(q, None, args))])
 
+    def sympy_force(q, v, u, t, args):
+        values = values_at(q, v, args)
+        values.update({name: u[k] for k, name in enumerate(unames)})
+        values[tname] = t
+        zero = jnp.zeros_like(q[0] * v[0])
+        return jnp.stack([jnp.asarray(x, dtype=jnp.float64) + zero for x in force_fn(**values)])
+
     return (sympy_lagrangian, sympy_constraints if cons else None, (sympy_affine if affine else None),
-            sympy_holonomic if hol else None)
+            sympy_holonomic if hol else None, sympy_force if forces else None)
 
 
 def _matrix(rows) -> jnp.ndarray:
@@ -329,7 +417,8 @@ def _substituted(expr, swap, where):
         back = {v: k for k, v in swap.items()}
         names = ", ".join(sorted(str(a.xreplace(back)) for a in left))
         raise InputError(f"from_sympy: {where}: {names} is not a coordinate, a velocity or a function gnipy can "
-                         f"evaluate (undefined functions, accelerations and inputs that depend on time are not supported)")
+                         f"evaluate (undefined functions and accelerations are not supported; a function of time that a "
+                         f"controller sets is an input: name it in inputs=[...], it may enter the forces only)")
     return out
 
 
@@ -441,56 +530,101 @@ def _is_zero(sp, expr) -> bool:
 
 
 def _from_mechanics_system(system):
-    """(Lagrangian, coordinates, speeds, constraints) of a `sympy.physics.mechanics.System`, in q and q̇."""
+    """(Lagrangian, coordinates, speeds, constraints, holonomic constraints, generalized forces) of a
+    `sympy.physics.mechanics.System`, in q and q̇."""
     sp = _sympy()
     me = require("sympy.physics.mechanics", extra="sympy")
-    if len(system.actuators):
-        raise InputError("from_sympy: model: the mechanics System has actuators (springs, dampers, ...), which are "
-                         "not supported: only constant forces (gravity), which have a potential")
     q = list(system.q)
     u = list(system.u)
     t = me.dynamicsymbols._t
     qd = [c.diff(t) for c in q]
-    # u in terms of q̇, from the kinematic differential equations (linear in u)
-    if set(u) == set(qd) or not u:
-        to_qd = {}
-    else:
-        if len(system.kdes) != len(u):
-            raise InputError(f"from_sympy: model: {len(system.kdes)} kinematic differential equations for "
-                             f"{len(u)} speeds u; gnipy needs u in terms of q̇")
-        try:
-            A, b = sp.linear_eq_to_matrix(list(system.kdes), u)
-        except ValueError as e:  # sympy.solvers.solveset.NonlinearError
-            raise InputError(f"from_sympy: model: the kinematic differential equations are not linear in u ({e})") from None
-        if A.has(*qd) or A.has(t) or _is_zero(sp, A.det()):
-            raise InputError("from_sympy: model: the kinematic differential equations do not give u as a "
-                             "function of q and q̇ (linear in u, with coefficients that depend on q only)")
-        to_qd = dict(zip(u, list(A.LUsolve(b))))
+    to_qd = _speeds_in_qdot(sp, system, q, u, qd, t)
     frame, origin = system.frame, system.fixed_point
     try:
         T = sum((_kinetic_energy(sp, body, frame, origin) for body in system.bodies), sp.Integer(0))
     except ValueError as e:  # a position or an orientation that is not defined
         raise InputError(f"from_sympy: model: the kinetic energy cannot be formed: {e}") from None
     V = sum((sp.sympify(body.potential_energy) for body in system.bodies), sp.Integer(0))
-    for load in system.loads:
-        if isinstance(load, me.Torque):
-            raise InputError(f"from_sympy: model: a torque on {load.frame} is not supported (only constant forces, "
-                             f"which have a potential)")
-        F = load.force
-        moving = [x for x in (*q, *u, *qd, t) if F.diff(x, frame) != 0] if F != 0 else []
-        if moving:
-            raise InputError(f"from_sympy: model: the force on {load.point} depends on {moving[0]}; only constant "
-                             f"forces (gravity) are supported: they have the potential -F·r")
-        try:
-            V -= F.dot(load.point.pos_from(origin))
-        except ValueError as e:  # no path of positions from the System's fixed point
-            raise InputError(f"from_sympy: model: the potential of the force on {load.point} needs its position from "
-                             f"the System's fixed point {origin}: {e}") from None
+    moving = []
+    for load in [*system.loads, *(load for actuator in system.actuators for load in actuator.to_loads())]:
+        if isinstance(load, me.Force) and not any(load.force.diff(x, frame) != 0 for x in (*q, *u, *qd, t)):
+            # a constant force (gravity): the potential −F·r, so that an unforced system keeps its energy
+            V -= load.force.dot(_position(load.point, origin))
+        else:
+            moving.append(load)
     L = (T - V).xreplace(to_qd)
+    forces = _generalized_forces(sp, me, moving, frame, qd, to_qd,
+                                 lambda point: _position(point, origin).dt(frame))
     # the nonholonomic constraints, or the velocity constraints when set by hand; with holonomic
     # constraints only the nonholonomic ones (the velocity constraints then hold dφ/dt too, which
     # gnipy adds itself from φ)
     holonomic = [sp.sympify(c) for c in system.holonomic_constraints]
     velocity = system.nonholonomic_constraints if holonomic else system.velocity_constraints
     constraints = [sp.sympify(c).xreplace(to_qd) for c in velocity]
-    return L, q, None, constraints, holonomic
+    return L, q, None, constraints, holonomic, forces
+
+
+def _from_lagranges_method(method):
+    """(Lagrangian, coordinates, speeds, constraints, holonomic constraints, generalized forces) of a
+    `sympy.physics.mechanics.LagrangesMethod`: its Lagrangian, its `forcelist` as generalized forces
+    (the loads' partial velocities from the velocities set on their points, as LagrangesMethod
+    forms them), its holonomic and its nonholonomic constraints."""
+    sp = _sympy()
+    me = require("sympy.physics.mechanics", extra="sympy")
+    q = list(method.q)
+    qd = list(method._qdots)  # noqa: SLF001 (LagrangesMethod keeps q̇ there; no public name)
+    holonomic = list(method._hol_coneqs)  # noqa: SLF001 (the holonomic constraints as given)
+    constraints = list(method.coneqs)[len(holonomic):]  # the nonholonomic ones follow dφ/dt
+    loads = list(method._forcelist or [])  # noqa: SLF001
+    if loads and method.inertial is None:
+        raise InputError("from_sympy: model: the LagrangesMethod has loads but no frame (frame=N): the loads' "
+                         "generalized forces need the inertial frame")
+    loads = [me.Force(*x) if isinstance(x[0], me.Point) else me.Torque(*x) for x in loads]
+    forces = _generalized_forces(sp, me, loads, method.inertial, qd, {}, lambda point: point.vel(method.inertial))
+    return sp.sympify(method._L[0]), q, None, constraints, holonomic, forces  # noqa: SLF001
+
+
+def _speeds_in_qdot(sp, system, q, u, qd, t) -> dict:
+    """`{u_k: expression in q and q̇}` from the kinematic differential equations (linear in u)."""
+    if set(u) == set(qd) or not u:
+        return {}
+    if len(system.kdes) != len(u):
+        raise InputError(f"from_sympy: model: {len(system.kdes)} kinematic differential equations for "
+                         f"{len(u)} speeds u; gnipy needs u in terms of q̇")
+    try:
+        A, b = sp.linear_eq_to_matrix(list(system.kdes), u)
+    except ValueError as e:  # sympy.solvers.solveset.NonlinearError
+        raise InputError(f"from_sympy: model: the kinematic differential equations are not linear in u ({e})") from None
+    if A.has(*qd) or A.has(t) or _is_zero(sp, A.det()):
+        raise InputError("from_sympy: model: the kinematic differential equations do not give u as a "
+                         "function of q and q̇ (linear in u, with coefficients that depend on q only)")
+    return dict(zip(u, list(A.LUsolve(b))))
+
+
+def _position(point, origin):
+    try:
+        return point.pos_from(origin)
+    except ValueError as e:  # no path of positions from the System's fixed point
+        raise InputError(f"from_sympy: model: the load on {point} needs its position from the System's fixed point "
+                         f"{origin}: {e}") from None
+
+
+def _generalized_forces(sp, me, loads, frame, qd, to_qd, velocity) -> list:
+    """The generalized forces $F_j = \\sum F\\cdot\\partial v_P/\\partial\\dot q_j +
+    \\sum \\tau\\cdot\\partial\\omega_B/\\partial\\dot q_j$ of `loads` (forces on points, torques on
+    frames), in q, q̇, t and the inputs: the virtual work $\\sum_j F_j\\,\\delta q_j$ of the
+    Lagrange–d'Alembert principle with forcing (:mod:`gnipy.forcing`). `velocity(point)` is the
+    point's velocity in `frame`; u is rewritten in q̇ by `to_qd`. An empty list without loads."""
+    if not loads:
+        return []
+    out = [sp.Integer(0)] * len(qd)
+    for load in loads:
+        if isinstance(load, me.Torque):
+            vector, rate = load.torque, load.frame.ang_vel_in(frame)
+        else:
+            vector, rate = load.force, velocity(load.point)
+        vector = vector.xreplace(to_qd) if to_qd else vector
+        rate = rate.xreplace(to_qd) if to_qd else rate
+        for j, v in enumerate(qd):
+            out[j] += vector.dot(rate.diff(v, frame))
+    return out
