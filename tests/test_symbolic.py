@@ -527,3 +527,49 @@ def test_symbrims_whipple_bicycle_gives_basu_mandal_table_1():
     # the table gives 13 decimals (measured: ≤ 1.1e-12 absolute, on the steer acceleration, as the
     # hand-written model: tests/models/test_whipple_bicycle.py)
     np.testing.assert_allclose(theirs, np.array(table["qddot"]), rtol=0, atol=2e-12)
+
+
+def _sympys_nonminimal_pendulum():
+    """SymPy's own example "Nonminimal Coordinates Pendulum" (the sympy.physics.mechanics tutorial,
+    Lagrange's method), as the tutorial writes it: the mass at (q1, q2) with N.x down, the
+    Lagrangian of the particle (kinetic energy only), gravity m g N.x as a load, and the holonomic
+    constraint q1² + q2² − L² = 0."""
+    q1, q2 = me.dynamicsymbols("q1:3")
+    L, m, g = sp.symbols("L, m, g")
+    N = me.ReferenceFrame("N")
+    pN = me.Point("N*")
+    pN.set_vel(N, 0)
+    P = pN.locatenew("P1", q1 * N.x + q2 * N.y)
+    P.set_vel(N, P.pos_from(pN).dt(N))
+    pP = me.Particle("pP", P, m)
+    f_c = sp.Matrix([q1 ** 2 + q2 ** 2 - L ** 2])
+    return me.LagrangesMethod(me.Lagrangian(N, pP), [q1, q2], hol_coneqs=f_c, forcelist=[(P, m * g * N.x)], frame=N)
+
+
+def test_sympys_nonminimal_pendulum_example():
+    """The tutorial's linearization about hanging at rest, A = [[0, 1], [−g/L, 0]] (eigenvalues
+    ±i√(g/L)), from gnipy's `linearize`; and a large swing against the pendulum's own equation
+    θ̈ = −(g/L) sin θ (DOP853 at 1e-12), with the holonomic constraint at round-off and the energy
+    ½m|q̇|² − m g q1 kept (a conserved quantity, computed here from the run)."""
+    from scipy.integrate import solve_ivp
+
+    values = {"L": 1.3, "m": 0.7, "g": 9.81}
+    pendulum = gnipy.from_sympy(_sympys_nonminimal_pendulum(), params=values, name="sympy-nonminimal-pendulum")
+    assert pendulum.is_forced and pendulum.inputs == 0 and pendulum.holonomic is not None
+    lin = gnipy.linearize(pendulum, [values["L"], 0.0], [0.0, 0.0])
+    np.testing.assert_allclose(np.sort(lin.eigenvalues.imag), [-np.sqrt(9.81 / 1.3), np.sqrt(9.81 / 1.3)], rtol=1e-12)
+    np.testing.assert_allclose(lin.eigenvalues.real, 0.0, atol=1e-12)
+    theta0 = 2.0  # from rest at 2 rad from the vertical (beyond the horizontal)
+    q0 = values["L"] * np.array([np.cos(theta0), np.sin(theta0)])
+    h, steps = 0.001, 3000
+    run = gnipy.simulate(pendulum, "gni-trapezoid", q0, [0.0, 0.0], h=h, steps=steps)
+    assert run.healthy
+    exact = solve_ivp(lambda t, y: [y[1], -9.81 / 1.3 * np.sin(y[0])], (0.0, h * steps), [theta0, 0.0],
+                      method="DOP853", rtol=1e-12, atol=1e-12, t_eval=np.asarray(run.t))
+    q_exact = values["L"] * np.stack([np.cos(exact.y[0]), np.sin(exact.y[0])], axis=1)
+    error = np.max(np.abs(np.asarray(run.q) - q_exact))
+    assert 1e-8 < error < 1e-4  # second order at h = 0.001 over about 1.2 periods, not round-off
+    q, v = np.asarray(run.q), np.asarray(run.v)
+    assert np.max(np.abs(np.sum(q * q, axis=1) - 1.3 ** 2)) < 1e-13
+    energy = 0.5 * 0.7 * np.sum(v * v, axis=1) - 0.7 * 9.81 * q[:, 0]
+    assert np.max(np.abs(energy - energy[0])) < 1e-4 * abs(energy[0])

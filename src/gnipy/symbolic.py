@@ -16,11 +16,11 @@ SymPy, in either of two forms.
   holonomic and nonholonomic constraints.
 
 **Loads.** A constant force on a point (gravity, `System.apply_uniform_gravity`) becomes the
-potential $-F\cdot r$ from the System's `fixed_point`, so that a model without other loads is
+potential $-F\\cdot r$ from the System's `fixed_point`, so that a model without other loads is
 unforced and keeps the energy behaviour of the methods. Every other load (a force that depends on
 q, u, t or an input; a torque on a frame; the loads of an actuator: `LinearSpring`,
 `LinearDamper`, `TorqueActuator`, ...) becomes the generalized force
-$F_j = \sum F\cdot\partial v_P/\partial\dot q_j + \sum\tau\cdot\partial\omega_B/\partial\dot q_j$
+$F_j = \\sum F\\cdot\\partial v_P/\\partial\\dot q_j + \\sum\\tau\\cdot\\partial\\omega_B/\\partial\\dot q_j$
 (the virtual work of the Lagrange–d'Alembert principle with forcing, :mod:`gnipy.forcing`),
 and the System is forced (`force(q, v, u, t, args)`). The plain form takes the generalized forces
 as `forces`. The functions of time that a controller sets (motor torques) are named in `inputs`:

@@ -112,6 +112,20 @@ def test_what_is_not_a_steady_motion_is_refused(disk):
     with pytest.raises(gnipy.InputError, match="the coordinates 'x' move"):
         gnipy.linearize(well, np.zeros(3), np.array([1.0, 0.0, 0.0]))
     assert gnipy.linearize(well, np.zeros(3), np.zeros(3)).stable  # at rest at the bottom
+    # forces: one of (q, v) alone is part of the equations. A drag −c v makes the rest point
+    # asymptotically stable: at y = 0 the constraint holds ż = 0, so ẍ = −x − c ẋ and ÿ = −c ẏ,
+    # eigenvalues −c/2 ± i√(1 − c²/4) and −c (derived by hand); inputs and a force in t have no
+    # steady motion
+    drag = well.with_force(lambda q, v, u, t: -0.3 * v)
+    lin = gnipy.linearize(drag, np.zeros(3), np.zeros(3))
+    assert lin.stable
+    expected = [-0.15 - 1j * np.sqrt(1 - 0.15 ** 2), -0.15 + 1j * np.sqrt(1 - 0.15 ** 2), -0.3]
+    np.testing.assert_allclose(sorted(lin.eigenvalues, key=lambda z: (z.imag, z.real)),
+                               sorted(expected, key=lambda z: (z.imag, z.real)), rtol=1e-12)
+    with pytest.raises(gnipy.InputError, match="has 1 input"):
+        gnipy.linearize(well.with_force(lambda q, v, u, t: u[0] * v, inputs=1), np.zeros(3), np.zeros(3))
+    with pytest.raises(gnipy.InputError, match="force that depends on the time"):
+        gnipy.linearize(well.with_force(lambda q, v, u, t: jnp.sin(t) + 0.0 * v), np.zeros(3), np.zeros(3))
     with pytest.raises(gnipy.InputError, match=r"q: expected a vector of length 5"):
         gnipy.linearize(disk, np.zeros(4), v)
     with pytest.raises(gnipy.InputError, match="R\\^n x G"):

@@ -157,8 +157,9 @@ def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
     """The linearized equations of `system` about the steady motion `(q, v)` (module docstring).
 
     Arguments:
-        system: a System on $\\mathbb{R}^n$ without a force (a group system's linearization is not
-            implemented).
+        system: a System on $\\mathbb{R}^n$ (a group system's linearization is not implemented),
+            without inputs; a force of q and v alone (a drag, a spring, gravity given as a load) is
+            part of the equations.
         q, v: the steady motion: a configuration and a constant velocity on the constraints.
         tol: how closely the motion must be steady, relative to the size of the velocity: the
             constraints' residual and the acceleration, and the dependence of the equations on a
@@ -168,17 +169,24 @@ def linearize(system, q, v, *, tol: float = 1e-9) -> Linearization:
         A :class:`Linearization`, with the eigenvalues of the motion.
 
     Raises:
-        InputError: when the system is not on $\\mathbb{R}^n$ or is forced, or when `(q, v)` is not
+        InputError: when the system is not on $\\mathbb{R}^n$, has inputs or a force that depends on
+            the time, or when `(q, v)` is not
             a steady motion (off the constraints, accelerating, or moving along a coordinate that
             the equations depend on), naming what fails and by how much.
     """
     if system.group is not None:
         raise InputError(f"linearize: system {system.name!r} is on R^n x G; linearize takes systems on R^n")
-    if system.is_forced:
-        raise InputError(f"linearize: system {system.name!r} is forced; a steady motion is defined without inputs")
+    if system.is_forced and system.inputs:
+        raise InputError(f"linearize: system {system.name!r} has {system.inputs} input(s); a steady motion is defined "
+                         f"without inputs (linearize the system without them)")
     n = system.n
     q = jnp.asarray(finite_vector("q", q, n))
     v = jnp.asarray(finite_vector("v", v, n))
+    if system.is_forced:  # a force of (q, v) alone (a drag, a spring, gravity given as a load) keeps the flow autonomous
+        values = [np.asarray(system.external_force_continuous(q, v, jnp.asarray(t))) for t in (0.0, 0.7, 2.9)]
+        if any(np.max(np.abs(x - values[0])) > tol * (1.0 + np.max(np.abs(values[0]))) for x in values[1:]):
+            raise InputError(f"linearize: system {system.name!r} has a force that depends on the time; a steady motion "
+                             f"needs autonomous equations")
     scale = 1.0 + float(np.max(np.abs(v)))
     # as the driver does: without the provenance (static fields that change with the parameters'
     # values), Systems that differ only in args share the compiled pieces of the equations (a
