@@ -388,6 +388,11 @@ def test_load_refusals():
     unframed = me.LagrangesMethod(L, [x, y, th], forcelist=[(N, tau * N.z)], nonhol_coneqs=knife)
     with pytest.raises(gnipy.InputError, match="has loads but no frame"):
         gnipy.from_sympy(unframed, inputs=[tau])
+    speeds = me.dynamicsymbols("u1:4")
+    kane = me.KanesMethod(N, q_ind=[x, y, th], u_ind=speeds,
+                          kd_eqs=[c.diff(T) - u for c, u in zip((x, y, th), speeds)])
+    with pytest.raises(gnipy.InputError, match="KanesMethod.*as a sympy.physics.mechanics.System"):
+        gnipy.from_sympy(kane)
 
 
 def test_the_rolling_disk_converges_to_sympys_own_equations_of_motion():

@@ -163,6 +163,12 @@ def from_sympy(
                              f"{kind}; do not pass them too")
         read = _from_mechanics_system if isinstance(model, me.System) else _from_lagranges_method
         lagrangian, coordinates, speeds, constraints, holonomic, forces = read(model)
+    elif isinstance(model, me.KanesMethod):
+        raise InputError("from_sympy: model is a KanesMethod, whose equations are written in the speeds u with the "
+                         "velocity constraints already imposed; the GNI discretizes the Lagrangian of the "
+                         "unconstrained system with the constraints beside it. Give the same bodies, loads and "
+                         "constraints as a sympy.physics.mechanics.System (System(frame, fixed_point), add_bodies, "
+                         "add_loads, add_holonomic_constraints, add_nonholonomic_constraints) or a LagrangesMethod")
     elif isinstance(model, sp.Basic):
         if coordinates is None:
             raise InputError("from_sympy: coordinates is needed with a Lagrangian expression (the symbols of q)")
