@@ -60,7 +60,10 @@ with coefficients in q, explicit time dependence of the Lagrangian or the constr
 Lagrangian that is not of mechanical type (quadratic in the velocities, with no linear term), a
 constraint that is not affine in the velocities, a symbol whose value is not given (or a value for
 a symbol the model does not have), coordinates declared with assumptions on their values
-(`positive=True`: SymPy may already have simplified `Abs(x)` to `x`), and the imaginary unit.
+(`positive=True`: SymPy may already have simplified `Abs(x)` to `x`), the imaginary unit, and a
+`KanesMethod` (its equations are in the speeds with the velocity constraints already imposed; the
+GNI needs the Lagrangian of the unconstrained system: give the bodies, loads and constraints as a
+mechanics System).
 
 **Models written by others.** SymBRiM's Whipple bicycle (the `symbrim` package, bicycle–rider
 models for `sympy.physics.mechanics`), converted by :func:`from_sympy` with the benchmark's
