@@ -26,9 +26,11 @@ The only commands that do not run are those of :data:`NOT_RUN`, each with the te
 A few pages get an input file from a documented command first (:data:`PAGE_INPUTS`), and some
 pages' results are checked beyond running (:data:`CHECKS`).
 
-Each page runs in a fresh Python process of its own (as a reader would run it), in its own
-temporary directory; two pages run at a time. A failure names the page and the line of the block
-(a Python traceback points into the page itself).
+Each page runs in its own temporary directory and its own namespace, in one of two child
+processes (lanes) that run pages at the same time; a lane runs its pages one after the other, so a
+page reuses the programs an earlier page of its lane traced and compiled. A failure names the page
+and the line of the block (a Python traceback points into the page itself); a page that fails does
+not stop the next.
 """
 
 from __future__ import annotations
@@ -405,13 +407,9 @@ CHECKS = {
 
 
 def page_main(rel: str, cwd: str) -> None:
-    """The child process of one page: run it in `cwd`, then its :data:`CHECKS`."""
+    """Run the page `rel` in `cwd`, then its :data:`CHECKS`."""
     cwd_path = pathlib.Path(cwd)
     os.chdir(cwd_path)
-    if os.environ.get("GNIPY_COMPILATION_CACHE") == "1":  # the Python blocks too (:func:`_cache_dir`)
-        from gnipy.compilation import enable_compilation_cache
-
-        enable_compilation_cache()
     namespace = run_page(ROOT / rel, cwd_path)
     check = CHECKS.get(rel)
     if check is not None:
@@ -419,7 +417,34 @@ def page_main(rel: str, cwd: str) -> None:
     print(f"{rel}: all blocks ran", flush=True)
 
 
-#: Pages run at the same time (two on the 2-core machine; `DOC_EXAMPLES_LANES=1` runs them one by one).
+#: the line that ends a page's output in a lane's process: `END_MARK rel returncode`
+END_MARK = "@@gnipy-doc-page-end@@"
+
+
+def lane_main(*pairs: str) -> None:
+    """The child process of one lane: the pages `rel1 cwd1 rel2 cwd2 ...` one after the other, each
+    in its own directory and namespace, each page's end marked with its outcome; a page that fails
+    does not stop the next."""
+    import traceback
+
+    if os.environ.get("GNIPY_COMPILATION_CACHE") == "1":  # the Python blocks too (:func:`_cache_dir`)
+        from gnipy.compilation import enable_compilation_cache
+
+        enable_compilation_cache()
+    for rel, cwd in zip(pairs[::2], pairs[1::2]):
+        code = 0
+        try:
+            page_main(rel, cwd)
+        except BaseException:  # noqa: BLE001 (reported as the page's failure)
+            traceback.print_exc()
+            code = 1
+        sys.stdout.flush()
+        sys.stderr.flush()
+        print(f"\n{END_MARK} {rel} {code}", flush=True)
+
+
+#: Processes that run pages at the same time (two on the 2-core machine; `DOC_EXAMPLES_LANES=1`
+#: runs them all in one).
 LANES = max(1, int(os.environ.get("DOC_EXAMPLES_LANES", "2")))
 
 
@@ -431,46 +456,80 @@ def _cost(page: pathlib.Path) -> int:
     return len(PAGE_INPUTS.get(rel, [])) + sum(_key(c) not in NOT_RUN for c in commands) + python
 
 
+def _lanes(pages: list[str]) -> list[list[str]]:
+    """The pages shared among :data:`LANES` lanes, the costliest first, each to the lane with the
+    least cost so far."""
+    lanes = [[] for _ in range(min(LANES, len(pages)) or 1)]
+    load = [0] * len(lanes)
+    for rel in sorted(pages, key=lambda rel: -_cost(ROOT / rel)):
+        i = load.index(min(load))
+        lanes[i].append(rel)
+        load[i] += _cost(ROOT / rel)
+    return [lane for lane in lanes if lane]
+
+
 class _PageRuns:
-    """The selected pages, each run by `page_main` in a child process, `LANES` at a time."""
+    """The selected pages, run by `lane_main` in :data:`LANES` child processes, each page in its own
+    directory and namespace. The pages of a lane share its process (not each a fresh one): a page's
+    programs traced and compiled by an earlier page of the lane are reused, which took the module
+    from about 200 s of CPU in 15 processes to less (tests/conftest.py's budget)."""
 
     def __init__(self, pages: list[str], base: pathlib.Path):
-        self.base, self.procs, self.closed = base, {}, False
+        self.base, self.procs, self.closed = base, [], False
         self.lock = threading.Lock()
-        self.pool = ThreadPoolExecutor(LANES)
-        order = sorted(pages, key=lambda rel: -_cost(ROOT / rel))
-        self.futures = {rel: self.pool.submit(self._run, rel) for rel in order}
+        lanes = _lanes(pages)
+        self.pool = ThreadPoolExecutor(len(lanes))
+        self.futures = {}
+        for lane in lanes:
+            future = self.pool.submit(self._run, lane)
+            for rel in lane:
+                self.futures[rel] = (future, rel)
 
-    def _run(self, rel: str) -> tuple[int, str, float]:
-        cwd = self.base / re.sub(r"[^\w.-]", "_", rel)
-        cwd.mkdir()
-        code = f"import sys; sys.path.insert(0, {str(ROOT / 'tests')!r}); import test_doc_examples as t; t.page_main(*sys.argv[1:])"
+    def _run(self, lane: list[str]) -> dict[str, tuple[int, str, float]]:
+        pairs = []
+        for rel in lane:
+            cwd = self.base / re.sub(r"[^\w.-]", "_", rel)
+            cwd.mkdir()
+            pairs += [rel, str(cwd)]
+        code = f"import sys; sys.path.insert(0, {str(ROOT / 'tests')!r}); import test_doc_examples as t; t.lane_main(*sys.argv[1:])"
         start = time.perf_counter()
         with self.lock:
             if self.closed:
-                return -1, "not run: the session ended", 0.0
+                return {rel: (-1, "not run: the session ended", 0.0) for rel in lane}
             proc = subprocess.Popen(
-                [sys.executable, "-c", code, rel, str(cwd)], cwd=cwd, env=_shell_env(), stdin=subprocess.DEVNULL,
+                [sys.executable, "-c", code, *pairs], cwd=self.base, env=_shell_env(), stdin=subprocess.DEVNULL,
                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, start_new_session=True,
             )
-            self.procs[rel] = proc
+            self.procs.append(proc)
         try:
-            output, _ = proc.communicate(timeout=900)
+            output, _ = proc.communicate(timeout=900 * len(lane))
         except subprocess.TimeoutExpired:
             os.killpg(proc.pid, signal.SIGKILL)
-            output = proc.communicate()[0] + "\n(killed after 900 s)"
-        return proc.returncode, output, time.perf_counter() - start
+            output = proc.communicate()[0] + f"\n(killed after {900 * len(lane)} s)"
+        seconds = time.perf_counter() - start
+        results, rest = {}, output
+        for rel in lane:
+            mark = re.search(rf"^{re.escape(END_MARK)} {re.escape(rel)} (\d+)$", rest, flags=re.M)
+            if mark is None:  # the process ended (or was killed) before this page's end
+                results[rel] = (proc.returncode or -1, f"{rest}\n(the lane's process ended, code {proc.returncode}, "
+                                                         f"before {rel} finished)", seconds)
+                rest = ""
+                continue
+            results[rel] = (int(mark.group(1)), rest[:mark.start()], seconds)
+            rest = rest[mark.end():]
+        return results
 
     def result(self, rel: str) -> tuple[int, str, float]:
-        return self.futures[rel].result()
+        future, rel = self.futures[rel]
+        return future.result()[rel]
 
     def close(self) -> None:
         with self.lock:
             self.closed = True
-            for proc in self.procs.values():
+            for proc in self.procs:
                 if proc.poll() is None:
                     try:
-                        os.killpg(proc.pid, signal.SIGKILL)  # the page's process and its commands
+                        os.killpg(proc.pid, signal.SIGKILL)  # the lane's process and its commands
                     except ProcessLookupError:
                         pass
         self.pool.shutdown(wait=True, cancel_futures=True)
@@ -490,7 +549,7 @@ def page_runs(request, tmp_path_factory):
 def test_page_runs_as_written(page, page_runs):
     returncode, output, seconds = page_runs.result(_rel(page))
     print(output)
-    assert returncode == 0, f"{_rel(page)} (its own process, {seconds:.0f} s) failed:\n{output[-12000:]}"
+    assert returncode == 0, f"{_rel(page)} (its lane's process, {seconds:.0f} s) failed:\n{output[-12000:]}"
 
 
 # ------------------------------------------------------------------------------------------------
