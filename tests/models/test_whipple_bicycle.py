@@ -104,9 +104,9 @@ def test_nonlinear_accelerations_are_basu_mandal_table_1(bicycle):
 @pytest.fixture(scope="module")
 def runs(bicycle):
     """v = 5 m/s (self-stable) with a roll rate of 0.5 rad/s: the reference over 3 s."""
-    q0, v0 = wb.upright(None, 5.0)
-    v0[3] = 0.5
-    v0 = np.asarray(bicycle.check(q0, v0, project_v0=True)[1])
+    q0, v0 = (np.asarray(x, dtype=float) for x in wb.pushed(5.0, 0.5).defaults[:2])
+    # pushed's default: the upright motion with the roll rate set, on the constraints
+    assert v0[3] == 0.5 and np.max(np.abs(np.asarray(bicycle.constraint_residual(q0, v0)))) < 1e-13
     ref = gnipy.simulate(bicycle, "reference", q0, v0, h=0.05, t_final=3.0)
     return q0, v0, ref
 

@@ -61,7 +61,8 @@ from ..compilation import jit
 from ..system import System
 
 __all__ = ["BENCHMARK", "BASU_MANDAL_TABLE1", "moore_parameters", "COORDINATES", "PUBLISHED_MATRICES", "build", "upright",
-           "benchmark_matrices", "contact_points", "from_basu_mandal", "basu_mandal_accelerations", "riding"]
+           "benchmark_matrices", "contact_points", "from_basu_mandal", "basu_mandal_accelerations", "riding",
+           "pushed"]
 
 #: Meijaard 2007 Table 1: the benchmark bicycle (values exact); lam = π/10 the steer axis tilt
 BENCHMARK = {
@@ -226,6 +227,20 @@ def riding(v: float = 5.0) -> System:
 
     draws the eigenvalues against the speed (Meijaard 2007 Fig. 3) with the weave and capsize speeds."""
     return build(defaults=upright(None, v))
+
+
+def pushed(v: float = 5.0, roll_rate: float = 0.5) -> System:
+    """The benchmark bicycle riding upright and straight at the forward speed `v` (m/s), pushed into
+    the roll rate `roll_rate` (rad/s): its default initial condition is that state, the velocity
+    projected onto the constraints. At 5 m/s (inside the self-stable speed range, Meijaard 2007) the
+    weave that the push starts decays. As a model reference, `gnipy.models.whipple_bicycle:pushed`
+    is what `gni run`, `gni atlas` and `gni convergence` take."""
+    q0, v0 = upright(None, v)
+    v0 = v0.copy()
+    v0[_ROLL] = roll_rate
+    bicycle = build()
+    _, v0 = bicycle.check(q0, v0, project_v0=True)
+    return build(defaults=(q0, np.asarray(v0)))
 
 
 def upright(params: dict | None, v: float):
