@@ -12,8 +12,8 @@ front contact a holonomic constraint) with the benchmark's parameters (Meijaard 
   SciPy's `solve_ivp(DOP853)`; nothing keeps the holonomic constraint but the tolerance.
 - **gnipy**: `gnipy.from_sympy` of the same System (the Lagrangian and the constraints, differentiated
   by JAX), `simulate` with `dla` and `sgni-trapezoid` at h = 0.01 (XLA backend; compilation excluded,
-  reported apart); and `dla` on a batch of :data:`BATCH` pushes at once (one vmapped program), its
-  time per trajectory.
+  reported apart); `dla` on the native backend; and `dla` on a batch of :data:`BATCH` pushes at once
+  (one vmapped program, XLA), its time per trajectory.
 
 The motion: the benchmark bicycle rolling upright at 5 m/s (inside its self-stable speed range)
 pushed into a roll rate of 0.5 rad/s; its weave decays. The **reference** is DOP853 at rtol = atol
@@ -188,6 +188,15 @@ def measure(reps: int = 3, long: bool = True) -> dict:
             row["energy"], row["phi"] = drift(np.asarray(sol_long.q), np.asarray(sol_long.v))
         out["gnipy"][method] = row
 
+    # dla on the native backend (one trajectory; its build, minutes on an empty cache, is the first call)
+    t = time.perf_counter()
+    sol = gnipy.simulate(bicycle, "dla", q0, v0, h=H, t_final=T, save_every=every, backend="native")
+    first = time.perf_counter() - t
+    wall = _median_time(lambda: gnipy.simulate(bicycle, "dla", q0, v0, h=H, t_final=T, save_every=every,
+                                               backend="native").q.block_until_ready(), reps)
+    out["native"] = {"first_s": first, "per_second": wall / T, "error": _error(np.asarray(sol.q), ref_q),
+                     "healthy": bool(sol.healthy)}
+
     # a batch: BATCH pushes spread around the nominal one (member 0), one vmapped program; the
     # time per trajectory is the batch's wall time over BATCH (the cost of an ensemble: Monte
     # Carlo over the push, a sweep over a parameter)
@@ -256,6 +265,11 @@ def bench_bicycle(cfg, rep, results: dict, load) -> None:
                           f"first call {g(r['first_s'])} s (compilation); "
                           + ("healthy" if r["healthy"] else "flagged by its run-time verdicts")],
                     f"gnipy {method}: error {g(r['error'])}, {g(r['per_second'])} s per simulated s")
+        r = m["native"]
+        rep.row(sec, [f"gnipy dla, h = {H:g}, native backend", g(r["error"]), g(r["per_second"]), "", "",
+                      f"first call {g(r['first_s'])} s (lowering and LLVM; its object code cached after); "
+                      + ("healthy" if r["healthy"] else "flagged by its run-time verdicts")],
+                f"gnipy dla native: error {g(r['error'])}, {g(r['per_second'])} s per simulated s")
         r = m["batch"]
         rep.row(sec, [f"gnipy dla, h = {H:g}, a batch of {r['members']:,} pushes (per trajectory)", g(r["error"]),
                       g(r["per_second"]), "", "",
@@ -289,6 +303,11 @@ def bicycle_targets(results: dict, how_far, g) -> list[list[str]]:
         met, far = how_far(us, TARGET_STEP_US, False)
         rows.append([f"Whipple bicycle step ≤ {TARGET_STEP_US:g} µs: {method} (XLA, in simulate)", f"{g(us)} µs/step",
                      met, far])
+    if "native" in r:
+        us = r["native"]["per_second"] / (1.0 / H) * 1e6
+        met, far = how_far(us, TARGET_STEP_US, False)
+        rows.append([f"Whipple bicycle step ≤ {TARGET_STEP_US:g} µs: dla (native, in simulate)", f"{g(us)} µs/step",
+                     met, far])
     if "batch" in r:
         us = r["batch"]["per_second"] / (1.0 / H) * 1e6
         met, far = how_far(us, TARGET_STEP_US, False)
@@ -298,6 +317,11 @@ def bicycle_targets(results: dict, how_far, g) -> list[list[str]]:
     met, far = how_far(ratio, 1.0, True)
     rows.append(["gnipy (dla) faster than PyDy + DOP853 at matched accuracy: Whipple bicycle",
                  f"PyDy/gnipy = {g(ratio)}", met, far])
+    if "native" in r:
+        ratio = r["pydy"]["per_second"] / r["native"]["per_second"]
+        met, far = how_far(ratio, 1.0, True)
+        rows.append(["gnipy (dla, native) faster than PyDy + DOP853 at matched accuracy: Whipple bicycle",
+                     f"PyDy/gnipy = {g(ratio)}", met, far])
     if "batch" in r:
         ratio = r["pydy"]["per_second"] / r["batch"]["per_second"]
         met, far = how_far(ratio, 1.0, True)
