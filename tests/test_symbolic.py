@@ -382,6 +382,8 @@ def test_load_refusals():
     ):
         with pytest.raises(gnipy.InputError, match=match):
             gnipy.from_sympy(L, [x, y, th], constraints=knife, **kwargs)
+    with pytest.raises(gnipy.InputError, match="params must be a mapping"):
+        gnipy.from_sympy(L, [x, y, th], constraints=knife, forces=[0, 0, tau], inputs=[tau], params=5)
     with pytest.raises(gnipy.InputError, match=r"model involves inputs\[0\] = tau\(t\)"):
         gnipy.from_sympy(L + tau * th, [x, y, th], constraints=knife, forces=[0, 0, tau], inputs=[tau])
     N = me.ReferenceFrame("N")

@@ -250,7 +250,9 @@ def _time_symbol(params):
     """The symbol of time in the forces: `dynamicsymbols._t` (the symbol `t`), unless `params` gives
     a parameter named t."""
     me = require("sympy.physics.mechanics", extra="sympy")
-    named = {k if isinstance(k, str) else getattr(k, "name", None) for k in (params or {})}
+    if not isinstance(params, Mapping):  # None, or not a mapping (which _parameters refuses by name)
+        return me.dynamicsymbols._t
+    named = {k if isinstance(k, str) else getattr(k, "name", None) for k in params}
     return None if "t" in named else me.dynamicsymbols._t
 
 
