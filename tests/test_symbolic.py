@@ -477,25 +477,16 @@ def test_mechanics_system_with_a_holonomic_constraint():
 def _symbrim_whipple():
     """SymBRiM's Whipple bicycle as a sympy.physics.mechanics System, gravity along −ground.normal,
     with the benchmark's parameters in Moore's set (J. K. Moore, *Human control of a bicycle*, UC
-    Davis 2012: the relations of `dtk.bicycle.benchmark_to_moore`)."""
-    import symbrim as sb
+    Davis 2012: the relations of `dtk.bicycle.benchmark_to_moore`), as the bicycle benchmark builds
+    it (benchmarks/bicycle.py), converted by from_sympy."""
+    import pathlib
+    import sys
 
-    from gnipy.models.whipple_bicycle import moore_parameters
+    sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[1]))  # benchmarks/ is not installed
+    from benchmarks.bicycle import symbrim_bicycle
 
-    bicycle = sb.WhippleBicycle("bicycle")
-    bicycle.front_frame = sb.RigidFrontFrame("front_frame")
-    bicycle.rear_frame = sb.RigidRearFrame("rear_frame")
-    bicycle.front_wheel = sb.KnifeEdgeWheel("front_wheel")
-    bicycle.rear_wheel = sb.KnifeEdgeWheel("rear_wheel")
-    bicycle.front_tire = sb.NonHolonomicTire("front_tire")
-    bicycle.rear_tire = sb.NonHolonomicTire("rear_tire")
-    bicycle.ground = sb.FlatGround("ground")
-    bicycle.define_all()
-    system = bicycle.to_system()
-    g = sp.Symbol("g")
-    system.apply_uniform_gravity(-g * bicycle.ground.get_normal(bicycle.ground.origin))
-    values = moore_parameters()
-    return gnipy.from_sympy(system, params={sp.Symbol(k): float(v) for k, v in values.items()}, name="symbrim-whipple")
+    system, values = symbrim_bicycle()
+    return gnipy.from_sympy(system, params=values, name="symbrim-whipple")
 
 
 def test_symbrims_whipple_bicycle_gives_basu_mandal_table_1():
