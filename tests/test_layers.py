@@ -34,7 +34,7 @@ LAYERS = [
     # 2. mechanics: the System and what derives from it; the model table
     ["spaces", "forcing", "projectors", "equations"],
     ["holonomic"],  # holonomic constraints: the System's rows, the methods' position multiplier
-    ["system_checks", "system_arguments"],
+    ["system_checks", "system_arguments", "symbolic_mechanics"],  # symbolic_mechanics: reading SymPy mechanics models
     ["system"],
     ["registry", "symbolic"],
     # 3. discretization
