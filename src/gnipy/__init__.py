@@ -121,6 +121,7 @@ __all__ = [
     "model_from_function",
     "from_sympy",
     "linearize",
+    "modified_equations",
     "make_system",
     "model_names",
     "models",
@@ -145,7 +146,7 @@ _LAZY = {
     **dict.fromkeys(["ControlResult", "FitResult", "Observations", "fit", "solve_optimal_control"], "control"),
     "simulate_to_file": "streaming",
     "from_sympy": "symbolic",
-    "linearize": "analysis",
+    **dict.fromkeys(["linearize", "modified_equations"], "analysis"),
     **dict.fromkeys(["open_sweep", "run_sweep"], "sweep"),
     **dict.fromkeys(["read_netcdf", "verify_netcdf", "write_netcdf"], "io"),
 }

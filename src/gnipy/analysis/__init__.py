@@ -8,7 +8,9 @@ tests.
   exact solution;
 - :mod:`gnipy.analysis.orders`: the one fitted order of convergence;
 - :mod:`gnipy.analysis.convergence`: convergence studies (`gni convergence`);
-- :mod:`gnipy.analysis.linearization`: the linear stability of a steady motion (`gnipy.linearize`).
+- :mod:`gnipy.analysis.linearization`: the linear stability of a steady motion (`gnipy.linearize`);
+- :mod:`gnipy.analysis.modified_equations`: backward error analysis, the modified vector field
+  of a method's one-step map.
 """
 
 from .convergence import MEASURES, REFERENCE_FLOOR, ConvergenceStudy, convergence_study
@@ -25,12 +27,15 @@ from ..diagnostics import (
     hidden_momentum_band,
     hidden_momentum_verdict,
 )
+from .modified_equations import ModifiedEquations, modified_equations
 from .invariants import ExactErrors, exact_errors, invariant_drifts
 from .linearization import (DiscreteLinearization, Linearization, StabilityCurve, discrete_linearization, linearize,
                             stability_curve)
 from .orders import ROUND_OFF, fit_points, fitted_order
 
 __all__ = [
+    "ModifiedEquations",
+    "modified_equations",
     "Linearization",
     "linearize",
     "StabilityCurve",
