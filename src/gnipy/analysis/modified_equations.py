@@ -86,8 +86,11 @@ def _nth_derivative(f: Callable, n: int) -> Callable:
 class ModifiedEquations:
     """The modified vector field of a method's one-step map (:func:`modified_equations`).
 
-    The state vector y is the method's own state without its compensated-summation errors:
-    :attr:`fields` names its parts in order, :attr:`sizes` their lengths.
+    The state vector y is the method's own state without its compensated-summation errors, its
+    parts in the order of :attr:`fields` and each part's arrays flattened (:attr:`sizes`: the
+    lengths). On $\\mathbb{R}^n \\times G$ the base point's orientation R enters as its matrix
+    entries: the step keeps R on the group, so each $f_j$'s R-part is tangent there
+    ($R^{-1}f_{j,R}$ in the Lie algebra).
 
     Attributes:
         method: the method's name.
@@ -113,23 +116,29 @@ class ModifiedEquations:
     _system: object
     _template: object
 
-    def state(self, q, v, h: float) -> jax.Array:
-        """The state vector y at which the method starts from `(q, v)` with step `h` (its `init`)."""
-        q = jnp.asarray(np.asarray(q, dtype=np.float64))
+    def state(self, q, v, h: float, R=None) -> jax.Array:
+        """The state vector y at which the method starts from `(q, v)` (and the orientation `R` on
+        $\\mathbb{R}^n \\times G$, default the identity) with step `h` (its `init`)."""
+        b = self._system.initial_point(q, R)
         v = jnp.asarray(np.asarray(v, dtype=np.float64))
-        return self._pack(self._integrator.init(self._system, q, v, jnp.asarray(h, dtype=q.dtype)))
+        return self._pack(self._integrator.init(self._system, b, v, jnp.asarray(h, dtype=v.dtype)))
 
     def _pack(self, state) -> jax.Array:
-        return jnp.concatenate([jnp.ravel(getattr(state, name)) for name in self.fields])
+        return jnp.concatenate([jnp.ravel(leaf) for name in self.fields
+                                for leaf in jax.tree_util.tree_leaves(getattr(state, name))])
 
     def _unpack(self, y):
         parts, offset = {}, 0
-        for name, size in zip(self.fields, self.sizes):
-            template = getattr(self._template, name)
-            parts[name] = y[offset:offset + size].reshape(jnp.shape(template))
-            offset += size
-        errors = {name: jnp.zeros_like(value) for name, value in self._template._asdict().items()
-                  if name not in self.fields and value is not None}
+        for name in self.fields:
+            leaves, tree = jax.tree_util.tree_flatten(getattr(self._template, name))
+            new = []
+            for leaf in leaves:
+                size = int(np.size(leaf))
+                new.append(y[offset:offset + size].reshape(jnp.shape(leaf)))
+                offset += size
+            parts[name] = jax.tree_util.tree_unflatten(tree, new)
+        errors = {name: jax.tree_util.tree_map(jnp.zeros_like, value)
+                  for name, value in self._template._asdict().items() if name not in self.fields and value is not None}
         return self._template._replace(**parts, **errors)
 
     def step_map(self, y, h) -> jax.Array:
@@ -198,28 +207,29 @@ class ModifiedEquations:
         return sum(h ** (j - 1) * f for j, f in enumerate(self.coefficients(y), start=1))
 
 
-def modified_equations(system, method, order: int = 2, *, q=None, v=None, delta: float = 0.02,
+def modified_equations(system, method, order: int = 2, *, q=None, v=None, R=None, delta: float = 0.02,
                        nodes: int = 5) -> ModifiedEquations:
     """The modified equations of `method` on `system` (backward error analysis of its one-step map;
     the theory and the numerical method are in :mod:`gnipy.analysis.modified_equations`).
 
     Arguments:
-        system: a :class:`~gnipy.System` on $\\mathbb{R}^n$ (the state must be a vector: systems on
-            $\\mathbb{R}^n \\times G$ are refused).
+        system: a :class:`~gnipy.System` (on $\\mathbb{R}^n \\times G$ the orientation's matrix
+            entries are part of the state vector).
         method: a method's name or an :class:`~gnipy.Integrator`.
         order: the highest power of h kept in the field (≥ 0): $f_1, \\dots, f_{order+1}$.
-        q, v: a configuration and velocity where the method is prepared (default: the system's
-            documented initial condition).
+        q, v: a configuration and velocity where the method is prepared and the premise checked
+            (default: the system's documented initial condition).
+        R: the orientation there on $\\mathbb{R}^n \\times G$ (default the identity).
         delta, nodes: the extrapolation's node spacing δ (> 0) and count M (≥ 1).
 
     Returns:
         A :class:`ModifiedEquations`.
 
     Raises:
-        InputError: on an order, δ or M out of range, a system on a group, or no (q, v).
+        InputError: on an order, δ or M out of range, or no (q, v).
         MethodError: when the method does not apply to the system, or when its step map does not tend
-            to the identity at the start state (:meth:`ModifiedEquations.defect`): no modified vector
-            field exists there.
+            to the identity at the start state (:meth:`ModifiedEquations.defect`), even after its
+            reflection: no modified vector field exists there.
     """
     from ..inputs import real_number
     from .linearization import prepared_method
@@ -229,20 +239,23 @@ def modified_equations(system, method, order: int = 2, *, q=None, v=None, delta:
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 1:
         raise InputError(f"nodes: expected a positive integer, got {nodes!r}")
     delta = real_number("delta", delta, lower=0.0, strict=True)
-    if getattr(system, "group", None) is not None:
-        raise InputError("system: modified equations need a state vector; systems on R^n x G are not supported")
     if q is None or v is None:
         defaults = getattr(system, "defaults", None)
         if defaults is None:
             raise InputError("q, v: the system has no documented initial condition; give q and v")
-        q, v = defaults if q is None and v is None else (q if q is not None else defaults[0],
-                                                         v if v is not None else defaults[1])
+        q = defaults[0] if q is None else q
+        v = defaults[1] if v is None else v
+        if R is None and len(defaults) > 2:
+            R = defaults[2]
     system, integrator, q, v = prepared_method(system, method, q, v)
-    template = integrator.init(system, q, v, jnp.asarray(delta, dtype=q.dtype))
+    b = system.initial_point(q, R)
+    template = integrator.init(system, b, v, jnp.asarray(delta, dtype=v.dtype))
     fields = tuple(name for name, value in template._asdict().items()
                    if value is not None and not name.endswith("_err")
-                   and jnp.issubdtype(jnp.asarray(value).dtype, jnp.floating))
-    sizes = tuple(int(np.size(getattr(template, name))) for name in fields)
+                   and all(jnp.issubdtype(jnp.asarray(leaf).dtype, jnp.floating)
+                           for leaf in jax.tree_util.tree_leaves(value)))
+    sizes = tuple(sum(int(np.size(leaf)) for leaf in jax.tree_util.tree_leaves(getattr(template, name)))
+                  for name in fields)
     y = None
     for reflected in (False, True):
         if reflected and not callable(getattr(integrator, "reverse", None)):
