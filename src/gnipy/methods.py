@@ -10,7 +10,7 @@ from collections.abc import Callable
 from .integrators.base import MethodError
 from .registry import set_method_lookup
 
-__all__ = ["get_method", "method_names", "is_method_name", "METHOD_DESCRIPTIONS"]
+__all__ = ["get_method", "method_names", "is_method_name", "prepared_method", "METHOD_DESCRIPTIONS"]
 
 
 def _gni(ld_name: str):
@@ -130,6 +130,17 @@ def get_method(name: str):
         raise MethodError(f"method: unknown method {name!r} (known: {', '.join(_METHODS)}; compositions "
                           "'<scheme>-<symmetric method>' with scheme yoshida4, suzuki4, yoshida6, kahanli6)")
     return _METHODS[name][1]()
+
+
+def prepared_method(system, method, b0):
+    """`(system, integrator)`: the system without its metadata and the method (a name or an
+    Integrator) validated and prepared for it at the base point `b0`, as a run prepares them: what a
+    method's one-step map is studied with (:func:`gnipy.analysis.discrete_linearization`,
+    :func:`gnipy.modified_equations`). MethodError when the method does not apply to the system."""
+    integrator = get_method(method) if isinstance(method, str) else method
+    system = system.without_metadata()
+    integrator.validate(system, b0)
+    return system, integrator.prepare(system, b0)
 
 
 set_method_lookup(get_method, method_names)  # the registry's default passes over methods that cannot run a system

@@ -302,22 +302,6 @@ def _map_jacobian(integrator, system, q, v, h, warmup: int):
     return jax.jacfwd(step)(pack(leaves))
 
 
-def prepared_method(system, method, q, v):
-    """`(system, integrator, q, v)`: the system without its metadata, the method (a name or an
-    Integrator) validated and prepared for it at q, and q, v as float64 arrays: what a method's
-    one-step map is studied with (:func:`discrete_linearization`,
-    :func:`gnipy.analysis.modified_equations.modified_equations`). MethodError when the method does
-    not apply to the system."""
-    from ..methods import get_method
-
-    q = jnp.asarray(np.asarray(q, dtype=np.float64))
-    v = jnp.asarray(np.asarray(v, dtype=np.float64))
-    integrator = get_method(method) if isinstance(method, str) else method
-    system = system.without_metadata()
-    integrator.validate(system, q)
-    return system, integrator.prepare(system, q), q, v
-
-
 def discrete_linearization(system, method, q, v, h: float, *, warmup: int = 1) -> DiscreteLinearization:
     """The eigenvalues of `method`'s one-step map about the steady motion `(q, v)` with step `h`.
 
@@ -349,7 +333,11 @@ def discrete_linearization(system, method, q, v, h: float, *, warmup: int = 1) -
     """
     h = real_number("h", h, lower=0.0, strict=True)
     linearize(system, q, v)  # the same checks of the steady motion
-    system, integrator, q, v = prepared_method(system, method, q, v)
+    from ..methods import prepared_method
+
+    q = jnp.asarray(np.asarray(q, dtype=np.float64))
+    v = jnp.asarray(np.asarray(v, dtype=np.float64))
+    system, integrator = prepared_method(system, method, q)
     if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or warmup < 0:
         raise InputError(f"warmup: expected a non-negative integer, got {warmup!r}")
     jacobian = np.asarray(_map_jacobian(integrator, system, q, v, jnp.asarray(h, dtype=q.dtype), int(warmup)))

@@ -232,7 +232,7 @@ def modified_equations(system, method, order: int = 2, *, q=None, v=None, R=None
             reflection: no modified vector field exists there.
     """
     from ..inputs import real_number
-    from .linearization import prepared_method
+    from ..methods import prepared_method
 
     if isinstance(order, bool) or not isinstance(order, (int, np.integer)) or order < 0:
         raise InputError(f"order: expected a non-negative integer, got {order!r}")
@@ -247,8 +247,9 @@ def modified_equations(system, method, order: int = 2, *, q=None, v=None, R=None
         v = defaults[1] if v is None else v
         if R is None and len(defaults) > 2:
             R = defaults[2]
-    system, integrator, q, v = prepared_method(system, method, q, v)
     b = system.initial_point(q, R)
+    v = jnp.asarray(np.asarray(v, dtype=np.float64))
+    system, integrator = prepared_method(system, method, b)
     template = integrator.init(system, b, v, jnp.asarray(delta, dtype=v.dtype))
     fields = tuple(name for name, value in template._asdict().items()
                    if value is not None and not name.endswith("_err")
@@ -256,22 +257,20 @@ def modified_equations(system, method, order: int = 2, *, q=None, v=None, R=None
                            for leaf in jax.tree_util.tree_leaves(value)))
     sizes = tuple(sum(int(np.size(leaf)) for leaf in jax.tree_util.tree_leaves(getattr(template, name)))
                   for name in fields)
-    y = None
+    defects = []
     for reflected in (False, True):
         if reflected and not callable(getattr(integrator, "reverse", None)):
             break
         result = ModifiedEquations(method=integrator.name, order=int(order), fields=fields, sizes=sizes,
                                    delta=float(delta), nodes=int(nodes), reflected=reflected,
                                    _integrator=integrator, _system=system, _template=template)
-        y = result._pack(template) if y is None else y
-        defect = float(jax.jit(result.defect)(y))
-        if defect <= NEAR_IDENTITY * (1.0 + float(jnp.max(jnp.abs(y)))):
+        y = result._pack(template)
+        defects.append(float(jax.jit(result.defect)(y)))
+        if defects[-1] <= NEAR_IDENTITY * (1.0 + float(jnp.max(jnp.abs(y)))):
             return result
-        if not reflected:
-            first = defect
     raise MethodError(
         f"method: {integrator.name}'s step map does not tend to the identity as h -> 0 at its start from "
-        f"(q, v) (|Phi_0(y) - y| = {first:.3g}), nor after its reflection: its state carries a part that "
+        f"(q, v) (|Phi_0(y) - y| = {defects[0]:.3g}), nor after its reflection: its state carries a part that "
         "a step changes by O(1) however small h (a multiplier or an increment of the size of h, or a momentum "
         "that the step projects), so no modified vector field exists on its state space as it is written; "
         "the GNI family, sgni, dla, mp and discrete-gradient have one")
