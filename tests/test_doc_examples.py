@@ -92,6 +92,14 @@ NOT_RUN = {
     "gni atlas --quick --out atlas-quick/":
         "1.5-2.5 minutes: gni atlas --quick with --models and --methods runs in "
         "tests/experiments/test_atlas.py::test_gni_atlas_quick_cli, and the small command of the atlas page here",
+    "gni open-questions --out gnipy-open-questions/":
+        "the full study takes about 30 minutes on 2 cores; its report writer runs in "
+        "tests/experiments/test_open_questions.py::test_the_report_states_the_verdicts_its_rules_give_and_writes_every_file, "
+        "its measurements in tests/analysis/test_sister.py and tests/analysis/test_modified_equations.py",
+    "gni open-questions --quick --out oq-quick/":
+        "about 3 minutes: the command's folder checks run in "
+        "tests/experiments/test_open_questions.py::test_the_command_refuses_a_folder_it_did_not_create_before_computing, "
+        "its report writer in tests/experiments/test_open_questions.py::test_the_report_states_the_verdicts_its_rules_give_and_writes_every_file",
     "mkdocs build --strict":
         "tests/test_docs.py::test_site_builds_strict builds the site with --strict",
     "python -m benchmarks":

@@ -122,6 +122,8 @@ __all__ = [
     "from_sympy",
     "linearize",
     "modified_equations",
+    "sister_trajectory",
+    "sister_method",
     "make_system",
     "model_names",
     "models",
@@ -146,7 +148,7 @@ _LAZY = {
     **dict.fromkeys(["ControlResult", "FitResult", "Observations", "fit", "solve_optimal_control"], "control"),
     "simulate_to_file": "streaming",
     "from_sympy": "symbolic",
-    **dict.fromkeys(["linearize", "modified_equations"], "analysis"),
+    **dict.fromkeys(["linearize", "modified_equations", "sister_trajectory", "sister_method"], "analysis"),
     **dict.fromkeys(["open_sweep", "run_sweep"], "sweep"),
     **dict.fromkeys(["read_netcdf", "verify_netcdf", "write_netcdf"], "io"),
 }

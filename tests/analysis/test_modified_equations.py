@@ -137,6 +137,7 @@ def test_dla_starts_near_the_identity_and_leaves_it_at_order_one():
 
 @pytest.mark.parametrize("kwargs, message", [
     ({"order": -1}, "order"), ({"order": 1.5}, "order"), ({"nodes": 0}, "nodes"), ({"delta": 0.0}, "delta"),
+    ({"steps": 0}, "steps"),
 ])
 def test_bad_arguments_are_refused_by_name(kwargs, message):
     with pytest.raises(InputError, match=message):
@@ -162,3 +163,24 @@ def test_on_a_group_the_orientation_moves_along_the_group_at_every_order():
     A = R.T @ f2[2:11].reshape(3, 3)
     np.testing.assert_allclose(A + A.T, 0.0, rtol=0, atol=1e-7)
     assert modified_equations(ball, "gni-midpoint", order=0).reflected
+
+
+def test_two_midpoint_gni_steps_are_the_flow_of_the_half_step_modified_field():
+    # two GNI steps of h/2 (steps=2): σ² = id, so the map tends to the identity without a reflection;
+    # on the oscillator from the consistent start (no hidden momentum: z is still) they are two
+    # implicit midpoint steps of h/2, whose field is A + (h/2)²A³/12: f_2 = 0, f_3 = A³y/48
+    me = modified_equations(OSCILLATOR, "gni-midpoint", order=2, q=Q0, v=V0, steps=2)
+    assert not me.reflected and me.steps == 2
+    y = me.state(Q0, V0, 0.01)
+    f1, f2, f3 = (np.asarray(f) for f in jax.jit(me.coefficients)(y))
+    np.testing.assert_allclose(f1, A @ np.asarray(y), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(f2, 0.0, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(f3, np.linalg.matrix_power(A, 3) @ np.asarray(y) / 48, rtol=0, atol=1e-9)
+    # the implicit midpoint rule conserves quadratic invariants: every f_j is tangent to E = const
+    # (yᵀA³y = 0 for the oscillator's A)
+    grad_E = np.asarray(jax.grad(me.energy)(y))
+    assert max(abs(grad_E @ f) for f in (f1, f2, f3)) < 1e-11
+    assert abs(float(me.energy_rate(y, 1)) - grad_E @ f1) < 1e-12
+    # the constraint ż = 0 holds at every order: μ f_j,q is z's velocity, zero in every f_j
+    assert max(abs(f[2]) for f in (f1, f2, f3)) < 1e-11
+    np.testing.assert_allclose(np.asarray(me.normal_velocity(y, 1)), [f1[2]], rtol=0, atol=1e-15)

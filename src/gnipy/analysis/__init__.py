@@ -10,7 +10,9 @@ tests.
 - :mod:`gnipy.analysis.convergence`: convergence studies (`gni convergence`);
 - :mod:`gnipy.analysis.linearization`: the linear stability of a steady motion (`gnipy.linearize`);
 - :mod:`gnipy.analysis.modified_equations`: backward error analysis, the modified vector field
-  of a method's one-step map.
+  of a method's one-step map;
+- :mod:`gnipy.analysis.sister`: sister systems, a nonholonomic constraint replaced by holonomic
+  ones switched every τ with a plastic impact, and the discrete method built from them.
 """
 
 from .convergence import MEASURES, REFERENCE_FLOOR, ConvergenceStudy, convergence_study
@@ -28,6 +30,7 @@ from ..diagnostics import (
     hidden_momentum_verdict,
 )
 from .modified_equations import ModifiedEquations, modified_equations
+from .sister import SisterRun, sister_method, sister_trajectory
 from .invariants import ExactErrors, exact_errors, invariant_drifts
 from .linearization import (DiscreteLinearization, Linearization, StabilityCurve, discrete_linearization, linearize,
                             stability_curve)
@@ -36,6 +39,9 @@ from .orders import ROUND_OFF, fit_points, fitted_order
 __all__ = [
     "ModifiedEquations",
     "modified_equations",
+    "SisterRun",
+    "sister_trajectory",
+    "sister_method",
     "Linearization",
     "linearize",
     "StabilityCurve",

@@ -103,6 +103,9 @@ class ModifiedEquations:
             reflection σ (the GNI family's (Comb), $p^+ \\mapsto p^-$, :meth:`~gnipy.GNI.reverse`),
             because $\\Phi_h$ itself tends to σ, not to the identity, as h → 0: then one step of the
             method is σ after the flow of the modified field for time h.
+        steps: the map expanded is s steps of size h/s of the method (default 1). With s = 2 the
+            GNI family's two steps tend to the identity ($\\sigma^2 = \\mathrm{id}$): the field whose
+            flow for time h is two steps of h/2, the alternation of the hidden momentum averaged out.
     """
 
     method: str
@@ -112,15 +115,20 @@ class ModifiedEquations:
     delta: float
     nodes: int
     reflected: bool
+    steps: int
     _integrator: object
     _system: object
     _template: object
 
     def state(self, q, v, h: float, R=None) -> jax.Array:
         """The state vector y at which the method starts from `(q, v)` (and the orientation `R` on
-        $\\mathbb{R}^n \\times G$, default the identity) with step `h` (its `init`)."""
-        b = self._system.initial_point(q, R)
-        v = jnp.asarray(np.asarray(v, dtype=np.float64))
+        $\\mathbb{R}^n \\times G$, default the identity) with step `h` (its `init`). On $\\mathbb{R}^n$ it
+        can be traced (vmapped over states, e.g.)."""
+        if self._system.group is None:
+            b = jnp.asarray(q, dtype=jnp.float64)
+        else:
+            b = self._system.initial_point(q, R)
+        v = jnp.asarray(v, dtype=jnp.float64)
         return self._pack(self._integrator.init(self._system, b, v, jnp.asarray(h, dtype=v.dtype)))
 
     def _pack(self, state) -> jax.Array:
@@ -142,8 +150,11 @@ class ModifiedEquations:
         return self._template._replace(**parts, **errors)
 
     def step_map(self, y, h) -> jax.Array:
-        """$\\Phi_h(y)$, one step of the method from the state y (σ∘Φ_h when :attr:`reflected`)."""
-        new, _ = self._integrator.step(self._system, self._unpack(y), h)
+        """$\\Phi_h(y)$, one step of the method from the state y (σ∘Φ_h when :attr:`reflected`; with
+        :attr:`steps` = s, the s steps of size h/s that make up one step of the map)."""
+        new = self._unpack(y)
+        for _ in range(self.steps):
+            new, _ = self._integrator.step(self._system, new, h / self.steps)
         if self.reflected:
             new = self._integrator.reverse(self._system, new)
         return self._pack(new)
@@ -154,6 +165,31 @@ class ModifiedEquations:
             return jnp.asarray(y)
         return self._pack(self._integrator.reverse(self._system, self._unpack(jnp.asarray(y))))
 
+    def observe(self, y):
+        """`(b, v)`: the base point and the velocity the method reports at the state y (its
+        `observe`, as :func:`gnipy.simulate` saves them)."""
+        b, v, _ = self._integrator.observe(self._system, self._unpack(jnp.asarray(y)), self.delta)
+        return b, v
+
+    def energy(self, y) -> jax.Array:
+        """The system's energy at what the method reports at y (:meth:`observe`)."""
+        return self._system.energy(*self.observe(y))
+
+    def energy_rate(self, y, j: int) -> jax.Array:
+        """$\\nabla E(y)\\cdot f_j(y)$: the rate at which $f_j$ changes the energy (:meth:`energy`).
+        Where the motion conserves E, $f_1$'s rate vanishes on the states the method visits, and the
+        first non-zero one, $j = p + 1$, is the energy error's source at order $h^p$."""
+        return jax.jvp(self.energy, (jnp.asarray(y),), (self.coefficient(j)(y),))[1]
+
+    def normal_velocity(self, y, j: int) -> jax.Array:
+        """$\\mu(q)\\,f_{j,q}(y)$ on $\\mathbb{R}^n$: the part of $f_j$'s configuration velocity off the
+        constraint distribution at q (one entry per constraint row). Zero for every j exactly
+        when the modified flow's configurations keep the system's own constraints."""
+        if self._system.group is not None:
+            raise InputError("system: normal_velocity is defined on R^n (the configuration is the state's first n entries)")
+        n = self._system.n
+        return self._system.mu(y[:n]) @ self.coefficient(j)(y)[:n]
+
     def _extrapolated(self, y, j: int) -> jax.Array:
         """$\\partial_h^j\\Phi_h(y)$ at the nodes, extrapolated to $h = 0$ (j = 0: $\\Phi_h(y)$ itself)."""
         y = jnp.asarray(y)
@@ -163,7 +199,9 @@ class ModifiedEquations:
         weights = np.array([np.prod([-hs[m] / (hs[i] - hs[m]) for m in range(hs.size) if m != i])
                             for i in range(hs.size)])
         derivative = _nth_derivative(lambda h: self.step_map(y, h), j)
-        values = jax.vmap(derivative)(jnp.asarray(hs, dtype=y.dtype))
+        # one node after another (lax.map): a vmap batches the steps' Newton loops, and such vmap graphs of
+        # while loops have wedged XLA:CPU's thread pool here (0% CPU, the result never ready)
+        values = jax.lax.map(derivative, jnp.asarray(hs, dtype=y.dtype))
         return jnp.tensordot(jnp.asarray(weights, dtype=y.dtype), values, axes=1)
 
     def taylor(self, y, j: int) -> jax.Array:
@@ -208,7 +246,7 @@ class ModifiedEquations:
 
 
 def modified_equations(system, method, order: int = 2, *, q=None, v=None, R=None, delta: float = 0.02,
-                       nodes: int = 5) -> ModifiedEquations:
+                       nodes: int = 5, steps: int = 1) -> ModifiedEquations:
     """The modified equations of `method` on `system` (backward error analysis of its one-step map;
     the theory and the numerical method are in :mod:`gnipy.analysis.modified_equations`).
 
@@ -221,6 +259,7 @@ def modified_equations(system, method, order: int = 2, *, q=None, v=None, R=None
             (default: the system's documented initial condition).
         R: the orientation there on $\\mathbb{R}^n \\times G$ (default the identity).
         delta, nodes: the extrapolation's node spacing δ (> 0) and count M (≥ 1).
+        steps: expand s steps of size h/s as one map (:attr:`ModifiedEquations.steps`; ≥ 1).
 
     Returns:
         A :class:`ModifiedEquations`.
@@ -238,6 +277,8 @@ def modified_equations(system, method, order: int = 2, *, q=None, v=None, R=None
         raise InputError(f"order: expected a non-negative integer, got {order!r}")
     if isinstance(nodes, bool) or not isinstance(nodes, (int, np.integer)) or nodes < 1:
         raise InputError(f"nodes: expected a positive integer, got {nodes!r}")
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise InputError(f"steps: expected a positive integer, got {steps!r}")
     delta = real_number("delta", delta, lower=0.0, strict=True)
     if q is None or v is None:
         defaults = getattr(system, "defaults", None)
@@ -262,7 +303,7 @@ def modified_equations(system, method, order: int = 2, *, q=None, v=None, R=None
         if reflected and not callable(getattr(integrator, "reverse", None)):
             break
         result = ModifiedEquations(method=integrator.name, order=int(order), fields=fields, sizes=sizes,
-                                   delta=float(delta), nodes=int(nodes), reflected=reflected,
+                                   delta=float(delta), nodes=int(nodes), reflected=reflected, steps=int(steps),
                                    _integrator=integrator, _system=system, _template=template)
         y = result._pack(template)
         defects.append(float(jax.jit(result.defect)(y)))

@@ -16,6 +16,7 @@ listings.
     gni verify PATH
     gni reproduce [--out DIR] [--quick]
     gni atlas [--quick] [--out DIR] [--models a,b] [--methods x,y]
+    gni open-questions [--quick] [--out DIR]
     gni demo [--out FILE.nc]
     gni models
     gni methods
@@ -48,12 +49,12 @@ The package holds parsing and printing only; what the commands compute lives in 
 - one module per command group: :mod:`~gnipy.cli.run` (`run`, with
   :mod:`~gnipy.cli.summary`), :mod:`~gnipy.cli.demo`, :mod:`~gnipy.cli.convergence`, :mod:`~gnipy.cli.stability`, :mod:`~gnipy.cli.sweep`,
   :mod:`~gnipy.cli.control`, :mod:`~gnipy.cli.fit`, :mod:`~gnipy.cli.info` (`info`, `verify`), :mod:`~gnipy.cli.reproduce`,
-  :mod:`~gnipy.cli.atlas`, :mod:`~gnipy.cli.listings` (`models`, `methods`).
+  :mod:`~gnipy.cli.atlas`, :mod:`~gnipy.cli.open_questions`, :mod:`~gnipy.cli.listings` (`models`, `methods`).
 """
 
 from .app import app, main
 
 # the commands register on `app` when their modules are imported, in the order `gni --help` lists them
-from . import run, convergence, stability, sweep, control, fit, info, demo, listings, reproduce, atlas  # noqa: E402, F401  isort: skip
+from . import run, convergence, stability, sweep, control, fit, info, demo, listings, reproduce, atlas, open_questions  # noqa: E402, F401  isort: skip
 
 __all__ = ["app", "main"]
