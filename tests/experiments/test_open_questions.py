@@ -29,7 +29,9 @@ def _measurements():
     rows = [
         _row("discrete-gradient", [0.0, 0.0, 0.08], [0.0, 0.0, 0.0]),  # E conserved; constraints modified at h²
         _row("mp", [0.0, 0.0, 0.0], [0.0, 0.0, 0.05]),  # same constraints, bounded energy error
-        _row("sgni-trapezoid", [0.0, 0.0, 0.3], [0.0, 0.0, 0.2], measured=(1e-3, 1e-3)),  # a drift (slope·span > max/2)
+        _row("sgni-trapezoid", [0.0, 0.0, 0.3], [0.0, 0.0, 0.2], measured=(1e-3, 1e-3),
+             predicted=(1e-3, 1e-3)),  # a drift (slope·span > max/2), as predicted
+        _row("gni-trapezoid", [0.0, 1e-3, 0.07], [0.0, 7e-4, 0.0], measured=(1.1, 0.0), predicted=(2.6e-5, 0.0)),
         _row("dla", [0.0, 0.0, 0.1], [0.0, 0.0, 0.1], defect=1e-3),  # the premise fails at its states
     ]
     paths = {"reference": np.zeros((3, 3)), "sister": {0.5: np.ones((3, 3))}}
@@ -51,11 +53,13 @@ def test_the_report_states_the_verdicts_its_rules_give_and_writes_every_file(tmp
     lines = {line.split("|")[2].strip(): line for line in text.splitlines() if line.startswith("| nonholonomic")}
     assert "conserved to h^2" in lines["discrete-gradient"] and "modified constraints from h^2" in lines["discrete-gradient"]
     assert "same constraints to h^2" in lines["mp"] and "predicted bounded, measured bounded" in lines["mp"]
-    assert "measured drift" in lines["sgni-trapezoid"]
+    assert "predicted drift, measured drift" in lines["sgni-trapezoid"]
+    assert "modified constraints from h^1" in lines["gni-trapezoid"] and "breaks down" in lines["gni-trapezoid"]
     assert "no modified field at the visited states" in lines["dla"]
     assert "round-off: the same map" in text and "failed: solve failed at step 2130" in text
     data = json.loads(result.data.read_text())
-    assert [r["method"] for r in data["backward_error"]] == ["discrete-gradient", "mp", "sgni-trapezoid", "dla"]
+    assert [r["method"] for r in data["backward_error"]] == ["discrete-gradient", "mp", "sgni-trapezoid",
+                                                             "gni-trapezoid", "dla"]
     assert "sister_paths" not in data  # the figure's arrays, not measurements
 
 
