@@ -1,7 +1,7 @@
 """`gni open-questions`: the report's verdict rules on constructed rows, the files it writes, and
 the command's refusal of a folder it may not write. The measurements themselves are tested where
 they are made (tests/analysis/test_modified_equations.py, tests/analysis/test_sister.py); the full
-study takes about 30 minutes and its quick form about 3 (`gni open-questions --quick`)."""
+study takes about 45 minutes and its quick form about 3 (`gni open-questions --quick`)."""
 
 import json
 
