@@ -68,8 +68,8 @@ from ..errors import InputError
 from ..holonomic import project_state
 from ..inputs import real_number
 from ..integrators.base import newton
-from ..linalg import solve, solve_spd
-from ..projectors import projectors
+from ..projectors import projectors, reported_momentum
+from ..solution import SolverFailure
 from ..system import System
 
 __all__ = ["SisterRun", "sister_phase", "sister_trajectory", "sister_method", "rail"]
@@ -172,7 +172,7 @@ def sister_phase(system, constraint=None) -> System:
 
 
 def _impact(system, q, v):
-    """The plastic impact at q: `(v+, energy lost)`."""
+    """The plastic impact at q: `(v+, energy lost)`, v+ the G-orthogonal projection of v onto the distribution."""
     G = system.metric(q)
     P, _ = projectors(G, system.nonholonomic_mu(q))
     w = P @ v
@@ -202,18 +202,19 @@ def _sister_flow(system, phase, q0, v0, tau, K: int):
         kept = jnp.max(jnp.abs(ph.phi(y[:system.n])))
         ok = (sol.result == diffrax.RESULTS.successful) & jnp.all(jnp.isfinite(y))
         w, lost = _impact(system, q1, v1)
-        return (q1, w), (q1, w, system.energy(q1, w), lost, kept, ok)
+        return (q1, w), (q1, w, system.energy(q1, w), lost, kept, ok, jnp.nan)
 
     _, out = jax.lax.scan(one, (q0, v0), None, length=K)
     return out
 
 
-def _run(system, q0, v0, K, tau, out, name: str = "tau") -> SisterRun:
-    q, v, energy, lost, kept, ok = (np.asarray(a) for a in out)
+def _run(system, q0, v0, K, tau, out) -> SisterRun:
+    q, v, energy, lost, kept, ok, residual = (np.asarray(a) for a in out)
     if not ok.all():
         k = int(np.argmin(ok))
-        raise InputError(f"{name}: the phase from t = {k * tau:.6g} to {(k + 1) * tau:.6g} failed (non-finite "
-                         "values, the solver's step cap, or a step's Newton solve)")
+        raise SolverFailure(f"sister: the phase from t = {k * tau:.6g} to {(k + 1) * tau:.6g} failed (non-finite "
+                            "values, the solver's step cap, or the step's Newton solve)", step=k, time=k * tau,
+                            residual=float(residual[k]))
     z = lambda a, first: np.concatenate([np.asarray(first)[None], a])
     e0 = float(system.energy(q0, v0))
     return SisterRun(t=tau * np.arange(K + 1), q=z(q, q0), v=z(v, v0), energy=z(energy, e0),
@@ -228,7 +229,7 @@ def sister_trajectory(system, q0, v0, *, tau: float, t_final: float, constraint=
     Each phase is integrated with diffrax's Dopri8 at tolerance 1e-12 (the continuous reference's
     solver) and projected onto $\\varphi_k = 0$ and its velocity constraint at its end. Raises
     InputError on a system that is not on $\\mathbb{R}^n$ with linear constraints, a `constraint`
-    that is not tangent to the distribution at the anchor, or a failed phase."""
+    that is not tangent to the distribution at the anchor; :class:`~gnipy.SolverFailure` on a failed phase."""
     core = system.without_metadata()
     q0, v0, K, constraint = _check(core, q0, v0, tau, t_final, constraint)
     phase = sister_phase(core, constraint).without_metadata()
@@ -257,14 +258,14 @@ def _sister_steps(system, phase, q0, v0, h, K: int):
         guess = jnp.concatenate([q + h * system.velocity(q, p), jnp.zeros(m)])
         z, info = newton(F, guess, floor_scale=jnp.maximum(jnp.max(jnp.abs(p)), 1.0))
         q1 = z[:n]
-        # RATTLE's end: the velocity tangent to the engaged constraint at q_{k+1}
-        p_end = jax.grad(Ld, 1)(q, q1)
-        rows1, G1 = ph.holonomic_mu(q1), system.metric(q1)
-        X = solve_spd(G1, rows1.T)
-        p_end = p_end - rows1.T @ solve(rows1 @ X, X.T @ p_end)
-        v_end = system.velocity(q1, p_end)
-        w, lost = _impact(system, q1, v_end)
-        return (q1, G1 @ w), (q1, w, system.energy(q1, w), lost, jnp.max(jnp.abs(ph.phi(q1))), info.ok)
+        # RATTLE's end, the momentum G-orthogonally onto the engaged constraint's rows at q_{k+1}, then
+        # the impact onto the distribution there: both the GNI's projection P* (no affine part)
+        G1, zero = system.metric(q1), jnp.zeros(n)
+        p_end = reported_momentum(G1, ph.holonomic_mu(q1), zero, jax.grad(Ld, 1)(q, q1))
+        p1 = reported_momentum(G1, system.nonholonomic_mu(q1), zero, p_end)
+        v_end, w = system.velocity(q1, p_end), system.velocity(q1, p1)
+        lost = 0.5 * (p_end @ v_end - p1 @ w)
+        return (q1, p1), (q1, w, system.energy(q1, w), lost, jnp.max(jnp.abs(ph.phi(q1))), info.ok, info.residual)
 
     _, out = jax.lax.scan(one, (q0, system.momentum(q0, v0)), None, length=K)
     return out
@@ -273,9 +274,10 @@ def _sister_steps(system, phase, q0, v0, h, K: int):
 def sister_method(system, q0, v0, *, h: float, t_final: float, constraint=None) -> SisterRun:
     """The sister method: one switch per step of size `h` (the module docstring's equations), from
     `(q0, v0)` to `t_final` (a whole number of steps). Each step is a Newton solve for
-    $(q_{k+1}, \\Lambda_k)$; the run stops with InputError at a step that fails."""
+    $(q_{k+1}, \\Lambda_k)$; the run stops with :class:`~gnipy.SolverFailure` (step, time, residual) at a
+    step that fails."""
     core = system.without_metadata()
     q0, v0, K, constraint = _check(core, q0, v0, h, t_final, constraint, "h")
     phase = sister_phase(core, constraint).without_metadata()
     out = _sister_steps(core, phase, q0, v0, jnp.asarray(float(h)), K)
-    return _run(core, q0, v0, K, h, out, "h")
+    return _run(core, q0, v0, K, h, out)
