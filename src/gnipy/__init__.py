@@ -37,6 +37,7 @@ from .integrators import (  # noqa: E402
     NonholonomicEulerB,
     Rattle,
     Shake,
+    SisterMethod,
     StepInfo,
 )
 from .lie_groups import SE2, SO3, MatrixLieGroup, ProductGroup, Rn, TrivialGroup  # noqa: E402
@@ -79,6 +80,7 @@ __all__ = [
     "EulerABComposition",
     "Rattle",
     "Shake",
+    "SisterMethod",
     "DiscreteLagrangeDAlembert",
     "McLachlanPerlmutter",
     "DiscreteGradient",

@@ -51,6 +51,7 @@ from .compilation import jit
 from .linalg import solve_spd
 
 __all__ = [
+    "scheme_energy",
     "HIDDEN_BAND",
     "HIDDEN_FLOOR",
     "ENERGY_BAND",
@@ -288,7 +289,7 @@ class EnergyVerdict:
             f"WARNING: the energy of {system}, a constant of this motion, drifted by more than half the kinetic "
             f"energy from t = {self.first_time:.6g} on (up to {self.max_drift:.3g}x the kinetic energy) with "
             f"{method}: the run is qualitatively wrong from there on. A first-order method (gni-euler-a/b, "
-            "euler-a/b) needs a much smaller h or a symmetric one (gni-trapezoid, gni-midpoint, mp); if the hidden "
+            "euler-a/b; sister, which dissipates the energy by design) needs a much smaller h or a symmetric one (gni-trapezoid, gni-midpoint, mp); if the hidden "
             "momentum left its band too, follow that warning. Check against method='reference'; see the methods "
             "guide, 'Where the GNI struggles'."
         )
@@ -314,7 +315,16 @@ def energy_verdict(t, energy, kinetic, *, e0=None, kmax0: float = 0.0) -> Energy
     return EnergyVerdict(False, float(t[out[0]]), max_drift)
 
 
-def conserved_quantity(system, b0, *, gni_family: bool, invariants=(), conserves_energy: bool = False) -> str:
+def scheme_energy(method) -> str:
+    """How a method's scheme treats an energy the motion conserves: `"exact"` (to round-off,
+    `method.conserves_energy`: the discrete-gradient method), `"dissipated"` (`method.dissipates_energy`:
+    the sister method's plastic impacts) or `"approximate"`."""
+    if getattr(method, "conserves_energy", False):
+        return "exact"
+    return "dissipated" if getattr(method, "dissipates_energy", False) else "approximate"
+
+
+def conserved_quantity(system, b0, *, gni_family: bool, invariants=(), scheme: str = "approximate") -> str:
     """Which reported quantity the run should conserve, as a sentence for `summary()`.
 
     Linear constraints: the energy $\\tfrac12\\bar v^T\\mathbb{G}\\bar v + V$ is a constant of the
@@ -322,15 +332,14 @@ def conserved_quantity(system, b0, *, gni_family: bool, invariants=(), conserves
     runs); with V = 0, a constant metric on $\\mathbb{R}^n$ or a bi-invariant one on SO(3), the GNI
     conserves the energy of $p^+$ exactly (the paper's energy theorem, §4). Affine constraints:
     neither energy is conserved (the constraint forces do work); the model's Jacobi integral
-    where one is registered. `conserves_energy`: the method conserves the energy exactly
-    (`method.conserves_energy`, the discrete-gradient method).
+    where one is registered. `scheme`: how the method treats that energy (:func:`scheme_energy`).
     """
     invariant = energy_is_invariant(system, b0)
-    theorem = gni_family and invariant and not conserves_energy and energy_theorem_applies(system, b0)
-    return _sentence(system.is_forced, invariant, theorem, tuple(invariants), conserves_energy, gni_family)
+    theorem = gni_family and invariant and scheme == "approximate" and energy_theorem_applies(system, b0)
+    return _sentence(system.is_forced, invariant, theorem, tuple(invariants), scheme, gni_family)
 
 
-def _sentence(forced: bool, invariant: bool, theorem: bool, names: tuple, conserves_energy: bool,
+def _sentence(forced: bool, invariant: bool, theorem: bool, names: tuple, scheme: str,
               gni_family: bool) -> str:
     if forced:
         return "external forces act: the energy is not conserved (the force F(q, v, u, t) does work)"
@@ -338,8 +347,11 @@ def _sentence(forced: bool, invariant: bool, theorem: bool, names: tuple, conser
         if "jacobi" in names:
             return "affine constraints: neither energy is conserved; the Jacobi integral is (gnipy.get_model(...).invariants['jacobi'])"
         return "affine constraints: neither energy is conserved (the constraint forces do work)"
-    if conserves_energy:
+    if scheme == "exact":
         return "the energy is conserved by the motion (linear constraints) and by the scheme, to round-off"
+    if scheme == "dissipated":
+        return ("the energy is conserved by the motion (linear constraints); the scheme dissipates it, O(h) per "
+                "unit time (an inelastic impact at every step)")
     if gni_family and theorem:
         return ("the energy of p+ (energy_plus) is conserved exactly by the GNI (energy theorem: V = 0 and a "
                 "constant or bi-invariant metric); the reported energy is conserved by the motion, not exactly by the scheme")
@@ -347,7 +359,7 @@ def _sentence(forced: bool, invariant: bool, theorem: bool, names: tuple, conser
 
 
 def member_conservation(system, core, batched_system: bool, b0, *, gni_family: bool, invariants=(),
-                        conserves_energy: bool = False) -> tuple[tuple[str, ...], np.ndarray]:
+                        scheme: str = "approximate") -> tuple[tuple[str, ...], np.ndarray]:
     """Each member's :func:`conserved_quantity` sentence and whether its energy is a constant of
     its motion (:func:`energy_is_invariant`), for a batch: `system` its first member, `core` the
     members' systems stacked when `batched_system` (else the one system), `b0` the members' start
@@ -358,7 +370,7 @@ def member_conservation(system, core, batched_system: bool, b0, *, gni_family: b
     B = int(np.shape(jax.tree_util.tree_leaves(b0)[0])[0])
     names = tuple(invariants)
     if system.is_forced:
-        return (_sentence(True, False, False, names, conserves_energy, gni_family),) * B, np.zeros(B, dtype=bool)
+        return (_sentence(True, False, False, names, scheme, gni_family),) * B, np.zeros(B, dtype=bool)
     G, gradV, Y, dG = (np.asarray(a) for a in _member_values(core, batched_system, b0))
     invariant = np.ones(B, dtype=bool) if not system.is_affine else ~np.any(Y.reshape(B, -1) != 0.0, axis=1)
     theorem = invariant & ~np.any(dG.reshape(B, -1) != 0.0, axis=1) & ~np.any(gradV.reshape(B, -1) != 0.0, axis=1)
@@ -368,7 +380,7 @@ def member_conservation(system, core, batched_system: bool, b0, *, gni_family: b
         # no coupling to R^n, and a group block the group knows to be bi-invariant (cI on SO(3))
         theorem &= (np.max(np.abs(G[:, :n, n:]).reshape(B, -1), axis=1, initial=0.0) <= 1e-14 * scale) & (
             system.group.is_bi_invariant(G[:, n:, n:], 1e-14 * scale))
-    sentences = tuple(_sentence(False, bool(inv), bool(th), names, conserves_energy, gni_family)
+    sentences = tuple(_sentence(False, bool(inv), bool(th), names, scheme, gni_family)
                       for inv, th in zip(invariant, theorem))
     return sentences, invariant
 
@@ -442,20 +454,20 @@ DIAGNOSTIC_ARRAYS = ("hidden_momentum", "hidden_expected", "energy_plus")
 
 
 def diagnostic_fields(system, core, b0, nodes, h, *, batched_system: bool = False, batch: bool = False,
-                     cached: dict | None = None, prepared=None, conserves_energy: bool = False, times=None) -> dict:
+                     cached: dict | None = None, prepared=None, scheme: str = "approximate", times=None) -> dict:
     """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
     the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved (kept in
     `cached`, per system and start, when given)."""
     from .registry import registered_invariants
 
     gni_family = nodes[3] is not None
-    key = ("conserved", gni_family, conserves_energy)
+    key = ("conserved", gni_family, scheme)
     if cached is not None and key in cached:
         out = dict(cached[key])
     else:
         out = {"conserved": conserved_quantity(system, b0, gni_family=gni_family,
                                                invariants=registered_invariants(system.model),
-                                               conserves_energy=conserves_energy),
+                                               scheme=scheme),
                "energy_invariant": energy_is_invariant(system, b0)}
         if cached is not None:
             cached[key] = dict(out)

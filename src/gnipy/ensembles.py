@@ -392,7 +392,7 @@ def simulate_batch(problem, reporter, backend: str) -> Solution:
     one vmapped program on `backend` ("xla" or "native"); a failed member's nodes after its failure
     are NaN (:func:`gnipy.assembly.assemble`)."""
     from .assembly import assemble, labels
-    from .diagnostics import diagnostic_fields
+    from .diagnostics import diagnostic_fields, scheme_energy
     from .system import describe_orientations
 
     systems = list(problem.systems or [problem.system])
@@ -411,7 +411,7 @@ def simulate_batch(problem, reporter, backend: str) -> Solution:
     method = method.prepare(system, first_b0)
     hj = np.float64(h)
     state0 = _init_batch(method, core, sys_batched, b0, v0, hj)
-    conserves_energy = bool(getattr(method, "conserves_energy", False))
+    scheme = scheme_energy(method)
     monitor0, conservation = _batch_monitor(problem, system, core, sys_batched, b0, method, state0, B)
     out = None
     if backend == "native":
@@ -427,7 +427,7 @@ def simulate_batch(problem, reporter, backend: str) -> Solution:
         jax.block_until_ready(out)
     fields = labels(problem, method, backend) | {"orientation": describe_orientations(systems)}
     fields |= diagnostic_fields(system, core, first_b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
-                                batched_system=sys_batched, batch=True, conserves_energy=conserves_energy,
+                                batched_system=sys_batched, batch=True, scheme=scheme,
                                 times=problem.times)
     fields |= conservation
     if sys_batched:
@@ -438,7 +438,7 @@ def simulate_batch(problem, reporter, backend: str) -> Solution:
 def _batch_monitor(problem, system, core, sys_batched, b0, method, state0, B):
     """The members' monitors at the start (:mod:`gnipy.monitor`), and each member's own sentence on
     what its motion conserves (the fields `conserved`, `energy_invariant`, `member_conserved`)."""
-    from .diagnostics import member_conservation
+    from .diagnostics import member_conservation, scheme_energy
     from .monitor import initial
     from .registry import registered_invariants
 
@@ -447,7 +447,7 @@ def _batch_monitor(problem, system, core, sys_batched, b0, method, state0, B):
         system.without_metadata(), jax.tree_util.tree_map(lambda a: a[0], state0), hj)) is not None
     conserved, invariant = member_conservation(system, core, sys_batched, b0, gni_family=gni_family,
                                                invariants=registered_invariants(system.model),
-                                               conserves_energy=bool(getattr(method, "conserves_energy", False)))
+                                               scheme=scheme_energy(method))
     monitor0 = initial(problem.h, (problem.steps + problem.partial) * problem.h, problem.t0, energy_applies=invariant,
                        members=B)
     same = all(c == conserved[0] for c in conserved)

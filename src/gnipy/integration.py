@@ -22,7 +22,7 @@ import jax
 import jax.numpy as jnp
 
 from . import monitor
-from .diagnostics import diagnostic_fields, energy_is_invariant
+from .diagnostics import diagnostic_fields, energy_is_invariant, scheme_energy
 from .problem import Problem
 from .solution import Solution
 from .stepping import Progress
@@ -110,6 +110,6 @@ def _single(problem: Problem, reporter, use: str) -> Solution:
     fields = labels(problem, prep.method, use) | {"orientation": prep.cache["orientation"]}
     fields |= diagnostic_fields(system, prep.core, prep.b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
                                 cached=prep.cache, prepared=(prep, out.get("padded")),
-                                conserves_energy=bool(getattr(problem.method, "conserves_energy", False)),
+                                scheme=scheme_energy(problem.method),
                                 times=problem.times)
     return assemble(problem, out, fields)

@@ -66,6 +66,9 @@ _METHODS: dict[str, tuple[str, Callable[[], object]]] = {
             _lazy(".integrators.comparators", "DiscreteLagrangeDAlembert")),
     "mp": ("McLachlan–Perlmutter reversible scheme (4.18)",
            _lazy(".integrators.comparators", "McLachlanPerlmutter")),
+    "sister": ("sister method: RATTLE on a rail tangent to the constraints at each node, then the plastic impact "
+               "onto them (order 1, dissipative; open question 3), R^n and linear constraints",
+               _lazy(".integrators.sister", "SisterMethod")),
     "discrete-gradient": ("energy-conserving discrete gradient, constraints exact at the nodes, symmetric",
                           _lazy(".integrators.discrete_gradient", "DiscreteGradient")),
     "reference": ("continuous Lagrange–d'Alembert equations, Dopri8 at tolerance 1e-12",

@@ -98,17 +98,17 @@ def _sentences(system, prep, method) -> dict:
     """The diagnostics' sentences of a run whose system is known at trace time (what is conserved,
     whether the energy is a constant of the motion), kept per call signature as in an untransformed
     run; the per-node arrays are not computed under a transformation (:mod:`gnipy.assembly`)."""
-    from .diagnostics import conserved_quantity, energy_is_invariant
+    from .diagnostics import conserved_quantity, energy_is_invariant, scheme_energy
     from .registry import registered_invariants
 
-    conserves_energy = bool(getattr(method, "conserves_energy", False))
+    scheme = scheme_energy(method)
     gni_family = type(prep.method).hidden_momentum is not Integrator.hidden_momentum
-    key = ("traced-sentences", gni_family, conserves_energy)
+    key = ("traced-sentences", gni_family, scheme)
     if key not in prep.cache:
         prep.cache[key] = {
             "conserved": conserved_quantity(system, prep.b0, gni_family=gni_family,
                                             invariants=registered_invariants(system.model),
-                                            conserves_energy=conserves_energy),
+                                            scheme=scheme),
             "energy_invariant": energy_is_invariant(system, prep.b0)}
     return dict(prep.cache[key])
 

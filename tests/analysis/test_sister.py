@@ -53,6 +53,12 @@ def test_sister_method_is_the_sister_motion_where_phases_have_constant_accelerat
     method = sister_method(KNIFE, Q0, V0, h=0.1, t_final=1.0)
     assert np.abs(method.q - exact_run.q).max() < 1e-12
     assert np.abs(method.v - exact_run.v).max() < 1e-12
+    # the registered method "sister" (gnipy.SisterMethod) is that method in simulate, which says that it
+    # dissipates the energy the motion conserves
+    sol = gnipy.simulate(KNIFE, "sister", Q0, V0, h=0.1, steps=10)
+    assert np.abs(np.asarray(sol.q) - exact_run.q).max() < 1e-12
+    assert np.abs(np.asarray(sol.energy) - exact_run.energy).max() < 1e-12
+    assert "dissipates" in sol.conserved
 
 
 def test_sister_method_agrees_with_the_sister_phase_to_second_order_under_a_curved_potential():

@@ -1,8 +1,10 @@
-"""`gni open-questions`: the report's verdict rules on constructed rows, the files it writes, and
-the command's refusal of a folder it may not write. The measurements themselves are tested where
-they are made (tests/analysis/test_modified_equations.py, tests/analysis/test_sister.py); the full
-study takes about 45 minutes and its quick form about 3 (`gni open-questions --quick`)."""
+"""`gni open-questions`: the report's verdict rules on constructed rows, the files it writes, the
+command's refusal of a folder it may not write, and one row of question 1 measured end to end (a
+short run against the prediction of its modified equations). The measurements' parts are tested
+where they are made (tests/analysis/test_modified_equations.py, tests/analysis/test_sister.py); the
+full study takes about an hour and its quick form about 3 minutes (`gni open-questions --quick`)."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -33,6 +35,7 @@ def _measurements():
              predicted=(1e-3, 1e-3)),  # a drift (slope·span > max/2), as predicted
         _row("gni-trapezoid", [0.0, 1e-3, 0.07], [0.0, 7e-4, 0.0], measured=(1.1, 0.0), predicted=(2.6e-5, 0.0)),
         _row("dla", [0.0, 0.0, 0.1], [0.0, 0.0, 0.1], defect=1e-3),  # the premise fails at its states
+        {"model": "veselova", "method": "discrete-gradient", "not_applicable": "method 'discrete-gradient' refuses"},
     ]
     paths = {"reference": np.zeros((3, 3)), "sister": {0.5: np.ones((3, 3))}}
     relations = {"knife-edge": {"sister-system": {"h": [0.1, 0.05], "difference": [1e-16, 2e-16], "order": float("nan")},
@@ -57,9 +60,10 @@ def test_the_report_states_the_verdicts_its_rules_give_and_writes_every_file(tmp
     assert "modified constraints from h^1" in lines["gni-trapezoid"] and "breaks down" in lines["gni-trapezoid"]
     assert "no modified field at the visited states" in lines["dla"]
     assert "round-off: the same map" in text and "failed: solve failed at step 2130" in text
+    assert "| veselova | discrete-gradient |" in text and "does not apply | method 'discrete-gradient' refuses" in text
     data = json.loads(result.data.read_text())
     assert [r["method"] for r in data["backward_error"]] == ["discrete-gradient", "mp", "sgni-trapezoid",
-                                                             "gni-trapezoid", "dla"]
+                                                             "gni-trapezoid", "dla", "discrete-gradient"]
     assert "sister_paths" not in data  # the figure's arrays, not measurements
 
 
@@ -69,3 +73,20 @@ def test_the_command_refuses_a_folder_it_did_not_create_before_computing(tmp_pat
     assert result.exit_code == 2
     assert "--out" in result.output and "open-questions.md" in result.output
     assert (tmp_path / "open-questions.md").read_text() == "mine"
+
+
+def test_one_row_end_to_end_predicts_the_measured_energy_error():
+    # mp on the nonholonomic particle (order 2 in (q, v)): f_2 vanishes, f_3 leaves the distribution
+    # (modified constraints at h²) and predicts, with no free constant, the energy error of an actual run
+    # of 1000 steps (E_k - E_0 ≈ h² G_3, G_3 = ∫∇E·f_3 along the continuous reference): two independent
+    # computations (the run's energies, the expansion along the reference) agree to a few per cent
+    from gnipy.experiments.open_questions import backward_error_row
+    from gnipy.experiments.open_questions_report import _constraint_verdict, _energy_verdict
+
+    row = dataclasses.asdict(backward_error_row("nonholonomic-particle", "mp", steps=1000, span=10.0, samples=2))
+    assert row["leading"] == 3 and row["failure"] is None and row["defect"] < 1e-12
+    assert max(row["normal_velocity"][:2]) < 1e-12 < 1e-3 < row["normal_velocity"][2]
+    assert row["divergence"] < 1e-12  # the particle's motion preserves volume
+    assert 1e-6 < row["measured_max"] and abs(row["predicted_max"] / row["measured_max"] - 1) < 0.1
+    assert _constraint_verdict(row) == "modified constraints from h^2"
+    assert _energy_verdict(row).startswith("predicted bounded")

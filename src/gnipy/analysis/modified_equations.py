@@ -122,12 +122,19 @@ class ModifiedEquations:
 
     def state(self, q, v, h: float, R=None) -> jax.Array:
         """The state vector y at which the method starts from `(q, v)` (and the orientation `R` on
-        $\\mathbb{R}^n \\times G$, default the identity) with step `h` (its `init`). On $\\mathbb{R}^n$ it
-        can be traced (vmapped over states, e.g.)."""
-        if self._system.group is None:
+        $\\mathbb{R}^n \\times G$, default the identity) with step `h` (its `init`). It can be traced
+        (mapped over states, e.g.); traced orientations are not checked to lie on the group."""
+        system = self._system
+        if system.group is None:
             b = jnp.asarray(q, dtype=jnp.float64)
+        elif isinstance(q, jax.core.Tracer) or isinstance(R, jax.core.Tracer):
+            from ..spaces import Point
+
+            k = system.group.matrix_size
+            R = jnp.eye(k) if R is None else jnp.asarray(R, dtype=jnp.float64).reshape(k, k)
+            b = Point(jnp.asarray(q, dtype=jnp.float64), R)
         else:
-            b = self._system.initial_point(q, R)
+            b = system.initial_point(q, R)
         v = jnp.asarray(v, dtype=jnp.float64)
         return self._pack(self._integrator.init(self._system, b, v, jnp.asarray(h, dtype=v.dtype)))
 
@@ -181,14 +188,73 @@ class ModifiedEquations:
         first non-zero one, $j = p + 1$, is the energy error's source at order $h^p$."""
         return jax.jvp(self.energy, (jnp.asarray(y),), (self.coefficient(j)(y),))[1]
 
+    def base_point(self, y):
+        """The base point at the head of the state vector y: q on $\\mathbb{R}^n$, the
+        :class:`~gnipy.spaces.Point` $(x, R)$ on $\\mathbb{R}^n \\times G$ (R from its entries)."""
+        system = self._system
+        if system.group is None:
+            return y[:system.n]
+        k = system.group.matrix_size
+        return system.space.unpack(y[:system.n + k * k])
+
+    def configuration_velocity(self, y, f) -> jax.Array:
+        """The velocity $(\\dot x, \\xi)$ in the system's coordinates that the state-space vector f
+        gives the base point at y: on $\\mathbb{R}^n$ f's first n entries; on $\\mathbb{R}^n \\times G$
+        ξ from f's matrix part $\\dot R$, $\\hat\\xi = R^{-1}\\dot R$ ($\\dot R R^{-1}$ for a system
+        with `reconstruction="right"`)."""
+        system = self._system
+        n = system.n
+        if system.group is None:
+            return f[:n]
+        k = system.group.matrix_size
+        R = self.base_point(y).R
+        Rdot = f[n:n + k * k].reshape(k, k)
+        Rinv = system.group.inverse(R)
+        X = Rdot @ Rinv if system.reconstruction == "right" else Rinv @ Rdot
+        return jnp.concatenate([f[:n], system.group.vee(X)])
+
+    def normal_part(self, y, f) -> jax.Array:
+        """$\\mu(b)\\,w$, w the configuration velocity of f at y (:meth:`configuration_velocity`):
+        the part off the constraint distribution, one entry per constraint row."""
+        return self._system.mu(self.base_point(y)) @ self.configuration_velocity(y, f)
+
     def normal_velocity(self, y, j: int) -> jax.Array:
-        """$\\mu(q)\\,f_{j,q}(y)$ on $\\mathbb{R}^n$: the part of $f_j$'s configuration velocity off the
-        constraint distribution at q (one entry per constraint row). Zero for every j exactly
-        when the modified flow's configurations keep the system's own constraints."""
-        if self._system.group is not None:
-            raise InputError("system: normal_velocity is defined on R^n (the configuration is the state's first n entries)")
-        n = self._system.n
-        return self._system.mu(y[:n]) @ self.coefficient(j)(y)[:n]
+        """$\\mu(b)\\,f_{j,b}(y)$: the part of $f_j$'s configuration velocity off the constraint
+        distribution at the base point (one entry per constraint row; on $\\mathbb{R}^n \\times G$
+        the orientation's part as the body velocity ξ, :meth:`configuration_velocity`). Zero for
+        every j ≥ 2 exactly when the modified flow's configurations keep the system's own
+        constraints (and for j = 1 too where the constraints are linear)."""
+        return self.normal_part(y, self.coefficient(j)(y))
+
+    def divergence(self, y, j: int = 1) -> jax.Array:
+        """$\\operatorname{div} f_j$ at y in the state's own coordinates: on $\\mathbb{R}^n$ the trace
+        of $Df_j$; on $\\mathbb{R}^n \\times G$ the orientation through the chart $R e^{\\hat\\eta}$
+        at η = 0 (Haar measure on G, Lebesgue on the rest): the trace of the derivative of
+        $(\\dot x, \\xi, \\dot r)$ in $(x, \\eta, r)$, r the state's parts after the base point (the
+        chart's own term, $\\tfrac12\\operatorname{tr}\\mathrm{ad}_\\xi$, vanishes on the unimodular
+        groups SO(3) and SE(2)). A flow preserves phase volume where it is 0."""
+        f = self.coefficient(j)
+        system = self._system
+        if system.group is None:
+            return jnp.trace(jax.jacfwd(f)(y))
+        n, d, k = system.n, system.group.dim, system.group.matrix_size
+        R = self.base_point(y).R
+        eye = jnp.eye(k, dtype=y.dtype)
+        rest = y[n + k * k:]
+
+        def chart(c):
+            # the first-order curve R(I + η̂) has the derivative of R exp(η̂) at η = 0 (first derivatives only)
+            step = eye + system.group.hat(c[n:n + d])
+            R1 = step @ R if system.reconstruction == "right" else R @ step
+            return jnp.concatenate([c[:n], R1.reshape(-1), c[n + d:]])
+
+        def pulled(c):
+            yc = chart(c)
+            fc = f(yc)
+            return jnp.concatenate([self.configuration_velocity(yc, fc), fc[n + k * k:]])
+
+        c0 = jnp.concatenate([y[:n], jnp.zeros(d, dtype=y.dtype), rest])
+        return jnp.trace(jax.jacfwd(pulled)(c0))
 
     def _extrapolated(self, y, j: int) -> jax.Array:
         """$\\partial_h^j\\Phi_h(y)$ at the nodes, extrapolated to $h = 0$ (j = 0: $\\Phi_h(y)$ itself)."""

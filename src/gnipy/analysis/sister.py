@@ -62,13 +62,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..compilation import jit
-from ..discrete_lagrangians import Trapezoid
 from ..equations import lagrange_dalembert_acceleration
 from ..errors import InputError
 from ..holonomic import project_state
 from ..inputs import real_number
-from ..integrators.base import newton
-from ..projectors import projectors, reported_momentum
+from ..integrators.sister import SisterMethod
+from ..projectors import projectors
 from ..solution import SolverFailure
 from ..system import System
 
@@ -238,36 +237,16 @@ def sister_trajectory(system, q0, v0, *, tau: float, t_final: float, constraint=
 
 
 @jit
-def _sister_steps(system, phase, q0, v0, h, K: int):
-    ld = Trapezoid()
-    n = system.n
+def _sister_steps(system, method, q0, v0, h, K: int):
+    def one(state, _):
+        new, info, p_minus = method.advance(system, state, h)
+        q1, p1 = new.b, new.p
+        w = system.velocity(q1, p1)
+        lost = 0.5 * (p_minus @ system.velocity(q1, p_minus) - p1 @ w)
+        kept = jnp.max(jnp.abs(method.engaged(system, q1, state.b)))
+        return new, (q1, w, system.energy(q1, w), lost, kept, info.ok, info.residual)
 
-    def Ld(a, b):
-        return ld(system, a, b - a, h)
-
-    def one(carry, _):
-        q, p = carry
-        ph = eqx.tree_at(lambda s: s.args, phase, {"anchor": q})
-        rows0 = ph.holonomic_mu(q)
-        m = rows0.shape[0]
-
-        def F(z):
-            q1, lam = z[:n], z[n:]
-            return jnp.concatenate([p + jax.grad(Ld, 0)(q, q1) + rows0.T @ lam, ph.phi(q1)])
-
-        guess = jnp.concatenate([q + h * system.velocity(q, p), jnp.zeros(m)])
-        z, info = newton(F, guess, floor_scale=jnp.maximum(jnp.max(jnp.abs(p)), 1.0))
-        q1 = z[:n]
-        # RATTLE's end, the momentum G-orthogonally onto the engaged constraint's rows at q_{k+1}, then
-        # the impact onto the distribution there: both the GNI's projection P* (no affine part)
-        G1, zero = system.metric(q1), jnp.zeros(n)
-        p_end = reported_momentum(G1, ph.holonomic_mu(q1), zero, jax.grad(Ld, 1)(q, q1))
-        p1 = reported_momentum(G1, system.nonholonomic_mu(q1), zero, p_end)
-        v_end, w = system.velocity(q1, p_end), system.velocity(q1, p1)
-        lost = 0.5 * (p_end @ v_end - p1 @ w)
-        return (q1, p1), (q1, w, system.energy(q1, w), lost, jnp.max(jnp.abs(ph.phi(q1))), info.ok, info.residual)
-
-    _, out = jax.lax.scan(one, (q0, system.momentum(q0, v0)), None, length=K)
+    _, out = jax.lax.scan(one, method.init(system, q0, v0, h), None, length=K)
     return out
 
 
@@ -278,6 +257,5 @@ def sister_method(system, q0, v0, *, h: float, t_final: float, constraint=None) 
     step that fails."""
     core = system.without_metadata()
     q0, v0, K, constraint = _check(core, q0, v0, h, t_final, constraint, "h")
-    phase = sister_phase(core, constraint).without_metadata()
-    out = _sister_steps(core, phase, q0, v0, jnp.asarray(float(h)), K)
+    out = _sister_steps(core, SisterMethod(constraint), q0, v0, jnp.asarray(float(h)), K)
     return _run(core, q0, v0, K, h, out)

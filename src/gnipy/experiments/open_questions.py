@@ -42,7 +42,6 @@ import numpy as np
 from ..analysis.modified_equations import modified_equations
 from ..analysis.orders import fitted_order
 from ..analysis.sister import sister_method, sister_trajectory
-from ..methods import prepared_method
 from ..ensembles import model_systems
 from ..errors import InputError
 from ..simulate import simulate
@@ -51,8 +50,10 @@ from ..solution import SolverFailure
 __all__ = ["BackwardErrorRow", "backward_error_row", "SisterStudy", "sister_convergence", "sleigh_peg",
            "sister_relations", "LongRun", "long_runs", "BE_MODELS", "BE_METHODS", "SISTER_CASES"]
 
-#: The models of the backward-error table (on R^n, with linear constraints and a conserved energy).
-BE_MODELS = ("nonholonomic-particle", "knife-edge", "chaplygin-sleigh")
+#: The models of the backward-error table (linear constraints and a conserved energy): three on R^n,
+#: the sleigh again on SE(2) (the same motion in the group's coordinates), and Veselova's problem
+#: on SO(3) (constraints that depend on the orientation; an invariant measure).
+BE_MODELS = ("nonholonomic-particle", "knife-edge", "chaplygin-sleigh", "chaplygin-sleigh-se2", "veselova")
 #: The methods of the backward-error table.
 BE_METHODS = ("gni-trapezoid", "gni-midpoint", "sgni-trapezoid", "dla", "mp", "discrete-gradient")
 #: The sister studies: (model, constraint) with constraint "rail" or "peg" (the sleigh's only).
@@ -150,22 +151,21 @@ def backward_error_row(model: str, method: str, *, h: float = 0.01, steps: int =
     start = time.perf_counter()
     system, q0, v0 = _model(model)
     two = method.startswith("gni-")
-    me = modified_equations(system, method, order=2, q=q0, v=v0, steps=2 if two else 1)
+    R0 = system.defaults[2] if len(system.defaults) > 2 else None  # on R^n x G (None: the identity)
+    me = modified_equations(system, method, order=2, q=q0, v=v0, R=R0, steps=2 if two else 1)
     H = 2 * h if two else h  # the map's step: two GNI steps of h
-    y0 = me.state(q0, v0, h)
+    y0 = me.state(q0, v0, h, R0)
     ys = _samples(me, y0, H, samples, max(1, int(round(0.25 / H))))
     # jax.lax.map, not vmap: the samples one after another inside one program. A vmap of these
     # nested derivatives through batched while loops (the steps' Newton solves) wedged XLA:CPU's
     # thread pool twice here (0% CPU, waiting on the result; a known failure of vmap graphs on
     # XLA:CPU), and a batch gains little where every lane runs the longest solve anyway.
-    n = system.n
 
     def measure(y):
         fs = jnp.stack([me.coefficient(j)(y) for j in (1, 2, 3)])
-        normal = jnp.stack([system.mu(y[:n]) @ f[:n] for f in fs])
+        normal = jnp.stack([me.normal_part(y, f) for f in fs])
         rates = fs @ jax.grad(me.energy)(y)
-        divergence = jnp.trace(jax.jacfwd(me.coefficient(1))(y))
-        return fs, normal, rates, me.defect(y), divergence
+        return fs, normal, rates, me.defect(y), me.divergence(y)
 
     fields, normal, rates, defects, divergences = (np.asarray(a) for a in jax.jit(lambda ys: jax.lax.map(measure, ys))(ys))
     sizes = np.abs(fields).max(axis=(0, 2))
@@ -175,15 +175,22 @@ def backward_error_row(model: str, method: str, *, h: float = 0.01, steps: int =
     # G(t) along the reference motion, on the grid; the states the method would start from there
     T = float(min(steps * h, PREDICTION_SPAN) if span is None else span)
     count = int(round(T / grid))
-    ref = simulate(system, "reference", q0, v0, h=grid, steps=count)
+    ref = simulate(system, "reference", q0, v0, R0=R0, h=grid, steps=count)
     t = np.asarray(ref.t)
-    rate = jax.jit(lambda qs, vs: jax.lax.map(
-        lambda qv: jnp.stack([me.energy_rate(me.state(qv[0], qv[1], h), j) for j in (2, 3)]), (qs, vs)))
+    grouped = system.group is not None
+    rate = jax.jit(lambda qs, vs, Rs: jax.lax.map(
+        lambda qvR: jnp.stack([me.energy_rate(me.state(qvR[0], qvR[1], h, qvR[2] if grouped else None), j)
+                               for j in (2, 3)]), (qs, vs, Rs)))
     chunk = 4096  # every chunk of one length (the last padded): one compilation
-    pad = -t.size % chunk
-    qs = np.concatenate([np.asarray(ref.q), np.repeat(np.asarray(ref.q)[-1:], pad, axis=0)])
-    vs = np.concatenate([np.asarray(ref.v), np.repeat(np.asarray(ref.v)[-1:], pad, axis=0)])
-    values = np.concatenate([np.asarray(rate(qs[i:i + chunk], vs[i:i + chunk])) for i in range(0, qs.shape[0], chunk)])
+
+    def padded(a):
+        a = np.asarray(a)
+        return np.concatenate([a, np.repeat(a[-1:], -t.size % chunk, axis=0)])
+
+    # the orientations along the reference on R^n x G (a placeholder per node on R^n, unused)
+    qs, vs, Rs = padded(ref.q), padded(ref.v), padded(ref.R if grouped else np.zeros((t.size, 1)))
+    values = np.concatenate([np.asarray(rate(qs[i:i + chunk], vs[i:i + chunk], Rs[i:i + chunk]))
+                             for i in range(0, qs.shape[0], chunk)])
     values = values[:t.size]
     G = np.concatenate([np.zeros((1, 2)), np.cumsum(0.5 * (values[1:] + values[:-1]) * np.diff(t)[:, None], axis=0)])
     g_max = [float(x) for x in np.abs(G).max(axis=0)]
@@ -194,7 +201,7 @@ def backward_error_row(model: str, method: str, *, h: float = 0.01, steps: int =
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # the run's verdicts are recorded in the row
-            run = simulate(system, method, q0, v0, h=h, steps=steps, save_every=max(1, int(round(grid / h))))
+            run = simulate(system, method, q0, v0, R0=R0, h=h, steps=steps, save_every=max(1, int(round(grid / h))))
         E = np.asarray(run.energy)
         dE = E - E[0]
         window = np.asarray(run.t) <= T + 1e-9  # the span of the prediction

@@ -155,6 +155,9 @@ def _markdown(m: dict) -> str:
               "measured over the run (steps)", "constraints", "energy"]
     rows = []
     for r in m["backward_error"]:
+        if "not_applicable" in r:
+            rows.append([r["model"], r["method"], *["—"] * (len(header) - 4), "does not apply", r["not_applicable"][:90]])
+            continue
         measured = "failed: " + r["failure"][:60] if r["failure"] else _g(r["measured_max"])
         whole = "—" if r["failure"] else f"{_g(r['run_max'])} ({r['steps']:,})"
         rows.append([r["model"], r["method"], _g(r["defect"]), f"{_g(r['coefficient_sizes'][1])}, {_g(r['coefficient_sizes'][2])}",
@@ -280,8 +283,14 @@ def run_open_questions(out_dir, quick: bool = False, *, progress=None) -> OpenQu
 
 
 def _row(model: str, method: str, steps: int) -> dict:
-    """One row of question 1 as a dict (run in a worker process)."""
-    return dataclasses.asdict(backward_error_row(model, method, steps=steps))
+    """One row of question 1 as a dict (run in a worker process); a method that does not apply to the
+    model gives `{"model", "method", "not_applicable": why}`."""
+    from ..errors import MethodError
+
+    try:
+        return dataclasses.asdict(backward_error_row(model, method, steps=steps))
+    except MethodError as e:
+        return {"model": model, "method": method, "not_applicable": str(e)}
 
 
 def _paths() -> dict:

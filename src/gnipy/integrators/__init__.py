@@ -8,6 +8,7 @@ from .gni import GNI, GNIState
 from .paper_schemes import EulerABComposition, NonholonomicEulerA, NonholonomicEulerB, Rattle
 from .reversal import ForwardOnly, Reversed
 from .shake import Shake
+from .sister import SisterMethod, SisterState
 
 __all__ = [
     "Integrator",
@@ -20,6 +21,8 @@ __all__ = [
     "EulerABComposition",
     "Rattle",
     "Shake",
+    "SisterMethod",
+    "SisterState",
     "DiscreteLagrangeDAlembert",
     "McLachlanPerlmutter",
     "DiscreteGradient",

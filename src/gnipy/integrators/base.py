@@ -391,6 +391,10 @@ class Integrator(eqx.Module):
     #: (linear constraints): the discrete-gradient method.
     conserves_energy: ClassVar[bool] = False
 
+    #: Whether the method dissipates the energy where the motion conserves it, by design (the sister
+    #: method's inelastic impacts): the run's summary says so (:func:`gnipy.diagnostics.scheme_energy`).
+    dissipates_energy: ClassVar[bool] = False
+
     #: Whether :meth:`change_step` can continue a run with another step size (then `simulate`
     #: shortens the last step to end exactly at `t_final`).
     can_change_step: ClassVar[bool] = False

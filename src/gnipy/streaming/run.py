@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..extras import check
-from ..diagnostics import conserved_quantity, energy_is_invariant
+from ..diagnostics import conserved_quantity, energy_is_invariant, scheme_energy
 from .. import monitor
 from ..errors import InputError, QualitativeFailureWarning
 from ..inputs import finite_number, flag, positive_integer
@@ -223,7 +223,7 @@ def _checked_run(system, method, q0, v0, R0, *, h, steps, t_final, save_every, c
     gni_family = type(method).hidden_momentum is not Integrator.hidden_momentum
     attrs["conserved"] = conserved_quantity(system, b0, gni_family=gni_family,
                                             invariants=registered_invariants(system.model),
-                                            conserves_energy=bool(getattr(method, "conserves_energy", False)))
+                                            scheme=scheme_energy(method))
     spec = {
         # the part files' layout: `time` holds the times (parts of an earlier layout are not resumed)
         "layout": "time-coordinate",
