@@ -93,7 +93,7 @@ NOT_RUN = {
         "1.5-2.5 minutes: gni atlas --quick with --models and --methods runs in "
         "tests/experiments/test_atlas.py::test_gni_atlas_quick_cli, and the small command of the atlas page here",
     "gni open-questions --out gnipy-open-questions/":
-        "the full study takes about 45 minutes on 2 cores; its report writer runs in "
+        "the full study takes about an hour on 2 cores; its report writer runs in "
         "tests/experiments/test_open_questions.py::test_the_report_states_the_verdicts_its_rules_give_and_writes_every_file, "
         "its measurements in tests/analysis/test_sister.py and tests/analysis/test_modified_equations.py",
     "gni open-questions --quick --out oq-quick/":

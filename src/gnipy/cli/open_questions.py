@@ -21,8 +21,8 @@ def open_questions(
     out: Path = typer.Option(Path("gnipy-open-questions"), "--out", "-o",
                              help="Output folder: open-questions.md, open-questions.json and the figures (PNG, PDF)."),
     quick: bool = typer.Option(False, "--quick", help="The nonholonomic particle's rows of question 1 with 10^5 "
-                               "steps and three sister cases: about 3 minutes on 2 cores (full: 3 models x 6 "
-                               "methods with 10^6 steps each, about 45 minutes)."),
+                               "steps and three sister cases: about 3 minutes on 2 cores (full: 4 models x 6 "
+                               "methods with 10^6 steps each, about an hour)."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace the files in a folder gnipy did not create "
                                    "(in one it created, marked by its .gnipy-owned file, a rerun replaces them)."),
 ) -> None:

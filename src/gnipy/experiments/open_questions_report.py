@@ -156,7 +156,9 @@ def _markdown(m: dict) -> str:
     rows = []
     for r in m["backward_error"]:
         if "not_applicable" in r:
-            rows.append([r["model"], r["method"], *["—"] * (len(header) - 4), "does not apply", r["not_applicable"][:90]])
+            # the refusal's first clause: what the method needs (the message goes on to name alternatives)
+            rows.append([r["model"], r["method"], *["—"] * (len(header) - 4), "does not apply",
+                         r["not_applicable"].split(";")[0]])
             continue
         measured = "failed: " + r["failure"][:60] if r["failure"] else _g(r["measured_max"])
         whole = "—" if r["failure"] else f"{_g(r['run_max'])} ({r['steps']:,})"
