@@ -253,3 +253,51 @@ def test_progress_count_never_passes_its_total():
                           bounds=p.bounds, max_iterations=2, check_continuous=False,
                           progress=lambda i, cost, miss: plain.append(i))  # three arguments still work
     assert plain == [i for i, _ in calls]
+
+
+def test_an_unreachable_target_is_no_kkt_point_in_the_summary():
+    """Issue 34: a point that misses the target is not feasible, so its stationarity residual and its
+    bound multipliers' signs say nothing of optimality: the summary says so instead of quoting them
+    (it read "KKT 2.9e-12 ... multipliers of the right sign" at a miss of 8.8)."""
+    p = load_problem("sleigh-steering")
+    far = {"x": 10.0, "y": 0.5, "theta": 0.0}  # 10 m in 4 s with |tau| <= 0.05: out of reach
+    result = solve_optimal_control(p.system, far, h=0.2, steps=20, q0=p.q0, v0=p.v0, controls0=p.controls0[::4] * 0.05,
+                                   bounds=(-0.05, 0.05), max_iterations=5, check_continuous=False)
+    assert not result.success and result.target_residual > 1.0
+    text = result.summary()
+    assert "NOT converged" in text and "no KKT point: the target is missed by" in text
+    assert "sign" not in text and "KKT residual (free controls)" not in text
+
+
+def test_a_redundant_target_is_detected_solved_for_its_independent_part_and_checked_whole():
+    """Issue 34: a target whose components are dependent (here a fourth component, 2(x - 1), that the
+    first fixes) has a constraint Jacobian of rank 3 of 4 for every control: SLSQP's subproblem is
+    singular. The dependent component is found before the solve, the SQP solves for the independent
+    ones, and the whole target is checked at the end: the optimum is that of the target without the
+    redundant component (an independent formulation of the same problem), to round-off."""
+    import jax.numpy as jnp
+
+    p = load_problem("sleigh-steering")
+    kw = dict(h=0.2, steps=20, q0=p.q0, v0=p.v0, controls0=p.controls0[::4], bounds=p.bounds, check_continuous=False)
+    plain = solve_optimal_control(p.system, {"x": 1.0, "y": 0.5, "theta": 0.0}, **kw)
+    redundant = solve_optimal_control(p.system, lambda b, v: jnp.stack([b[0] - 1.0, b[1] - 0.5, b[2], 2.0 * (b[0] - 1.0)]),
+                                      **kw)
+    assert plain.success and not plain.redundant_components and plain.target_rank == 3
+    assert redundant.success and len(redundant.redundant_components) == 1
+    assert redundant.redundant_components[0] in ("g[0]", "g[3]")
+    assert redundant.target_residual < 1e-12 and abs(redundant.cost - plain.cost) < 1e-10
+    np.testing.assert_allclose(redundant.controls, plain.controls, rtol=0, atol=1e-8)
+    assert "redundant target" in redundant.summary() and "redundant target" in redundant.message
+
+
+def test_the_zero_warm_start_reaches_the_worked_optimum(solved):
+    """Issue 34: with no warm start (zeros) the sleigh at rest cannot turn its torque into forward motion
+    to first order, and SLSQP's subproblem is singular there; the trust-constr fallback leaves that
+    point and the solve reaches the same optimum as from the documented warm start."""
+    import dataclasses
+
+    problem, result = solved["sleigh-steering"]
+    cold = dataclasses.replace(problem, controls0=None).solve(check_continuous=False)
+    assert cold.success, cold.message
+    assert abs(cold.cost - result.cost) < 1e-9 * result.cost
+    np.testing.assert_allclose(cold.controls, result.controls, rtol=0, atol=1e-6)

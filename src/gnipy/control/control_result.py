@@ -10,7 +10,24 @@ import numpy as np
 
 from ..solution import Solution
 
-__all__ = ["ControlResult"]
+__all__ = ["ControlResult", "RANK_TOLERANCE", "target_rank"]
+
+#: Singular values of the target's Jacobian below this fraction of the largest count as zero
+#: (:func:`target_rank`): far above the round-off of a Jacobian computed through the steps (about
+#: 1e-13 relative) and far below the conditioning of a well-posed target.
+RANK_TOLERANCE = 1e-9
+
+
+def target_rank(jacobian) -> int | None:
+    """The numerical rank of the target's Jacobian with respect to the controls (:data:`RANK_TOLERANCE`);
+    None for no Jacobian or a non-finite one."""
+    if jacobian is None:
+        return None
+    J = np.asarray(jacobian, dtype=np.float64)
+    if J.size == 0 or not np.all(np.isfinite(J)):
+        return None
+    s = np.linalg.svd(J, compute_uv=False)
+    return int(np.sum(s > RANK_TOLERANCE * s[0])) if s[0] > 0 else 0
 
 
 @dataclasses.dataclass(frozen=True)
@@ -42,6 +59,15 @@ class ControlResult:
         continuous_miss: $\\max|g|$ when the same held controls drive the continuous system (the
             reference, :class:`~gnipy.ContinuousReference`): how far the physical system ends from
             the target, the discretization's error (NaN when not checked).
+        target_tol, kkt_tol: the tolerances `success` was judged by (NaN: not recorded).
+        target_rank: the rank of `target_jacobian` (singular values below :data:`RANK_TOLERANCE`
+            times the largest count as zero; None where no Jacobian was kept). Below the target's
+            number of components the target is redundant: some component is fixed by the others
+            through the dynamics or the constraints (a velocity that the constraints determine, say),
+            and the target's multipliers are not unique.
+        redundant_components: the target's components found to be fixed by the others before the
+            solve (a singular constraint Jacobian for any controls): the SQP solved for the rest, and
+            `target_residual` and `success` are for the whole target.
     """
 
     controls: np.ndarray
@@ -61,6 +87,40 @@ class ControlResult:
     input_names: tuple[str, ...] = ()
     continuous_miss: float = float("nan")
     target_jacobian: np.ndarray | None = None
+    target_tol: float = float("nan")
+    kkt_tol: float = float("nan")
+    target_rank: int | None = None
+    redundant_components: tuple[str, ...] = ()
+
+    @property
+    def redundant_target(self) -> bool:
+        """Whether the target's components are dependent (:attr:`target_rank` below their number)."""
+        return self.target_rank is not None and self.target_rank < np.shape(self.target_jacobian)[0]
+
+    def _rank_lines(self) -> list[str]:
+        if self.redundant_components:
+            return [f"  redundant target: {', '.join(self.redundant_components)} fixed by the other components "
+                    "(through the dynamics or the constraints); solved for the rest, the whole target checked"]
+        if not self.redundant_target:
+            return []
+        d = np.shape(self.target_jacobian)[0]
+        return [f"  redundant target: its {d} components have a Jacobian of rank {self.target_rank} with respect to the "
+                "controls (dependent: one is fixed by the others through the dynamics or the constraints; "
+                "the multipliers are not unique, and a target of independent components is better posed)"]
+
+    def _kkt_line(self) -> str:
+        """The summary's KKT line. At a point that misses the target the KKT residual (stationarity
+        over the free controls, with the target's multipliers fitted by least squares) says nothing
+        of optimality, and neither do the bound multipliers' signs: the line says the point is not
+        feasible instead of quoting them as a verdict."""
+        if self.target_residual > self.target_tol:  # False when the tolerance was not recorded (NaN)
+            return (f"  no KKT point: the target is missed by {self.target_residual:.3e} > target_tol = "
+                    f"{self.target_tol:g} (the stationarity residual {self.kkt_residual:.3e} of an infeasible point "
+                    f"is no test of optimality); {self.active_bounds} controls at a bound")
+        above = "" if not self.kkt_residual > self.kkt_tol else f" > kkt_tol = {self.kkt_tol:g}: not a KKT point"
+        return (f"  KKT residual (free controls) = {self.kkt_residual:.3e}{above}; {self.active_bounds} controls at a "
+                "bound" + ("" if self.active_bounds == 0 else
+                          f" (multipliers {'of the right sign' if self.bound_multipliers_ok else 'of the WRONG sign'})"))
 
     def summary(self) -> str:
         """A few lines: success, cost, residuals, iterations and time."""
@@ -70,11 +130,9 @@ class ControlResult:
             f"{'converged' if self.success else 'NOT converged'} ({self.message})",
             f"  cost J = {self.cost:.12g}",
             f"  target residual max|g| = {self.target_residual:.3e}",
-            f"  KKT residual (free controls) = {self.kkt_residual:.3e}; {self.active_bounds} controls at a bound"
-            + ("" if self.active_bounds == 0 else
-               f" (multipliers {'of the right sign' if self.bound_multipliers_ok else 'of the WRONG sign'})"),
+            self._kkt_line(),
             f"  iterations: {self.iterations} SQP + {self.polish_iterations} polish; {self.wall_time:.2f} s",
-        ] + ([] if math.isnan(self.continuous_miss) else [
+        ] + self._rank_lines() + ([] if math.isnan(self.continuous_miss) else [
             f"  the continuous system (reference) with these inputs misses the target by {self.continuous_miss:.3e}"
             + (" (the discretization's error: a smaller h reduces it)" if self.success
                else " (the discrete problem is not solved either)")]))

@@ -343,6 +343,7 @@ def write_control_result(result, problem: ControlProblem | None, path, *, overwr
         "control_message": str(result.message),
         "control_wall_time_s": float(result.wall_time),
         "control_continuous_miss": float(result.continuous_miss),
+        "control_redundant_components": ",".join(result.redundant_components),
         "control_transcription": "direct shooting on the method's steps (gnipy.control)",
     }
     if problem is not None and problem.source:
