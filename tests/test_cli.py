@@ -120,6 +120,9 @@ def test_listings_version_and_help():
     for name in gnipy.model_names():
         spec = gnipy.get_model(name)
         assert f"default method: {spec.default_method} (best error against the reference" in " ".join(res.output.split()), name
+        # the velocity names a problem file's [inputs] and targets use (issue 34)
+        system = gnipy.make_system(name)
+        assert f"v = ({', '.join(system.velocities)})" in " ".join(res.output.split()), name
     res = invoke("methods")
     assert res.exit_code == 0
     for name in gnipy.method_names():

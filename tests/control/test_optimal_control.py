@@ -153,7 +153,24 @@ def test_gni_control_cli_writes_the_run_and_its_inputs(tmp_path, solved):
     sol = _resimulate(problem, ds["u"].values)
     assert np.max(np.abs(np.asarray(sol.q[-1]) - [1.0, 0.5, 0.0])) <= 1e-8
     assert np.array_equal(np.asarray(sol.q), ds["q"].values)
+    u_short = ds["u"].values
     ds.close()
+    # issue 34: that result as the warm start of a problem file, on the same grid (the inputs
+    # themselves) and on the worked grid (h = 0.05: each earlier input held over two of its steps)
+    warm = "[warm_start]\namplitude = [1.0]\nphase = [0.0]\nperiods = 1.0"
+    assert warm in text
+    (tmp_path / "again.toml").write_text(text.replace(warm, '[warm_start]\nfile = "short.nc"'))
+    same = load_problem(tmp_path / "again.toml")  # relative to the problem file's folder
+    np.testing.assert_array_equal(same.controls0, u_short)
+    fine_text = WORKED_PROBLEMS["sleigh-steering"].replace(warm, '[warm_start]\nfile = "short.nc"')
+    (tmp_path / "fine.toml").write_text(fine_text)
+    fine = load_problem(tmp_path / "fine.toml")
+    np.testing.assert_array_equal(fine.controls0, np.repeat(u_short, 2, axis=0))
+    for entry, message in (('file = "missing.nc"', "no such file"), ('file = "short.toml"', "cannot read"),
+                           ('file = "short.nc"\nperiods = 2.0', "periods")):
+        (tmp_path / "bad.toml").write_text(text.replace(warm, "[warm_start]\n" + entry))
+        with pytest.raises(gnipy.InputError, match="warm_start"):
+            load_problem(tmp_path / "bad.toml")
     # no --out, unknown example: usage errors naming the option
     assert runner.invoke(app, ["control", "--example", "nope", "--out", str(out)]).exit_code == 2
     assert "--out" in runner.invoke(app, ["control", "--example", "ball-plate"]).output

@@ -10,7 +10,8 @@ __all__ = ["methods", "models"]
 
 @app.command()
 def models():
-    """List the models with their parameters (defaults), coordinates and initial condition."""
+    """List the models with their parameters (defaults), coordinate and velocity names (those of a problem
+    file's [inputs] and targets) and initial condition."""
     from rich.text import Text
 
     import gnipy
@@ -24,7 +25,10 @@ def models():
                   f"invariants: {', '.join(spec.invariants)}" if spec.invariants else None]
         con.print(Text.assemble((safe(name), "bold"), ": ", safe(spec.description)))
         con.print(f"    params: {params}", markup=False)
-        con.print(f"    q = ({', '.join(spec.coordinates)}); default q0 = {q0}, v0 = {v0}", markup=False)
+        # the velocity names too: what a problem file's [inputs] and a target's entries name
+        velocities = spec.system().velocities
+        con.print(f"    q = ({safe(', '.join(spec.coordinates))}), v = ({safe(', '.join(velocities))}); "
+                  f"default q0 = {q0}, v0 = {v0}", markup=False)
         more = "; ".join(x for x in extras if x)
         if more:
             con.print(f"    {more}", markup=False)

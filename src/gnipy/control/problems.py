@@ -13,7 +13,10 @@ A control problem file (:func:`load_problem`) has the sections
 - `[solver]` (optional): `method`, `bounds = [lower, upper]`, `effort`, `smoothness`,
   `max_iterations`, `segments` (the arguments of :func:`gnipy.control.solve_optimal_control`);
 - `[warm_start]` (optional): $u_j(t) = a_j\\sin(2\\pi\\,\\mathrm{periods}\\,t/T + \\phi_j)$ from
-  `amplitude`, `phase` and `periods` (default: zero inputs);
+  `amplitude`, `phase` and `periods`, or `file = "earlier.nc"`, the inputs of an earlier `gni
+  control` result (a path relative to the problem file; the inputs' names must match, and on
+  another grid the earlier inputs, held over their steps, are read at the middle of each new step,
+  the last one held past the earlier horizon) (default: zero inputs);
 - `name`, `description` (optional).
 
 Every entry is checked when the file is read, before anything is compiled: a value of the wrong
@@ -255,7 +258,7 @@ def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlP
     # refused before the warm start (K x m numbers) is built or anything is compiled
     check_control_memory(system, steps, size, segments, max_bytes, key="horizon.steps")
     warm = entry_table(data, "warm_start", required=False)
-    controls0 = _warm_start(warm, steps, m, h)
+    controls0 = _warm_start(warm, steps, m, h, folder, input_names)
     return ControlProblem(
         name=title, description=description, system=system, input_names=input_names, target=target, q0=q0, v0=v0,
         R0=R0, h=h, steps=steps, method=method, bounds=bounds, effort=effort, smoothness=smoothness,
@@ -300,10 +303,17 @@ def _bounds(value, m: int):
     return value[0], value[1]
 
 
-def _warm_start(warm, steps: int, m: int, h: float) -> np.ndarray:
+#: The most inputs a warm-start file may hold (steps x inputs), checked before they are read.
+MAX_WARM_START_VALUES = 10_000_000
+
+
+def _warm_start(warm, steps: int, m: int, h: float, folder=None, input_names=()) -> np.ndarray:
     if not warm:
         return np.zeros((steps, m))
-    refuse_unknown_keys(warm, "warm_start", {"amplitude", "phase", "periods"})
+    if "file" in warm:
+        refuse_unknown_keys(warm, "warm_start", {"file"})
+        return _warm_start_file(warm["file"], steps, m, h, folder, input_names)
+    refuse_unknown_keys(warm, "warm_start", {"amplitude", "phase", "periods", "file"})
     names = tuple(f"input {j + 1}" for j in range(m))
     amp = np.asarray(entry_numbers("warm_start.amplitude", warm.get("amplitude", [0.0] * m), names))
     phase = np.asarray(entry_numbers("warm_start.phase", warm.get("phase", [0.0] * m), names))
@@ -316,6 +326,46 @@ def _warm_start(warm, steps: int, m: int, h: float) -> np.ndarray:
         raise InputError(f"warm_start: the inputs it makes are not finite (the phase 2 pi periods t / T + phase "
                          f"overflows for periods = {periods!r}, phase = {phase.tolist()!r}); choose smaller values")
     return u
+
+
+def _warm_start_file(file, steps: int, m: int, h: float, folder, input_names) -> np.ndarray:
+    """The inputs of an earlier `gni control` result file as the warm start (module docstring): read
+    as data only (numbers; nothing in the file is executed), its size checked before they are read."""
+    from pathlib import Path
+
+    xr = require("xarray", extra="files")
+    if not isinstance(file, str) or not file or "\x00" in file:
+        raise InputError(f"warm_start.file: expected the path of a gni control result file (netCDF), got "
+                         f"{describe_entry(file)}")
+    path = Path(file) if Path(file).is_absolute() else Path(".") / file if folder is None else Path(folder) / file
+    if not path.is_file():
+        raise InputError(f"warm_start.file: {path}: no such file")
+    try:
+        with xr.open_dataset(path) as ds:
+            if "u" not in ds or ds["u"].dims != ("control_step", "input") or "control_time" not in ds:
+                raise InputError(f"warm_start.file: {path} holds no inputs u(control_step, input) with their "
+                                 "control_time: not a gni control result")
+            if ds["u"].size > MAX_WARM_START_VALUES:
+                raise InputError(f"warm_start.file: {path} holds {ds['u'].size} inputs, more than "
+                                 f"{MAX_WARM_START_VALUES:,}")
+            names = [str(x) for x in np.asarray(ds["input"].values)] if "input" in ds.coords else []
+            u = np.asarray(ds["u"].values, dtype=np.float64)
+            t = np.asarray(ds["control_time"].values, dtype=np.float64)
+    except (OSError, ValueError) as e:
+        raise InputError(f"warm_start.file: cannot read {path}: {e}") from None
+    expected = [str(x) for x in input_names] if input_names else names
+    if u.shape[1] != m or (input_names and names != expected):
+        raise InputError(f"warm_start.file: {path} holds the inputs {', '.join(names) or u.shape[1]}; this problem's "
+                         f"are {', '.join(expected)}")
+    if u.shape[0] == 0 or not (np.all(np.isfinite(u)) and np.all(np.isfinite(t))):
+        raise InputError(f"warm_start.file: {path}: its inputs are empty or not finite")
+    if u.shape[0] == steps and (steps == 1 or np.allclose(np.diff(t), h, rtol=1e-12, atol=0.0)):
+        return u
+    # another grid: the earlier inputs, held over their steps, read at the middle of each new step
+    rel = t - t[0]
+    mid = (np.arange(steps) + 0.5) * h
+    k = np.clip(np.searchsorted(rel, mid, side="right") - 1, 0, u.shape[0] - 1)
+    return u[k]
 
 
 def write_control_result(result, problem: ControlProblem | None, path, *, overwrite: bool = False) -> None:
