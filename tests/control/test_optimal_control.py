@@ -318,3 +318,26 @@ def test_the_zero_warm_start_reaches_the_worked_optimum(solved):
     assert cold.success, cold.message
     assert abs(cold.cost - result.cost) < 1e-9 * result.cost
     np.testing.assert_allclose(cold.controls, result.controls, rtol=0, atol=1e-6)
+
+
+def test_a_multistart_reuses_the_compiled_problem_and_lists_the_optima():
+    """Issue 34: `starts=N` solves from the warm start and N - 1 random starts and returns the best; on
+    the sleigh every converged start reaches the one optimum of the warm start's solve (the sleigh's
+    steering optimum appears global: IPOPT found it from 12 of 16 starts), listed once with its count.
+    The iterations count on across the starts and never pass their total."""
+    p = load_problem("sleigh-steering")
+    kw = dict(h=0.2, steps=20, q0=p.q0, v0=p.v0, controls0=p.controls0[::4], bounds=p.bounds, check_continuous=False)
+    one = solve_optimal_control(p.system, p.target, **kw)
+    calls = []
+    many = solve_optimal_control(p.system, p.target, starts=4, progress=lambda i, c, m, t: calls.append((i, t)), **kw)
+    assert one.success and many.success and not one.local_optima and many.starts == 4
+    assert len(many.local_optima) == 1 and 2 <= many.local_optima[0][1] <= 4
+    assert abs(many.local_optima[0][0] - one.cost) < 1e-9 * one.cost and abs(many.cost - one.cost) < 1e-9 * one.cost
+    assert [i for i, _ in calls] == list(range(1, len(calls) + 1)) and len(calls) == many.iterations
+    assert all(i <= t for i, t in calls)
+    assert "multistart: 1 distinct local optimum" in many.summary()
+    for bad in (0, 1.5, True, "2"):
+        with pytest.raises(gnipy.InputError, match="starts"):
+            solve_optimal_control(p.system, p.target, starts=bad, **kw)
+    with pytest.raises(gnipy.InputError, match="starts"):
+        solve_optimal_control(p.system, p.target, starts=2, segments=2, **kw)

@@ -7,6 +7,8 @@ The problem file's format is that of :mod:`gnipy.control.problems`; `gni control
 
 from __future__ import annotations
 
+import dataclasses
+
 import time
 from pathlib import Path
 
@@ -50,6 +52,7 @@ CONTROL_OPTIONS = {
     "smoothness": "solver.smoothness",
     "max_iterations": "solver.max_iterations",
     "segments": "solver.segments",
+    "starts": "solver.starts (or --starts)",
     "controls0": "warm_start",
     "controls": "warm_start",
 }
@@ -89,6 +92,11 @@ def control(
         False, "--yes", help="Solve even when the memory or the file the problem needs is estimated beyond gnipy's "
         "bounds (the SQP's matrices grow as the square of steps x inputs).",
     ),
+    starts: int | None = typer.Option(
+        None, "--starts", help="A multistart: the warm start and STARTS - 1 random ones on the same compiled "
+        "functions; returns the best and lists the distinct local optima (default: the file's solver.starts, or 1).",
+        show_default=False, min=1, max=1000,
+    ),
 ):
     """Solve an optimal-control problem on the GNI's steps and write the controlled run.
 
@@ -111,7 +119,7 @@ def control(
             text = source if isinstance(source, str) else problem_text(source)
             typer.echo(text, nl=not text.endswith("\n"))
             return
-        _solve(source, example, out=out, plot=plot, overwrite=overwrite, yes=yes)
+        _solve(source, example, out=out, plot=plot, overwrite=overwrite, yes=yes, starts=starts)
 
     guarded(go, method_option="solver.method", options=CONTROL_OPTIONS, keywords=CONTROL_KEYWORDS,
             out_of_memory="out of memory: use fewer steps (horizon.steps) or inputs")
@@ -133,7 +141,8 @@ def _problem_source(problem: Path | None, example: str | None):
     return problem
 
 
-def _solve(source, example: str | None, *, out: Path | None, plot: Path | None, overwrite: bool, yes: bool) -> None:
+def _solve(source, example: str | None, *, out: Path | None, plot: Path | None, overwrite: bool, yes: bool,
+           starts: int | None = None) -> None:
     """Solve the problem `source` (the text of `example`, or a file) and write --out (and --plot),
     within gnipy's bounds on memory and file size unless `yes`; then report."""
     from gnipy.control.problems import load_problem, write_control_result
@@ -147,7 +156,9 @@ def _solve(source, example: str | None, *, out: Path | None, plot: Path | None, 
     if not yes:
         check_result_file(prob.system, prob.steps + 1, out, "horizon.steps")
     start = time.perf_counter()
-    with Progress("control", prob.max_iterations, "iterations",
+    if starts is not None:  # --starts over the file's solver.starts
+        prob = dataclasses.replace(prob, starts=starts)
+    with Progress("control", prob.max_iterations * prob.starts, "iterations",
                   description=f"{prob.name}: compiling and iterating") as progress:
         # the total grows when SLSQP fails and the fallback (trust-constr, then SLSQP) starts
         def report(i, cost, miss, total):

@@ -68,6 +68,10 @@ class ControlResult:
         redundant_components: the target's components found to be fixed by the others before the
             solve (a singular constraint Jacobian for any controls): the SQP solved for the rest, and
             `target_residual` and `success` are for the whole target.
+        local_optima: after a multistart (`starts > 1`), the distinct optima the successful starts
+            reached, `((cost, number of starts), ...)` by increasing cost (the first is returned);
+            empty for one start.
+        starts: the number of starts (1: no multistart).
     """
 
     controls: np.ndarray
@@ -91,11 +95,21 @@ class ControlResult:
     kkt_tol: float = float("nan")
     target_rank: int | None = None
     redundant_components: tuple[str, ...] = ()
+    local_optima: tuple = ()
+    starts: int = 1
 
     @property
     def redundant_target(self) -> bool:
         """Whether the target's components are dependent (:attr:`target_rank` below their number)."""
         return self.target_rank is not None and self.target_rank < np.shape(self.target_jacobian)[0]
+
+    def _multistart_lines(self) -> list[str]:
+        if self.starts <= 1:
+            return []
+        found = sum(n for _, n in self.local_optima)
+        listed = ", ".join(f"{c:.10g} ({n} start{'s' if n > 1 else ''})" for c, n in self.local_optima)
+        return [f"  multistart: {len(self.local_optima)} distinct local optim{'a' if len(self.local_optima) > 1 else 'um'} "
+                f"from {found} of {self.starts} starts that converged" + (f": {listed}" if listed else "")]
 
     def _rank_lines(self) -> list[str]:
         if self.redundant_components:
@@ -132,7 +146,7 @@ class ControlResult:
             f"  target residual max|g| = {self.target_residual:.3e}",
             self._kkt_line(),
             f"  iterations: {self.iterations} SQP + {self.polish_iterations} polish; {self.wall_time:.2f} s",
-        ] + self._rank_lines() + ([] if math.isnan(self.continuous_miss) else [
+        ] + self._rank_lines() + self._multistart_lines() + ([] if math.isnan(self.continuous_miss) else [
             f"  the continuous system (reference) with these inputs misses the target by {self.continuous_miss:.3e}"
             + (" (the discretization's error: a smaller h reduces it)" if self.success
                else " (the discrete problem is not solved either)")]))

@@ -103,6 +103,7 @@ def solve_optimal_control(
     segments: int = 1,
     project_v0: bool = False,
     max_bytes="auto",
+    starts: int = 1,
 ) -> ControlResult:
     """Solve a discrete optimal-control problem by direct shooting on the GNI's steps (see
     the module docstring for the formulation and the choice of transcription).
@@ -151,6 +152,13 @@ def solve_optimal_control(
             (K·m)²): `"auto"` (the default) the smaller of :data:`MAX_MEMORY_BYTES` and half the
             physical memory, a number of bytes, or None for no bound.
 
+        starts: the number of starts of a multistart (≥ 1; single shooting): the warm start, then
+            `starts - 1` random ones (:func:`_random_start`, seeded by their index: reproducible),
+            each solved by the same compiled functions (no recompilation: a start costs its SQP
+            iterations). The best successful outcome is returned, and
+            :attr:`ControlResult.local_optima` lists the distinct optima found (costs equal to a
+            relative 1e-8 are one optimum) with how many starts reached each.
+
     Returns:
         A :class:`ControlResult`.
 
@@ -163,6 +171,10 @@ def solve_optimal_control(
                           target_tol=target_tol, kkt_tol=kkt_tol, running_cost=running_cost, segments=segments,
                           max_iterations=max_iterations, check_continuous=check_continuous, project_v0=project_v0,
                           bounds=bounds, progress=progress, input_names=input_names)
+    if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or not 1 <= starts <= MAX_STARTS:
+        raise InputError(f"starts: expected a whole number of starts from 1 to {MAX_STARTS}, got {starts!r}")
+    if starts > 1 and a.segments > 1:
+        raise InputError("starts: a multistart is for single shooting (segments = 1): its random starts are controls")
     method = "gni-trapezoid" if method is None else method
     g = terminal_residual(system, target)
     d = target_size(system, target, a.K * a.m)
@@ -185,8 +197,7 @@ def solve_optimal_control(
         n_target = keep.size
 
     problem = _sqp_problem(single, a, U0, running_cost, n_target)
-    out, iterations = solve_sqp(problem, max_iterations=a.max_iterations, target_tol=a.target_tol,
-                                kkt_tol=a.kkt_tol, report=a.report)
+    out, iterations, optima = _multistart(problem, a, starts)
     U = out.x.reshape(a.K, a.m)
     solution = single.run(U)
     rank = target_rank(out.jac)
@@ -210,9 +221,53 @@ def solve_optimal_control(
         wall_time=time.perf_counter() - start, method=name,
         input_names=tuple(str(n) for n in a.input_names) if a.input_names is not None
         else tuple(f"u{j}" for j in range(a.m)), continuous_miss=continuous_miss, target_jacobian=out.jac,
-        target_tol=a.target_tol, kkt_tol=a.kkt_tol, target_rank=rank, redundant_components=tuple(
+        local_optima=optima, starts=int(starts), target_tol=a.target_tol, kkt_tol=a.kkt_tol, target_rank=rank, redundant_components=tuple(
             _component_names(system, target, len(dropped) + n_target)[k] for k in dropped),
     )
+
+
+#: The most starts of a multistart.
+MAX_STARTS = 1000
+
+
+def _random_start(problem: SQPProblem, j: int) -> np.ndarray:
+    """Start j > 0 of a multistart (reproducible: seeded by j): the warm start plus Gaussian
+    controls of standard deviation a quarter of the bounds' width (or max(1, |warm start|) where
+    unbounded), clipped to the bounds."""
+    rng = np.random.default_rng(j)
+    lo, hi, x0 = problem.x_lo, problem.x_hi, problem.x0
+    finite = np.isfinite(lo) & np.isfinite(hi)
+    spread = np.where(finite, 0.25 * np.where(finite, hi - lo, 0.0), max(1.0, float(np.max(np.abs(x0), initial=0.0))))
+    return np.clip(x0 + spread * rng.standard_normal(x0.shape), lo, hi)
+
+
+def _multistart(problem: SQPProblem, a: ControlArguments, starts: int):
+    """`(best outcome, total iterations, distinct optima)`: the SQP from the warm start and from
+    `starts - 1` random starts, on the same compiled functions; the best is the successful outcome
+    of least cost (else the least miss). The optima: `((cost, starts that reached it), ...)` of the
+    successful outcomes, costs within a relative 1e-8 counted as one, by increasing cost (empty for
+    one start)."""
+    outcomes, total = [], 0
+    for j in range(starts):
+        offset, remaining = total, (starts - j - 1) * a.max_iterations
+
+        def report(i, cost, miss, cap, offset=offset, remaining=remaining):
+            if a.report is not None:  # one count across the starts: never past its total
+                a.report(offset + i, cost, miss, offset + cap + remaining)
+
+        trial = problem if j == 0 else dataclasses.replace(problem, x0=_random_start(problem, j))
+        out, iterations = solve_sqp(trial, max_iterations=a.max_iterations, target_tol=a.target_tol,
+                                    kkt_tol=a.kkt_tol, report=report if a.report is not None else None)
+        total += iterations
+        outcomes.append((out, float(problem.controls.cost(out.x))))
+    best = min(outcomes, key=lambda oc: (not oc[0].ok, oc[1] if oc[0].ok else oc[0].miss))[0]
+    optima: list[list] = []
+    for out, cost in sorted((oc for oc in outcomes if oc[0].ok), key=lambda oc: oc[1]):
+        if optima and abs(cost - optima[-1][0]) <= 1e-8 * max(abs(cost), abs(optima[-1][0]), 1e-300):
+            optima[-1][1] += 1
+        else:
+            optima.append([cost, 1])
+    return best, total, tuple((c, n) for c, n in optima) if starts > 1 else ()
 
 
 def _redundant_components(single: _SingleShooting, U0, a: ControlArguments) -> list[int]:

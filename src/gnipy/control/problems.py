@@ -11,7 +11,7 @@ A control problem file (:func:`load_problem`) has the sections
 - `[horizon]`: `h` and `steps`;
 - `[target]`: coordinate and velocity names with their values, and `R` (a matrix);
 - `[solver]` (optional): `method`, `bounds = [lower, upper]`, `effort`, `smoothness`,
-  `max_iterations`, `segments` (the arguments of :func:`gnipy.control.solve_optimal_control`);
+  `max_iterations`, `segments`, `starts` (the arguments of :func:`gnipy.control.solve_optimal_control`);
 - `[warm_start]` (optional): $u_j(t) = a_j\\sin(2\\pi\\,\\mathrm{periods}\\,t/T + \\phi_j)$ from
   `amplitude`, `phase` and `periods`, or `file = "earlier.nc"`, the inputs of an earlier `gni
   control` result (a path relative to the problem file; the inputs' names must match, and on
@@ -158,7 +158,7 @@ class ControlProblem:
         target: the target mapping (:func:`gnipy.control.terminal_residual`).
         q0, v0, R0: the start; `project_v0`: project v0 onto the constraints.
         h, steps: the horizon.
-        method, bounds, effort, smoothness, max_iterations, segments: the solver's options.
+        method, bounds, effort, smoothness, max_iterations, segments, starts: the solver's options.
         controls0: the warm start (K, m).
         source: the file's text (kept in the result file's attributes).
     """
@@ -182,9 +182,11 @@ class ControlProblem:
     controls0: np.ndarray
     source: str
     project_v0: bool = False
+    starts: int = 1
 
-    def solve(self, progress=False, check_continuous: bool = True, max_bytes="auto"):
-        """:func:`gnipy.control.solve_optimal_control` on this problem (`max_bytes` as there)."""
+    def solve(self, progress=False, check_continuous: bool = True, max_bytes="auto", starts: int | None = None):
+        """:func:`gnipy.control.solve_optimal_control` on this problem (`max_bytes` as there; `starts`
+        overrides the file's `solver.starts`)."""
         from .optimal_control import solve_optimal_control
 
         return solve_optimal_control(
@@ -192,7 +194,8 @@ class ControlProblem:
             method=self.method, controls0=self.controls0, bounds=self.bounds, effort=self.effort,
             smoothness=self.smoothness, segments=self.segments,
             max_iterations=self.max_iterations, progress=progress, input_names=self.input_names,
-            check_continuous=check_continuous, project_v0=self.project_v0, max_bytes=max_bytes)
+            check_continuous=check_continuous, project_v0=self.project_v0, max_bytes=max_bytes,
+            starts=self.starts if starts is None else starts)
 
 
 def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlProblem:
@@ -216,7 +219,7 @@ def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlP
     from ..forcing import input_force
     from ..simulate import MAX_TOTAL_STEPS, MIN_STEP_SIZE
     from .memory import check_control_memory
-    from .optimal_control import MAX_ITERATIONS
+    from .optimal_control import MAX_ITERATIONS, MAX_STARTS
 
     if isinstance(source, str) and source in WORKED_PROBLEMS:
         source = WORKED_PROBLEMS[source]
@@ -244,13 +247,17 @@ def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlP
         raise InputError(f"horizon: the horizon h x steps = {h!r} x {steps} is not a finite time")
     target = _target(entry_table(data, "target"), system)
     solver = entry_table(data, "solver", required=False)
-    refuse_unknown_keys(solver, "solver", {"method", "bounds", "effort", "smoothness", "max_iterations", "segments"})
+    refuse_unknown_keys(solver, "solver", {"method", "bounds", "effort", "smoothness", "max_iterations", "segments",
+                                           "starts"})
     method = entry_method("solver.method", solver.get("method", "gni-trapezoid"))
     bounds = _bounds(solver.get("bounds"), m)
     effort = entry_number("solver.effort", solver.get("effort", 1.0), nonnegative=True)
     smoothness = entry_number("solver.smoothness", solver.get("smoothness", 0.0), nonnegative=True)
     max_iterations = entry_integer("solver.max_iterations", solver.get("max_iterations", 500), 1, MAX_ITERATIONS)
     segments = entry_integer("solver.segments", solver.get("segments", 1), 1, steps, "horizon.steps")
+    starts = entry_integer("solver.starts", solver.get("starts", 1), 1, MAX_STARTS)
+    if starts > 1 and segments > 1:
+        raise InputError("solver.starts: a multistart is for single shooting (solver.segments = 1)")
     size = sum(system.group.dim if k == "R" else 1 for k in target)
     if size > steps * m:
         raise InputError(f"horizon.steps: the target's {size} conditions need at least as many controls; "
@@ -262,7 +269,8 @@ def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlP
     return ControlProblem(
         name=title, description=description, system=system, input_names=input_names, target=target, q0=q0, v0=v0,
         R0=R0, h=h, steps=steps, method=method, bounds=bounds, effort=effort, smoothness=smoothness,
-        max_iterations=max_iterations, segments=segments, controls0=controls0, source=text, project_v0=project_v0)
+        max_iterations=max_iterations, segments=segments, controls0=controls0, source=text, project_v0=project_v0,
+        starts=starts)
 
 
 def _target(table: Mapping, system: System) -> dict:
@@ -394,6 +402,8 @@ def write_control_result(result, problem: ControlProblem | None, path, *, overwr
         "control_wall_time_s": float(result.wall_time),
         "control_continuous_miss": float(result.continuous_miss),
         "control_redundant_components": ",".join(result.redundant_components),
+        "control_starts": int(result.starts),
+        "control_local_optima": ", ".join(f"{c!r} ({n})" for c, n in result.local_optima),
         "control_transcription": "direct shooting on the method's steps (gnipy.control)",
     }
     if problem is not None and problem.source:
