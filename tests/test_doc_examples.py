@@ -100,6 +100,10 @@ NOT_RUN = {
         "about 3 minutes: the command's folder checks run in "
         "tests/experiments/test_open_questions.py::test_the_command_refuses_a_folder_it_did_not_create_before_computing, "
         "its report writer in tests/experiments/test_open_questions.py::test_the_report_states_the_verdicts_its_rules_give_and_writes_every_file",
+    "gni control --example ball-plate --starts 8 --out ball-starts.nc":
+        "about 45 s: the multistart runs in tests/control/test_optimal_control.py::"
+        "test_a_multistart_reuses_the_compiled_problem_and_lists_the_optima, and --starts through the CLI in the "
+        "control page's sleigh-steering command here",
     "mkdocs build --strict":
         "tests/test_docs.py::test_site_builds_strict builds the site with --strict",
     "python -m benchmarks":
