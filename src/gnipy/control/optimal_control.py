@@ -190,23 +190,24 @@ def solve_optimal_control(
     # "at rest" as every velocity of a constrained system) makes the SQP's constraint Jacobian singular
     # everywhere (SLSQP: "Singular matrix C"): the SQP solves for an independent subset, and the whole
     # target is checked at the end
-    full_g, dropped = g, _redundant_components(single, U0, a)
-    if dropped:
+    problem = _sqp_problem(single, a, U0, running_cost, n_target)
+    full_g, dropped = g, _redundant_components(problem, U0, a)
+    if dropped:  # rebuilt (and compiled again) only then: the probe uses the functions the SQP uses
         keep = np.setdiff1d(np.arange(n_target), dropped)
         single = _SingleShooting(system, method, lambda b, v: full_g(b, v)[keep], q0, v0, R0, a, running_cost)
         n_target = keep.size
-
-    problem = _sqp_problem(single, a, U0, running_cost, n_target)
+        problem = _sqp_problem(single, a, U0, running_cost, n_target)
     out, iterations, optima = _multistart(problem, a, starts)
     U = out.x.reshape(a.K, a.m)
     solution = single.run(U)
     rank = target_rank(out.jac)
+    names = _component_names(system, target, len(dropped) + n_target)
+    redundant = tuple(names[k] for k in dropped)
     if dropped:  # the whole target, at the end of the run: what success means
         single.g = full_g
-        names = _component_names(system, target, len(dropped) + n_target)
         miss = float(np.max(np.abs(np.asarray(full_g(_final_point(system, solution), solution.v[-1])))))
         out = dataclasses.replace(out, miss=miss, ok=out.ok and miss <= a.target_tol)
-        message = (out.message(a.target_tol, a.kkt_tol) + f"; redundant target: {', '.join(names[k] for k in dropped)} "
+        message = (out.message(a.target_tol, a.kkt_tol) + f"; redundant target: {', '.join(redundant)} "
                    f"fixed by the other components (solved for {n_target} independent ones; the whole target "
                    f"checked at the end: max|g| = {miss:.3e})")
     else:
@@ -221,8 +222,7 @@ def solve_optimal_control(
         wall_time=time.perf_counter() - start, method=name,
         input_names=tuple(str(n) for n in a.input_names) if a.input_names is not None
         else tuple(f"u{j}" for j in range(a.m)), continuous_miss=continuous_miss, target_jacobian=out.jac,
-        local_optima=optima, starts=int(starts), target_tol=a.target_tol, kkt_tol=a.kkt_tol, target_rank=rank, redundant_components=tuple(
-            _component_names(system, target, len(dropped) + n_target)[k] for k in dropped),
+        local_optima=optima, starts=int(starts), target_tol=a.target_tol, kkt_tol=a.kkt_tol, target_rank=rank, redundant_components=redundant,
     )
 
 
@@ -270,7 +270,7 @@ def _multistart(problem: SQPProblem, a: ControlArguments, starts: int):
     return best, total, tuple((c, n) for c, n in optima) if starts > 1 else ()
 
 
-def _redundant_components(single: _SingleShooting, U0, a: ControlArguments) -> list[int]:
+def _redundant_components(problem: SQPProblem, U0, a: ControlArguments) -> list[int]:
     """The target's components that the others fix: the rows of $\\partial g/\\partial u$ outside an
     independent set (pivoted QR), at controls near the warm start (a random perturbation of 5 per cent
     of the bounds' width, or 0.1: a warm start such as zero, where the target may be degenerate to
@@ -280,8 +280,7 @@ def _redundant_components(single: _SingleShooting, U0, a: ControlArguments) -> l
     rng = np.random.default_rng(0)
     width = np.where(np.isfinite(a.hi - a.lo), a.hi - a.lo, 2.0)
     probe = np.clip(U0 + 0.05 * width * rng.standard_normal(U0.shape), a.lo, a.hi)
-    J = np.asarray(jax.jacrev(single.constraint)(jnp.asarray(probe)))
-    J = J.reshape(J.shape[0], -1)
+    J = np.asarray(problem.controls.constraints_jacobian(probe.ravel()))  # compiled once: the SQP's own
     rank = target_rank(J)
     if rank is None or rank >= J.shape[0]:
         return []

@@ -184,9 +184,8 @@ class ControlProblem:
     project_v0: bool = False
     starts: int = 1
 
-    def solve(self, progress=False, check_continuous: bool = True, max_bytes="auto", starts: int | None = None):
-        """:func:`gnipy.control.solve_optimal_control` on this problem (`max_bytes` as there; `starts`
-        overrides the file's `solver.starts`)."""
+    def solve(self, progress=False, check_continuous: bool = True, max_bytes="auto"):
+        """:func:`gnipy.control.solve_optimal_control` on this problem (`max_bytes` as there)."""
         from .optimal_control import solve_optimal_control
 
         return solve_optimal_control(
@@ -195,7 +194,7 @@ class ControlProblem:
             smoothness=self.smoothness, segments=self.segments,
             max_iterations=self.max_iterations, progress=progress, input_names=self.input_names,
             check_continuous=check_continuous, project_v0=self.project_v0, max_bytes=max_bytes,
-            starts=self.starts if starts is None else starts)
+            starts=self.starts)
 
 
 def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlProblem:
@@ -321,7 +320,7 @@ def _warm_start(warm, steps: int, m: int, h: float, folder=None, input_names=())
     if "file" in warm:
         refuse_unknown_keys(warm, "warm_start", {"file"})
         return _warm_start_file(warm["file"], steps, m, h, folder, input_names)
-    refuse_unknown_keys(warm, "warm_start", {"amplitude", "phase", "periods", "file"})
+    refuse_unknown_keys(warm, "warm_start", {"amplitude", "phase", "periods"})
     names = tuple(f"input {j + 1}" for j in range(m))
     amp = np.asarray(entry_numbers("warm_start.amplitude", warm.get("amplitude", [0.0] * m), names))
     phase = np.asarray(entry_numbers("warm_start.phase", warm.get("phase", [0.0] * m), names))

@@ -116,7 +116,7 @@ class SisterMethod(Integrator):
         space = system.space
         ld = Trapezoid()
         n = q.shape[0]
-        rows0 = jax.jacfwd(lambda x: self.engaged(system, x, q))(q)
+        rows0 = system.mu(q) if self.constraint is None else jax.jacfwd(lambda x: self.engaged(system, x, q))(q)
         m = rows0.shape[0]
 
         def lagrangian(b0, z):
@@ -145,7 +145,8 @@ class SisterMethod(Integrator):
         # FL⁺ = FL⁻ + (FL⁺ − FL⁻) at the solution (the momentum carried, as in the GNI)
         p_plus = p + rows0.T @ lam + space.legendre_jump(lagrangian, q, z)
         G1, zero = system.metric(q1), jnp.zeros_like(p)
-        rows1 = jax.jacfwd(lambda x: self.engaged(system, x, q))(q1)
+        # the rail's rows are constant (mu(q_k)); another constraint's are its differential at q_{k+1}
+        rows1 = rows0 if self.constraint is None else jax.jacfwd(lambda x: self.engaged(system, x, q))(q1)
         p_minus = reported_momentum(G1, rows1, zero, p_plus)  # RATTLE's end: tangent to φ_k = 0
         p1 = reported_momentum(G1, system.mu(q1), zero, p_minus)  # the plastic impact
         return SisterState(q1, p1, x_err), info, p_minus
