@@ -47,6 +47,8 @@ class ModelSpec:
         notes: longer documentation.
         origin: for a user's system (:func:`model_from_function`), `(reference, digest)`: how to
             load it again and the SHA-256 of its source; None for the zoo's models.
+        positive: the parameters that are positive by their meaning (masses, moments of inertia,
+            lengths): :func:`gnipy.fit` bounds their estimates below by 0 unless told otherwise.
     """
 
     name: str
@@ -62,6 +64,7 @@ class ModelSpec:
     invariants: Mapping[str, Callable[..., Any]] = dataclasses.field(default_factory=dict)
     notes: str = ""
     origin: tuple[str, str | None] | None = None
+    positive: tuple[str, ...] = ()
 
     def resolve_params(self, overrides: Mapping[str, Any] | None = None) -> dict[str, float]:
         """Defaults updated with `overrides`; unknown names, values that are not numbers (a string or

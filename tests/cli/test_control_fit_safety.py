@@ -356,6 +356,16 @@ FIT_CASES = [
     (FIT.replace("params = { I = 1.2, a = 0.5 }", "initial = ['q0', 'q0']"), ["estimate.initial:"]),
     (FIT.replace("params = { I = 1.2, a = 0.5 }", "params = {}"), ["estimate:", "nothing"]),
     (FIT.replace("[estimate]\nparams = { I = 1.2, a = 0.5 }\n", ""), ["estimate:", "missing"]),
+    (FIT.replace("params = { I = 1.2, a = 0.5 }", "params = { I = 1.2, a = 0.5 }\nbounds = { I = [1, 0] }"),
+     ["estimate.bounds.I:", "lower bound"]),
+    (FIT.replace("params = { I = 1.2, a = 0.5 }", "params = { I = 1.2, a = 0.5 }\nbounds = { I = [2, 3] }"),
+     ["estimate.bounds.I:", "not strictly inside"]),
+    (FIT.replace("params = { I = 1.2, a = 0.5 }", "params = { I = 1.2, a = 0.5 }\nbounds = { m = [0, 3] }"),
+     ["estimate.bounds.m:", "not an estimated"]),
+    (FIT.replace("params = { I = 1.2, a = 0.5 }", "params = { I = 1.2, a = 0.5 }\nbounds = { a = [0, \"1\"] }"),
+     ["estimate.bounds.a:", "[lower, upper]"]),
+    (FIT.replace("params = { I = 1.2, a = 0.5 }", "params = { I = -1.2, a = 0.5 }"),
+     ["estimate.params.I:", "must be positive", "[-inf, inf]"]),
 ]
 
 

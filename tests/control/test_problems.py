@@ -19,6 +19,7 @@ model = "chaplygin-sleigh"
 params = { m = 1.0 }
 [estimate]
 params = { I = 1.2, a = 0.5 }
+bounds = { a = [0.0, 1.0] }
 [observations]
 file = "observed.nc"
 variables = ["x", "y"]
@@ -53,13 +54,15 @@ def test_gni_fit_recovers_the_parameters_of_the_observed_run(observed):
         est = dict(zip(ds["quantity"].values.tolist(), ds["estimate"].values))
         assert abs(est["I"] - 1.5) <= 1e-8 and abs(est["a"] - 0.4) <= 1e-8
         assert ds.attrs["fit_success"] == 1 and ds.attrs["fit_observed_variables"] == "x,y"
+        assert ds.attrs["fit_determined"] == 2 and ds.attrs["fit_at_bound"] == "" and ds.attrs["fit_combinations"] == ""
         assert ds["covariance"].shape == (2, 2)
         # the file holds the fitted run: it is the run of the estimated parameters
         truth = gnipy.simulate(gnipy.make_system("chaplygin-sleigh", I=1.5, a=0.4), "gni-trapezoid", (0, 0, 0),
                                (1.0, 0.4, 1.0), h=0.05, steps=60)
         assert np.max(np.abs(ds["q"].values - np.asarray(truth.q))) <= 1e-8
-    # h came from the observation file (h = 0.05, not in the problem file)
-    assert load_fit_problem(observed / "sleigh-fit.toml").h == 0.05
+    # h came from the observation file (h = 0.05, not in the problem file); a's bounds are read
+    prob = load_fit_problem(observed / "sleigh-fit.toml")
+    assert prob.h == 0.05 and prob.bounds == {"a": (0.0, 1.0)}
 
 
 def test_fit_problem_errors_name_the_entry(observed):

@@ -33,6 +33,7 @@ FIT_OPTIONS = {
     "constraints": "system.params/estimate.params",
     "affine": "system.params/estimate.params",
     "initial": "estimate.initial",
+    "bounds": "estimate.bounds",
     "params/initial": "estimate",
     "observations": "observations.file",
     "observations/h": "observations.file/integration.h",

@@ -152,12 +152,15 @@ class FitModel:
         given: the given System (whose parameters are not estimated), else None.
         follow_ic: whether the model's default initial condition can follow the estimated
             parameters (it can be evaluated on JAX values).
+        positive: the parameters that are positive by their meaning (a zoo model's
+            :attr:`~gnipy.registry.ModelSpec.positive`; none for a user's System or build).
     """
 
     build: Any
     system: System
     given: System | None
     follow_ic: bool
+    positive: tuple[str, ...] = ()
 
 
 def fit_model(system, param_names, guesses, fixed, q0, v0) -> FitModel:
@@ -198,7 +201,7 @@ def _zoo_model(name: str, param_names, guesses, fixed, q0, v0) -> FitModel:
             follow_ic = True
         except Exception:  # e.g. float() of a traced value: the default at the initial guess
             follow_ic = False
-    return FitModel(build=build, system=concrete, given=None, follow_ic=follow_ic)
+    return FitModel(build=build, system=concrete, given=None, follow_ic=follow_ic, positive=tuple(spec.positive))
 
 
 def _built(build, param_names, guesses, fixed) -> System:

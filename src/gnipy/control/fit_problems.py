@@ -9,6 +9,7 @@ estimate with their guesses, the observations (a gnipy result file) and the inte
     [estimate]
     params = { I = 1.2, a = 0.5 }  # estimated, with initial guesses
     initial = ["q0"]               # optional: also q0 and/or v0
+    bounds = { a = [0.0, 1.0] }    # optional (default: masses, inertias, lengths positive)
     [observations]
     file = "observed.nc"           # relative to the problem file
     variables = ["x", "y"]         # optional (default: every coordinate)
@@ -68,6 +69,8 @@ class FitProblem:
         fixed: the fixed parameters.
         params: the estimated parameters' initial guesses.
         initial: which parts of the initial condition are estimated (`"q0"`, `"v0"`).
+        bounds: the bounds of `[estimate] bounds`, name -> `(lower, upper)` (over the model's
+            defaults: :mod:`gnipy.control.bounds`; `[-inf, inf]` lifts one).
         observations: the :class:`~gnipy.control.Observations`.
         q0, v0, R0: the start (guesses where estimated).
         method, h, t0: the integration.
@@ -88,6 +91,7 @@ class FitProblem:
     h: float
     t0: float
     source: str
+    bounds: dict = dataclasses.field(default_factory=dict)
 
     def solve(self, progress=False, max_bytes="auto"):
         """:func:`gnipy.fit` on this problem (`max_bytes` as there)."""
@@ -95,7 +99,13 @@ class FitProblem:
 
         return fit(self.model, self.observations, params=self.params or None, fixed=self.fixed or None,
                    initial=self.initial, method=self.method, h=self.h, t0=self.t0, q0=self.q0, v0=self.v0,
-                   R0=self.R0, progress=progress, max_bytes=max_bytes)
+                   R0=self.R0, bounds=self._bounds(), progress=progress, max_bytes=max_bytes)
+
+    def _bounds(self):
+        """The bounds for :func:`gnipy.fit` (an infinite pair lifts a default), None without any."""
+        if not self.bounds:
+            return None
+        return {k: None if (a, b) == (-math.inf, math.inf) else (a, b) for k, (a, b) in self.bounds.items()}
 
 
 def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProblem:
@@ -127,7 +137,7 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
     description = entry_text("description", data.get("description", "")).strip()
     spec, fixed_all = entry_model(data, base)
     fixed = entry_params(spec, data["system"].get("params"), "system.params")
-    params, initial = _estimate_section(data, spec, fixed)
+    params, initial, bounds = _estimate_section(data, spec, fixed)
     # the system at the initial guess: the names and sizes below are checked against it
     system = build_model_system(spec, {**fixed_all, **params}, "system.params/estimate.params")
     obs_path, variables, sigma = _observations_section(data, base, spec, system)
@@ -138,14 +148,15 @@ def load_fit_problem(source, *, name: str = "fit", max_bytes="auto") -> FitProbl
     _check_memory(system, observations, params, initial, t0, h, max_bytes)
     return FitProblem(name=title, description=description, model=spec.name, fixed=fixed, params=params,
                       initial=tuple(initial), observations=observations, q0=q0, v0=v0, R0=R0, method=method, h=h,
-                      t0=t0, source=text)
+                      t0=t0, source=text, bounds=bounds)
 
 
-def _estimate_section(data, spec, fixed) -> tuple[dict, list]:
-    """`(params, initial)` of `[estimate]`: the estimated parameters' guesses (none also fixed) and
-    the estimated parts of the initial condition; something to estimate."""
+def _estimate_section(data, spec, fixed) -> tuple[dict, list, dict]:
+    """`(params, initial, bounds)` of `[estimate]`: the estimated parameters' guesses (none also
+    fixed), the estimated parts of the initial condition (something to estimate) and the bounds
+    of estimated parameters (pairs of numbers, lower below upper)."""
     estimate = entry_table(data, "estimate")
-    refuse_unknown_keys(estimate, "estimate", {"params", "initial"})
+    refuse_unknown_keys(estimate, "estimate", {"params", "initial", "bounds"})
     params = entry_params(spec, estimate.get("params"), "estimate.params")
     both = set(params) & set(fixed)
     if both:
@@ -159,7 +170,36 @@ def _estimate_section(data, spec, fixed) -> tuple[dict, list]:
         raise InputError(f"estimate.initial: expected a list of 'q0' and/or 'v0' (each once), got {describe_entry(initial)}")
     if not params and not initial:
         raise InputError("estimate: nothing to estimate: give params = {...} and/or initial = [...]")
-    return params, initial
+    return params, initial, _bounds_entry(estimate.get("bounds", {}), params, spec.positive)
+
+
+def _bounds_entry(table, params, positive) -> dict:
+    """`[estimate] bounds`: estimated parameter -> `[lower, upper]` (numbers, ±inf for an open
+    side), each holding its guess strictly inside, as the model's positive parameters' guesses
+    must be unless a bound is given."""
+    if not isinstance(table, dict):
+        raise InputError(f"estimate.bounds: expected a table {{name = [lower, upper]}}, got {describe_entry(table)}")
+    out = {}
+    for name, pair in table.items():
+        key = f"estimate.bounds.{name}"
+        if name not in params:
+            raise InputError(f"{key}: not an estimated parameter (estimate.params: {', '.join(params) or 'none'})")
+        if not isinstance(pair, list) or len(pair) != 2 or not all(is_entry_number(x) for x in pair):
+            raise InputError(f"{key}: expected [lower, upper] (numbers; inf and -inf for an open side), got "
+                             f"{describe_entry(pair)}")
+        a, b = (float(x) for x in pair)
+        if not a < b:
+            raise InputError(f"{key}: the lower bound must be below the upper bound, got [{a!r}, {b!r}]")
+        if not a < params[name] < b:
+            raise InputError(f"{key}: the guess {params[name]!r} (estimate.params.{name}) is not strictly inside "
+                             f"[{a!r}, {b!r}]")
+        out[name] = (a, b)
+    for name in positive:
+        if name in params and name not in out and not params[name] > 0:
+            raise InputError(f"estimate.params.{name}: the guess {params[name]!r} must be positive ({name} is a mass, "
+                             f"moment of inertia or length of this model); [estimate] bounds = {{ {name} = [-inf, inf] "
+                             "} lifts the bound")
+    return out
 
 
 def _observations_section(data, base: Path, spec, system) -> tuple[Path, Any, Any]:
@@ -355,6 +395,10 @@ def write_fit_result(result, problem: FitProblem | None, path, *, overwrite: boo
         "fit_reduced_chi2": float(result.reduced_chi2),
         "fit_n_obs": int(result.n_obs),
         "fit_rank": int(result.rank),
+        "fit_determined": int(result.determined),
+        "fit_discretization": float(result.discretization),
+        "fit_combinations": "; ".join(str(c) for c in result.combinations),
+        "fit_at_bound": ", ".join(f"{n} = {b!r}" for n, b in result.at_bound.items()),
         "fit_sigma_known": int(result.sigma_known),
         "fit_success": int(result.success),
         "fit_message": str(result.message),
@@ -364,6 +408,8 @@ def write_fit_result(result, problem: FitProblem | None, path, *, overwrite: boo
     }
     if problem is not None and problem.source:
         attrs["fit_problem_file"] = problem.source
+    if result.solution is None:
+        raise InputError(f"--out: the fit has no fitted run to write ({result.message})")
     ds = result.solution.to_xarray(attrs=attrs)
     names = [str(n) for n in result.names]
     for var, values, dims in (("estimate", result.values, ("quantity",)),

@@ -19,24 +19,52 @@ that explains the data).
 This is the usual linearization: valid when the errors are small enough for the model to be
 nearly linear in $\\theta$ over a few standard errors.
 
-**Initial velocities** must satisfy the constraints. An estimated `v0` is therefore a free
-vector that is projected $\\mathbb{G}$-orthogonally onto the constraints (for the current
-parameters and `q0`, :func:`gnipy.system.project_velocity`) at every evaluation; the reported
-`v0` is the projected one. The directions the projection removes do not change the residuals
-(they are null directions of $J$), so the covariance is formed with the pseudo-inverse of
-$J^TJ$ (singular values below $10^{-10}$ of the largest dropped) and mapped to the reported
-quantities (the parameters, `q0` and the projected `v0`) by the derivative of that map; it is the
-same for every generalized inverse, because the dropped directions change none of them. A
-quantity that the data cannot determine (e.g. the mass and the moment of inertia of the Chaplygin
-sleigh separately: only their ratio enters the motion) has a reported direction in the null space
-of $J$: its standard error is infinite and the result says so.
+**Initial velocities** must satisfy the constraints, which may depend on the estimated
+parameters. At every evaluation `v0` (held, or estimated as a free vector) is moved onto the
+constraints of the system at the trial values by the smallest change of its components,
+$v - \\mu^T(\\mu\\mu^T)^{-1}\\mu(v - Y)$
+(:func:`gnipy.control.least_squares.admissible_velocity`): a held `v0` that satisfies them is
+kept exactly; one that does not is corrected in a way that depends on the constraints'
+parameters only, never on the masses and moments of inertia (a $\\mathbb{G}$-orthogonal projection
+would make the fit depend on them where the motion does not). The reported `v0` is the moved one.
+The directions the move removes from an estimated `v0` do not change the residuals (exact null
+directions of $J$), so the covariance is formed with the pseudo-inverse of $J^TJ$ and mapped to
+the reported quantities (the parameters, `q0` and the moved `v0`) by the derivative of that map;
+it is the same for every generalized inverse, because the dropped directions change none of them.
+
+**Bounds.** Every trial point stays inside the quantities' bounds (a zoo model's masses, moments
+of inertia and lengths are positive by default; :mod:`gnipy.control.bounds` says how); an estimate
+that ends at a bound, a system that is not valid at the estimate, a solver that does not converge:
+each returns a flagged result (`success` False, `message` says why), never an exception.
+
+**Identifiability: which quantities the data determine.** Let $J_s$ be the Jacobian scaled by
+the estimates (columns multiplied by $|y_i|$, 1 where $y_i = 0$), with singular values $S_j$ and
+right singular vectors $v_j$, and $s$ the noise scale of one weighted residual (1 with `sigma`,
+else $\\sqrt{\\chi^2/\\text{dof}}$). The simulation at step $h$ differs from the continuous model by
+the discretization error, and so does its Jacobian: $J_s = J_c + J_d$. A direction that the
+continuous physics leaves undetermined (for a disk driven from rest and observed in its rolling
+angle, any change of $m$, $r$, $I_{rot}$ that keeps $m r^2 + I_{rot}$) still has $S_j > 0$ at
+finite $h$, made by $J_d$ alone, and an exact-null test would call it determined. So the fit
+reruns the problem at h/2 at the estimate and estimates, by Richardson extrapolation with the
+method's order $p$, the discretization error of the predictions, $e = (r_h - r_{h/2})\\,2^p/(2^p-1)$
+(its size is `FitResult.discretization`), and its part of the Jacobian along each direction,
+$J_d v_j = (J_s v_j - J_{s,h/2}\\,v_j)\\,2^p/(2^p-1)$ (central differences at h/2). **The rule:**
+$v_j$ is determined when the continuous part $c_j = \\|J_s v_j - J_d v_j\\|$ exceeds both the
+noise and the discretization's part, $c_j > \\max(s, \\|J_d v_j\\|)$. For a physical direction
+$\\|J_d v_j\\|/c_j = O(h^p)$; for one seen only through the discretization error it is about 1 or
+more: the two are far apart at any $h$ where the method is in its asymptotic range. A quantity is
+identifiable when its part along the undetermined directions, each weighted by its uncertainty
+$\\max(s, \\|J_d v_j\\|)/c_j$, is below its own size (and it has none along an exact null
+direction); otherwise its standard error is infinite, and the result lists the combinations of
+such quantities that the data do determine (`FitResult.combinations`: $m r^2 + I_{rot}$ appears
+as its gradient at the estimate, $r^2\\,m + 2mr\\,r + I_{rot}$ normalized). The covariance is
+$s^2 (J_s^TJ_s)^+$ over the determined directions, mapped to the reported quantities.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from typing import Any
 
 import equinox as eqx
 import jax
@@ -46,9 +74,7 @@ import numpy as np
 from ..compilation import jit
 from ..errors import InputError, SolverFailure
 from ..inputs import finite_number, real_number, require_float64, whole_number
-from ..saveat import SaveAt
 from ..simulate import simulate
-from ..system import System, project_velocity
 from .control_arguments import MAX_ITERATIONS
 from .fit_arguments import (
     FitData,
@@ -63,7 +89,9 @@ from .fit_arguments import (
     progress_reporter,
     step_grid,
 )
+from .bounds import Bounds, fit_bounds
 from .fit_result import IDENTIFIABLE_TOL, RCOND, FitResult, fit_notes, observed_residuals, uncertainties  # noqa: F401
+from .least_squares import LeastSquares, discretization, final_linearization, gauss_newton_step, reported
 from .memory import memory_limit
 from .observations import Observations
 
@@ -71,123 +99,6 @@ __all__ = ["fit", "FitResult", "Observations", "RCOND", "MAX_STEPS"]
 
 #: The default of :func:`fit`'s `max_steps`: the most iterations of the solver.
 MAX_STEPS = 200
-
-
-# ----------------------------------------------------------------------------------------------
-# The least-squares problem
-# ----------------------------------------------------------------------------------------------
-def _point(system: System, q0, R0):
-    from ..spaces import Point
-
-    x = jnp.asarray(q0, jnp.float64).reshape(system.n)
-    if system.group is None:
-        return x
-    k = system.group.matrix_size
-    return Point(x, jnp.eye(k) if R0 is None else jnp.asarray(R0, jnp.float64).reshape(k, k))
-
-
-class _Problem(eqx.Module):
-    """The weighted residuals of a fit as a function of the scaled estimated quantities `z`
-    (`y = scale * z`: the parameters, then the estimated components of q0 and of the raw v0)."""
-
-    system: Any  # a System whose parameters are not estimated, else None
-    fixed: dict  # fixed parameters passed to the build (arrays)
-    q0: jax.Array
-    v0: jax.Array
-    R0: Any
-    scale: jax.Array
-    controls: Any
-    build: Any = eqx.field(static=True)
-    method: Any
-    param_names: tuple = eqx.field(static=True)
-    q_idx: tuple = eqx.field(static=True)
-    v_idx: tuple = eqx.field(static=True)
-    follow_ic: bool = eqx.field(static=True)
-    h: float = eqx.field(static=True)
-    steps: int = eqx.field(static=True)
-    t0: float = eqx.field(static=True)
-    ts: tuple = eqx.field(static=True)
-    columns: tuple = eqx.field(static=True)
-
-    def unpack(self, y):
-        """`(system, q0, v0 before projection)` at the unscaled estimate `y`."""
-        y = jnp.asarray(y, jnp.float64)
-        npar, nq = len(self.param_names), len(self.q_idx)
-        params = {**self.fixed, **{name: y[i] for i, name in enumerate(self.param_names)}}
-        system = self.system if self.system is not None else self.build(params)
-        q0, v0 = self.q0, self.v0
-        if self.follow_ic:
-            q0, v0 = (jnp.asarray(a, jnp.float64).reshape(-1) for a in self.build.initial(params))
-        if nq:
-            q0 = q0.at[jnp.asarray(self.q_idx)].set(y[npar:npar + nq])
-        if self.v_idx:
-            v0 = v0.at[jnp.asarray(self.v_idx)].set(y[npar + nq:])
-        return system, q0, v0
-
-    def outputs(self, y):
-        """The reported quantities at `y`: the parameters, the estimated components of q0 and
-        those of the projected v0."""
-        system, q0, v0 = self.unpack(y)
-        npar, nq = len(self.param_names), len(self.q_idx)
-        out = [jnp.asarray(y[:npar + nq], jnp.float64)]
-        if self.v_idx:
-            vp = project_velocity(system.without_metadata(), _point(system, q0, self.R0), v0)
-            out.append(vp[jnp.asarray(self.v_idx)])
-        return jnp.concatenate(out)
-
-    def initial_velocity(self, y):
-        """The full projected v0 at `y`."""
-        system, q0, v0 = self.unpack(y)
-        return project_velocity(system.without_metadata(), _point(system, q0, self.R0), v0)
-
-    def predict(self, y):
-        """The model's values of the observed variables at the observation times, (T, k)."""
-        system, q0, v0 = self.unpack(y)
-        kw = {} if self.controls is None else {"controls": self.controls}
-        sol = simulate(system, self.method, q0, v0, R0=self.R0, h=self.h, steps=self.steps,
-                       saveat=SaveAt(ts=self.ts), t0=self.t0, project_v0=True, **kw)
-        return jnp.stack([(sol.q if kind == "q" else sol.v)[:, i] for kind, i in self.columns], axis=1)
-
-    def residuals(self, y, data):
-        """The weighted residuals at the unscaled `y`, flattened (zero at missing values)."""
-        values, weights = data
-        return ((self.predict(y) - values) * weights).reshape(-1)
-
-    def __call__(self, z, data):
-        return self.residuals(self.scale * z, data)
-
-
-@jit
-def _linearization(problem: _Problem, y, data):
-    """The weighted residuals at `y` and their Jacobian (compiled once per problem structure):
-    for solvers whose final state does not hold them."""
-    jac, r = jax.jacfwd(lambda u: (problem.residuals(u, data),) * 2, has_aux=True)(y)
-    return r, jac
-
-
-@jit
-def _as_matrix(operator):
-    """A lineax operator's matrix (the solver's Jacobian at its final point)."""
-    return operator.as_matrix()
-
-
-@jit
-def _reported(problem: _Problem, y):
-    """The reported quantities at `y`, their derivative, and the projected v0."""
-    return problem.outputs(y), jax.jacfwd(problem.outputs)(y), problem.initial_velocity(y)
-
-
-def _final_linearization(out, problem: _Problem, y, data):
-    """The weighted residuals and their Jacobian (in the unscaled quantities) at the solver's
-    final point: from the Gauss–Newton family's final state when it holds them (its last
-    accepted point is the returned one), else computed anew."""
-    import lineax as lx
-
-    info = getattr(out.state, "f_info", None)
-    jac = getattr(info, "jac", None)
-    if isinstance(jac, lx.AbstractLinearOperator) and getattr(info, "residual", None) is not None:
-        return np.asarray(info.residual), np.asarray(_as_matrix(jac)) / np.asarray(problem.scale)[None, :]
-    return tuple(np.asarray(a) for a in _linearization(problem, jnp.asarray(y), data))
 
 
 #: The progress report of the fit running now (a callable `(iteration, chi2)`, or None): the
@@ -227,6 +138,7 @@ def fit(
     R0=None,
     sigma=None,
     controls=None,
+    bounds=None,
     solver=None,
     max_steps: int = MAX_STEPS,
     rtol: float = 1e-10,
@@ -276,9 +188,15 @@ def fit(
             `sigma`, the covariance is $(J^TJ)^{-1}$ and the reduced chi² tests the fit; without,
             the residuals are unweighted and the covariance is scaled by the reduced chi².
         controls: passed on to :func:`gnipy.simulate` (`controls=`) when given.
+        bounds: bounds on the estimated quantities, name -> `(lower, upper)` (None or ±inf for an
+            open side) or None to lift a default bound (:mod:`gnipy.control.bounds`). Default: a
+            zoo model's masses, moments of inertia and lengths are positive (its
+            :attr:`~gnipy.registry.ModelSpec.positive`). Every trial point of the solver is inside
+            them; an estimate that ends at a bound is flagged (`at_bound`, `success` False).
         solver: an optimistix least-squares solver (default
             `optimistix.LevenbergMarquardt(rtol, atol)`). The estimated quantities are scaled
-            by their initial guesses (by 1 where a guess is 0) before the solver sees them.
+            by their initial guesses (by 1 where a guess is 0) and mapped onto their bounds before
+            the solver sees them.
         max_steps: the most solver iterations.
         rtol, atol: the default solver's tolerances (on the scaled quantities and on the
             residuals).
@@ -289,18 +207,24 @@ def fit(
             the last observation): `"auto"` (the default) the smaller of 8 GiB and half the
             physical memory, a number of bytes, or None for no bound.
 
+    The fit simulates once more at h/2 at the estimate, to estimate the discretization error that
+    the identifiability rule weighs (module docstring).
+
     Returns:
         A :class:`FitResult`: the estimates, standard errors, covariance and correlation, chi²
-        and degrees of freedom, the fitted Solution, and whether the solver converged
-        (`success`, `message`, `iterations`; a fit that did not converge is returned, not
+        and degrees of freedom, which quantities the data determine (and which combinations,
+        when they do not determine the quantities one by one), the fitted Solution, and whether
+        the fit succeeded (`success`, `message`, `iterations`; a fit that did not converge, that
+        ends at a bound, or whose system is not valid at the estimate is returned flagged, not
         raised, so that it can be inspected).
 
     Raises:
         InputError: bad arguments (the message names the argument): unknown parameters or
             variables, observation times off the step grid, shapes that do not match, too few
             observations, a model that cannot be built from traced parameter values, values that
-            are not numbers (a string or a boolean is not one), or a fit estimated beyond
-            `max_bytes` (naming `observations/h`).
+            are not numbers (a string or a boolean is not one), bounds that are not pairs of
+            numbers or do not hold the initial guesses, or a fit estimated beyond `max_bytes`
+            (naming `observations/h`).
         SolverFailure: a simulation failed during the fit (a step did not converge at some
             trial values of the estimated quantities; `step`, `time` and `residual` are then
             unknown: -1 and NaN). Better initial guesses or a smaller `h` help.
@@ -316,28 +240,38 @@ def fit(
     check_fit_method(method)
     model = fit_model(system, param_names, guesses, fixed, q0, v0)
     begin = fit_start(model, q0, v0, R0, initial, param_names, guesses)
+    limits = fit_bounds(bounds, model.positive, begin.names, begin.y0)
     data = fit_data(observations, model.system, t0, h, sigma, len(begin.names), bound)
 
-    # the least-squares problem in the scaled quantities, solved
-    scale = np.where(begin.y0 != 0, np.abs(begin.y0), 1.0)
-    problem = _problem(model, begin, data, fixed, param_names, scale, controls, method, h, t0)
+    # the least-squares problem in the solver's internal variables, solved
+    problem = _problem(model, begin, data, fixed, param_names, limits, controls, method, h, t0)
     solver = _least_squares_solver(solver, rtol, atol, reporter)
-    out, z = _solve(problem, solver, begin.y0 / scale, data.arrays, max_steps, reporter, begin.names)
-    y = z * scale
+    out, z = _solve(problem, solver, limits.internal(begin.y0), data.arrays, max_steps, reporter, begin.names)
+    y = np.asarray(problem.quantities(jnp.asarray(z)))
     iterations, success, solver_message = _solver_outcome(out)
 
     # the linearization at the estimate: residuals, Jacobian, the reported quantities
-    r, J = _linearization_at_estimate(out, problem, y, data.arrays)
-    outputs, phi, v0p = (np.asarray(a) for a in _reported(problem, jnp.asarray(y)))
+    r, J = _linearization_at_estimate(out, problem, y, limits.derivative(z), data.arrays)
+    outputs, phi, v0p = (np.asarray(a) for a in reported(problem, jnp.asarray(y)))
     chi2 = float(np.sum(r**2))
-    stats = uncertainties(J, phi, scale, chi2, data.n_obs, data.sigma_known)
-    success, notes = fit_notes(success, solver_message, stats, begin.names)
 
-    # the fitted run: every node, at the estimate
-    q0_fit, solution = _fitted_run(problem, model, begin, y, fixed, v0p, outputs)
-    residuals = observed_residuals(solution, data.columns, data.steps, data.observations, data.mask)
-    if not solution.success:
-        notes.append(f"the fitted run failed: {solution.message}")
+    # the fitted run (every node, at the estimate) and its discretization error
+    q0_fit, solution, invalid = _fitted_run(problem, model, begin, y, fixed, v0p, outputs)
+    scale = np.where(y != 0, np.abs(y), 1.0)
+    d, discrete_part = (float("nan"), None) if solution is None else discretization(
+        problem, y, r, J * scale[None, :], scale, solution.method, data.arrays)
+    stats = uncertainties(J, phi, scale, chi2, data.n_obs, data.sigma_known, discrete_part=discrete_part,
+                          names=begin.names, values=outputs)
+    at_bound = limits.at_bound(y, gauss_newton_step(r, J, scale))
+    success, notes = fit_notes(success, solver_message, stats, begin.names, at_bound, d)
+    if solution is None:
+        success = False
+        notes.append(invalid)
+        residuals = np.full(data.observations.values.shape, np.nan)
+    else:
+        residuals = observed_residuals(solution, data.columns, data.steps, data.observations, data.mask)
+        if not solution.success:
+            notes.append(f"the fitted run failed: {solution.message}")
 
     return FitResult(
         names=begin.names, values=outputs, stderr=stats.stderr, covariance=stats.covariance,
@@ -346,25 +280,28 @@ def fit(
         observations=data.observations, residuals=residuals, raw=y, jacobian=J, chi2=chi2, n_obs=data.n_obs,
         rank=stats.rank, dof=stats.dof, reduced_chi2=stats.reduced_chi2, sigma_known=data.sigma_known,
         success=bool(success), message="; ".join(notes), iterations=iterations, initial_guess=begin.y0,
-        method=solution.method, h=h, t0=t0, wall_time=time.perf_counter() - start, _problem=problem,
-        _data=data.arrays,
+        method=solution.method if solution is not None else _method_name(method, model),
+        h=h, t0=t0, wall_time=time.perf_counter() - start, determined=stats.determined,
+        threshold=stats.threshold, discretization=d, combinations=stats.combinations, bounds=limits.bounded,
+        at_bound=at_bound, _problem=problem, _data=data.arrays,
     )
 
 
 # ----------------------------------------------------------------------------------------------
 # The steps of fit
 # ----------------------------------------------------------------------------------------------
-def _problem(model: FitModel, begin: FitStart, data: FitData, fixed, param_names, scale, controls, method, h,
-             t0) -> _Problem:
-    """The least-squares problem of a fit (in the quantities scaled by `scale`)."""
+def _problem(model: FitModel, begin: FitStart, data: FitData, fixed, param_names, limits: Bounds, controls,
+             method, h, t0) -> LeastSquares:
+    """The least-squares problem of a fit (in the internal variables of `limits`)."""
     ks = data.steps
-    return _Problem(
+    return LeastSquares(
         system=None if model.given is None else model.given.without_metadata(),
         fixed={k: jnp.asarray(finite_number(f"fixed: {k!r}", v), jnp.float64) for k, v in fixed.items()},
         q0=jnp.asarray(begin.q0), v0=jnp.asarray(begin.v0), R0=None if begin.R0 is None else jnp.asarray(begin.R0),
-        scale=jnp.asarray(scale), controls=controls, build=model.build, method=method, param_names=param_names,
+        lower=jnp.asarray(limits.lower), upper=jnp.asarray(limits.upper), scale=jnp.asarray(limits.scale),
+        controls=controls, build=model.build, method=method, param_names=param_names,
         q_idx=begin.q_idx, v_idx=begin.v_idx, follow_ic=begin.follow_ic, h=h, steps=ks[-1], t0=t0,
-        ts=tuple(float(t0 + k * h) for k in ks), columns=data.columns,
+        ts=tuple(float(t0 + k * h) for k in ks), columns=data.columns, kinds=limits.kinds,
     )
 
 
@@ -383,14 +320,14 @@ def _least_squares_solver(solver, rtol, atol, reporter):
 
 
 @jit
-def _least_squares(problem: _Problem, solver, z0, data, max_steps: int):
+def _least_squares(problem: LeastSquares, solver, z0, data, max_steps: int):
     """optimistix's least squares, compiled with gnipy's compiler options (gnipy.compilation.jit)."""
     import optimistix as optx
 
     return optx.least_squares(problem, solver, z0, data, max_steps=max_steps, throw=False)
 
 
-def _solve(problem: _Problem, solver, z0, data, max_steps, reporter, names):
+def _solve(problem: LeastSquares, solver, z0, data, max_steps, reporter, names):
     """`(optimistix's solution, its final point)` from the scaled guess `z0`, progress reported
     through `reporter`; InputError for a model that cannot be traced, SolverFailure for a
     simulation that failed at some trial values."""
@@ -426,10 +363,10 @@ def _solver_outcome(out) -> tuple[int, bool, str]:
     return int(out.stats["num_steps"]), success, solver_message
 
 
-def _linearization_at_estimate(out, problem: _Problem, y, data):
+def _linearization_at_estimate(out, problem: LeastSquares, y, dydz, data):
     """:func:`_final_linearization`, a failed step a SolverFailure."""
     try:
-        return _final_linearization(out, problem, y, data)
+        return final_linearization(out, problem, y, dydz, data)
     except Exception as e:
         if "step failed" not in str(e):
             raise
@@ -437,22 +374,40 @@ def _linearization_at_estimate(out, problem: _Problem, y, data):
                             residual=float("nan")) from e
 
 
-def _fitted_run(problem: _Problem, model: FitModel, begin: FitStart, y, fixed, v0p, outputs):
-    """`(q0, Solution)` of the fitted run: every node from t0 to the last observation, at the
-    estimate `y` (the system rebuilt from the estimated parameters as plain numbers, the projected
-    `v0p`); InputError when the system is not valid there."""
+def _fitted_system(problem: LeastSquares, model: FitModel, y, fixed):
+    """`(System, q0)` at the estimate `y` (the System rebuilt from the estimated parameters as
+    plain numbers)."""
     system_fit, q0_fit, _ = problem.unpack(jnp.asarray(y))
+    q0_fit = np.asarray(q0_fit)
     if model.given is None:
         param_names, build = problem.param_names, model.build
         estimated = {k: float(v) for k, v in zip(param_names, y[:len(param_names)])}
         system_fit = build({**fixed, **estimated}) if isinstance(build, ModelBuild) else build(
             {**{k: jnp.float64(v) for k, v in fixed.items()}, **{k: jnp.float64(v) for k, v in estimated.items()}})
-    q0_fit = np.asarray(q0_fit)
+    return system_fit, q0_fit
+
+
+def _fitted_run(problem: LeastSquares, model: FitModel, begin: FitStart, y, fixed, v0p, outputs):
+    """`(q0, Solution, None)` of the fitted run: every node from t0 to the last observation, at
+    the estimate `y` (the projected `v0p`); `(q0, None, why)` when the system is not valid there
+    (the fit drifted out of the model's valid region: a flagged result, not an exception)."""
     kw = {} if problem.controls is None else {"controls": problem.controls}
+    q0_fit = np.array(problem.q0)  # the estimated components from y, without building the system
+    npar = len(problem.param_names)
+    q0_fit[list(problem.q_idx)] = np.asarray(y)[npar:npar + len(problem.q_idx)]
     try:
+        system_fit, q0_fit = _fitted_system(problem, model, y, fixed)
         solution = simulate(system_fit, problem.method, q0_fit, v0p, R0=begin.R0, h=problem.h, steps=problem.steps,
                             t0=problem.t0, project_v0=True, throw=False, **kw)
     except InputError as e:
         at = ", ".join(f"{n} = {x:.6g}" for n, x in zip(begin.names, outputs))
-        raise InputError(f"params: the fitted system is not valid at the estimate ({at}): {e}") from e
-    return q0_fit, solution
+        return q0_fit, None, (f"the fitted system is not valid at the estimate ({at}): {e}; bound the quantities "
+                              "(bounds=) to keep the fit inside the model's valid region")
+    return q0_fit, solution, None
+
+
+def _method_name(method, model: FitModel) -> str:
+    """The method's name for a result without a fitted run."""
+    if isinstance(method, str):
+        return method
+    return getattr(method, "name", None) or "the default method"

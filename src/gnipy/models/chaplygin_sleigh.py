@@ -140,5 +140,6 @@ MODEL = register(
         default_ic=_default_ic,
         invariants={"energy": _energy},
         notes=__doc__,
+        positive=('m', 'I'),
     )
 )

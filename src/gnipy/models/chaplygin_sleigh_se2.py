@@ -98,5 +98,6 @@ MODEL = register(
         exact=exact,
         invariants={"energy": _energy},
         notes=__doc__,
+        positive=('m', 'I'),
     )
 )

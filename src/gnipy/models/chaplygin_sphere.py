@@ -177,5 +177,6 @@ MODEL = register(
         default_ic=_default_ic,
         invariants={"jacobi": _jacobi, "M_gamma": _M_gamma, "M_squared": _M_squared},
         notes=__doc__,
+        positive=('m', 'r', 'I1', 'I2', 'I3'),
     )
 )

@@ -145,5 +145,6 @@ MODEL = register(
         default_ic=_default_ic,
         invariants={"jacobi": _jacobi},
         notes=__doc__,
+        positive=('m', 'r', 'I1', 'I2', 'I3'),
     )
 )

@@ -182,5 +182,6 @@ MODEL = register(
         default_ic=_default_ic,
         invariants={"energy": energy, "wheel_heading": wheel_heading},
         notes=__doc__,
+        positive=('m_c', 'I_c', 'b', 'r', 'm_w', 'I_w', 'I_m'),
     )
 )

@@ -118,5 +118,6 @@ MODEL = register(
         exact=exact,
         invariants={"energy": _energy, "turning_rate": _turning_rate},
         notes=__doc__,
+        positive=('m', 'J'),
     )
 )

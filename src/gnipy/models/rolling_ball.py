@@ -233,5 +233,6 @@ MODEL = register(
         exact=exact,
         invariants={"jacobi": jacobi_integral, "spin": _spin},
         notes=__doc__,
+        positive=('m', 'r', 'I1', 'I2', 'I3'),
     )
 )

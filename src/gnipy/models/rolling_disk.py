@@ -164,5 +164,6 @@ MODEL = register(
         exact=exact,
         invariants={"energy": energy},
         notes=__doc__,
+        positive=('m', 'R', 'A', 'C'),
     )
 )

@@ -145,5 +145,6 @@ MODEL = register(
         exact=exact,
         invariants={"jacobi": _jacobi, "speed_squared": _speed_squared, "spin": _spin},
         notes=__doc__,
+        positive=('m', 'r', 'I'),
     )
 )

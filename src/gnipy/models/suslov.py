@@ -183,5 +183,6 @@ MODEL = register(
         exact=exact,
         invariants={"energy": _energy},
         notes=__doc__,
+        positive=('I11', 'I22', 'I33'),
     )
 )

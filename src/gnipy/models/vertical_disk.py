@@ -122,5 +122,6 @@ MODEL = register(
         exact=exact,
         invariants={"energy": _energy, "heading_rate": _heading_rate, "rolling_rate": _rolling_rate},
         notes=__doc__,
+        positive=('m', 'r', 'I_flip', 'I_rot'),
     )
 )

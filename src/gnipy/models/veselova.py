@@ -85,5 +85,6 @@ MODEL = register(
         v0=(1.0, 0.5, 0.0),
         invariants={"energy": _energy, "F": _F},
         notes=__doc__,
+        positive=('I1', 'I2', 'I3'),
     )
 )
