@@ -8,7 +8,10 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Mapping
+from typing import Any
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -18,8 +21,8 @@ from ..inputs import real_array, real_number, whole_number
 from ..simulate import MAX_TOTAL_STEPS, MIN_STEP_SIZE
 from ..system import System
 
-__all__ = ["ControlArguments", "control_arguments", "terminal_residual", "target_size", "warm_start",
-           "control_bounds", "control_reporter", "MAX_ITERATIONS"]
+__all__ = ["ControlArguments", "control_arguments", "terminal_residual", "TerminalResidual", "TargetSubset",
+           "target_size", "warm_start", "control_bounds", "control_reporter", "MAX_ITERATIONS"]
 
 
 #: The largest `max_iterations` accepted: SciPy's solvers count iterations in 32-bit integers, and an
@@ -165,21 +168,44 @@ def terminal_residual(system: System, target) -> Callable:
         else:
             raise InputError(f"target: unknown name {name!r}; expected one of {', '.join([*coords, *vels])}"
                              + (", R" if system.group is not None else ""))
-    q_idx, q_val = np.asarray(q_idx, int), np.asarray(q_val)
-    v_idx, v_val = np.asarray(v_idx, int), np.asarray(v_val)
-    space = system.space
+    return TerminalResidual(space=system.space, group=system.group, q_idx=tuple(q_idx),
+                            q_val=jnp.asarray(q_val, jnp.float64), v_idx=tuple(v_idx),
+                            v_val=jnp.asarray(v_val, jnp.float64),
+                            R_target=None if R_target is None else jnp.asarray(R_target, jnp.float64))
 
-    def g(b, v):
+
+class TerminalResidual(eqx.Module):
+    """$g(b, v)$ of a target given by names (:func:`terminal_residual`): the targeted coordinates
+    and velocities minus their values, then $\\log(R_{target}^{-1}R)$. A pytree whose values are
+    arrays: targets of one shape share one compiled program whatever their values."""
+
+    space: Any
+    group: Any
+    q_idx: tuple = eqx.field(static=True)
+    q_val: jax.Array
+    v_idx: tuple = eqx.field(static=True)
+    v_val: jax.Array
+    R_target: Any
+
+    def __call__(self, b, v):
         parts = []
-        if len(q_idx):
-            parts.append(space.coordinates(b)[q_idx] - q_val)
-        if len(v_idx):
-            parts.append(v[v_idx] - v_val)
-        if R_target is not None:
-            parts.append(system.group.log(jnp.asarray(R_target).T @ space.orientation(b)))
+        if self.q_idx:
+            parts.append(self.space.coordinates(b)[jnp.asarray(self.q_idx)] - self.q_val)
+        if self.v_idx:
+            parts.append(v[jnp.asarray(self.v_idx)] - self.v_val)
+        if self.R_target is not None:
+            parts.append(self.group.log(self.R_target.T @ self.space.orientation(b)))
         return jnp.concatenate(parts)
 
-    return g
+
+class TargetSubset(eqx.Module):
+    """The components `keep` of a terminal residual `g` (a redundant target's independent ones)."""
+
+    g: Any
+    keep: tuple = eqx.field(static=True)
+
+    def __call__(self, b, v):
+        return self.g(b, v)[jnp.asarray(self.keep)]
 
 
 def _finite(arg, name, value) -> float:

@@ -51,9 +51,12 @@ nonlinear equality constraints with bounds.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import time
 from collections.abc import Callable
+from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -66,6 +69,7 @@ from ..system import System
 from .control_arguments import (
     MAX_ITERATIONS,
     ControlArguments,
+    TargetSubset,
     control_arguments,
     target_size,
     terminal_residual,
@@ -184,7 +188,7 @@ def solve_optimal_control(
     U0 = np.clip(warm_start(controls0, a.K, a.m), a.lo, a.hi)
     if project_v0:
         _, v0 = system.check(q0, v0, R0=R0, project_v0=True)
-    single = _SingleShooting(system, method, g, q0, v0, R0, a, running_cost)
+    single = _SingleShooting.make(system, method, g, q0, v0, R0, a, running_cost)
     name, n_target = single.check(U0, a.K * a.m)
     # a redundant target (components that the others fix through the dynamics or the constraints, e.g.
     # "at rest" as every velocity of a constrained system) makes the SQP's constraint Jacobian singular
@@ -194,17 +198,18 @@ def solve_optimal_control(
     full_g, dropped = g, _redundant_components(problem, U0, a)
     if dropped:  # rebuilt (and compiled again) only then: the probe uses the functions the SQP uses
         keep = np.setdiff1d(np.arange(n_target), dropped)
-        single = _SingleShooting(system, method, lambda b, v: full_g(b, v)[keep], q0, v0, R0, a, running_cost)
+        single = _SingleShooting.make(system, method, TargetSubset(full_g, tuple(int(k) for k in keep)), q0, v0, R0, a,
+                                      running_cost)
         n_target = keep.size
         problem = _sqp_problem(single, a, U0, running_cost, n_target)
     out, iterations, optima = _multistart(problem, a, starts)
     U = out.x.reshape(a.K, a.m)
-    solution = single.run(U)
+    solution = single.run(U, concrete=True)
     rank = target_rank(out.jac)
     names = _component_names(system, target, len(dropped) + n_target)
     redundant = tuple(names[k] for k in dropped)
     if dropped:  # the whole target, at the end of the run: what success means
-        single.g = full_g
+        single = dataclasses.replace(single, g=full_g)
         miss = float(np.max(np.abs(np.asarray(full_g(_final_point(system, solution), solution.v[-1])))))
         out = dataclasses.replace(out, miss=miss, ok=out.ok and miss <= a.target_tol)
         message = (out.message(a.target_tol, a.kkt_tol) + f"; redundant target: {', '.join(redundant)} "
@@ -298,27 +303,49 @@ def _component_names(system, target, d: int) -> list[str]:
     return names
 
 
-class _SingleShooting:
+class _SingleShooting(eqx.Module):
     """The functions of single shooting: the unknowns are the controls (K, m); the states are
-    eliminated by the steps themselves (a run from the start)."""
+    eliminated by the steps themselves (a run from the start). A pytree whose numbers are arrays:
+    problems of one structure (system, method, target's shape, K, m) share the compiled programs
+    whatever their numbers (start, step, weights, target values, warm start)."""
 
-    def __init__(self, system, method, g, q0, v0, R0, a: ControlArguments, running_cost):
-        self.system, self.method, self.g, self.q0, self.v0, self.R0 = system, method, g, q0, v0, R0
-        self.h, self.K, self.t0 = a.h, a.K, a.t0
-        self.effort, self.smoothness, self.running_cost = a.effort, a.smoothness, running_cost
-        self.ts = a.t0 + a.h * np.arange(a.K)
+    system: Any
+    method: Any
+    g: Any
+    q0: Any
+    v0: Any
+    R0: Any
+    h: jax.Array
+    t0: jax.Array
+    effort: jax.Array
+    smoothness: jax.Array
+    ts: jax.Array
+    K: int = eqx.field(static=True)
+    m: int = eqx.field(static=True)
+    smooth: bool = eqx.field(static=True)
+    running_cost: Any = eqx.field(static=True)
 
-    def run(self, U):
-        """The run driven by the controls `U` (every node)."""
-        return simulate(self.system, self.method, self.q0, self.v0, R0=self.R0, h=self.h, steps=self.K, controls=U,
-                        t0=self.t0)
+    @classmethod
+    def make(cls, system, method, g, q0, v0, R0, a: ControlArguments, running_cost) -> "_SingleShooting":
+        """The single-shooting functions of a problem."""
+        f64 = functools.partial(jnp.asarray, dtype=jnp.float64)
+        return cls(system=system, method=method, g=g, q0=f64(q0), v0=f64(v0), R0=None if R0 is None else f64(R0),
+                   h=f64(a.h), t0=f64(a.t0), effort=f64(a.effort), smoothness=f64(a.smoothness),
+                   ts=f64(a.t0 + a.h * np.arange(a.K)), K=int(a.K), m=int(a.m), smooth=bool(a.smoothness),
+                   running_cost=running_cost)
+
+    def run(self, U, concrete: bool = False):
+        """The run driven by the controls `U` (every node); `concrete`: outside a compiled program
+        (the step and start time as numbers, as a run the user makes)."""
+        h, t0 = (float(self.h), float(self.t0)) if concrete else (self.h, self.t0)
+        return simulate(self.system, self.method, self.q0, self.v0, R0=self.R0, h=h, steps=self.K, controls=U, t0=t0)
 
     def check(self, U0, controls: int) -> tuple[str, int]:
         """`(the method's name, the number of the target's components)`: the problem checked once,
         eagerly, by a run from the warm start `U0`: the start, the method, the target's shape (clear
         errors before anything is compiled; no more components than `controls`)."""
-        first = simulate(self.system, self.method, self.q0, self.v0, R0=self.R0, h=self.h, steps=self.K, controls=U0,
-                         t0=self.t0, saveat=SaveAt(t1=True))
+        first = simulate(self.system, self.method, self.q0, self.v0, R0=self.R0, h=float(self.h), steps=self.K,
+                         controls=U0, t0=float(self.t0), saveat=SaveAt(t1=True))
         g0 = np.asarray(self.g(_final_point(self.system, first), first.v[-1]))
         if g0.ndim != 1 or g0.size == 0:
             raise InputError(f"target: the residual g(b, v) must be a non-empty vector, got shape {g0.shape}")
@@ -329,7 +356,7 @@ class _SingleShooting:
     def effort_cost(self, U):
         """The effort and smoothness terms of the cost."""
         J = 0.5 * self.effort * self.h * jnp.sum(U**2)
-        if self.smoothness:
+        if self.smooth:
             J = J + 0.5 * self.smoothness / self.h * jnp.sum(jnp.diff(U, axis=0) ** 2)
         return J
 
@@ -339,7 +366,7 @@ class _SingleShooting:
         if self.running_cost is not None:
             sol = self.run(U)
             K = self.K
-            J = J + self.h * jnp.sum(jax.vmap(self.running_cost)(sol.q[:K], sol.v[:K], U, jnp.asarray(self.ts)))
+            J = J + self.h * jnp.sum(jax.vmap(self.running_cost)(sol.q[:K], sol.v[:K], U, self.ts))
         return J
 
     def constraint(self, U):
@@ -353,11 +380,24 @@ class _SingleShooting:
         from ..errors import SolverFailure
 
         try:
-            ref = simulate(self.system, "reference", self.q0, self.v0, R0=self.R0, h=self.h, steps=self.K, controls=U,
-                           t0=self.t0, saveat=SaveAt(t1=True))
+            ref = simulate(self.system, "reference", self.q0, self.v0, R0=self.R0, h=float(self.h), steps=self.K,
+                           controls=U, t0=float(self.t0), saveat=SaveAt(t1=True))
             return float(np.max(np.abs(np.asarray(self.g(_final_point(self.system, ref), ref.v[-1])))))
         except SolverFailure:
             return float("inf")
+
+
+class _Controls(eqx.Module):
+    """Single shooting as a function of the flattened controls (K·m,)."""
+
+    single: _SingleShooting
+    shape: tuple = eqx.field(static=True)
+
+    def cost(self, u):
+        return self.single.cost(u.reshape(self.shape))
+
+    def constraints(self, u):
+        return self.single.constraint(u.reshape(self.shape))
 
 
 def _sqp_problem(single: _SingleShooting, a: ControlArguments, U0, running_cost, n_target: int) -> SQPProblem:
@@ -366,18 +406,17 @@ def _sqp_problem(single: _SingleShooting, a: ControlArguments, U0, running_cost,
     shape = (a.K, a.m)
     # the single-shooting functions of the controls: the polish, the KKT check and (one segment)
     # the SQP itself
-    controls = Functions.compiled(lambda u: single.cost(u.reshape(shape)),
-                                  lambda u: single.constraint(u.reshape(shape)))
+    controls = Functions.of(_Controls(single, shape))
     lo_x, hi_x = np.tile(a.lo, a.K), np.tile(a.hi, a.K)
     if a.segments == 1:
         x0, x_lo, x_hi, unknowns = U0.ravel(), np.tile(a.lo, a.K), np.tile(a.hi, a.K), controls
     else:
         shooting = _MultipleShooting(single.system, single.method, single.g, single.q0, single.v0, single.R0, a.h, a.K,
-                                     a.m, a.t0, a.segments, U0, running_cost, single.effort_cost, single.ts)
+                                     a.m, a.t0, a.segments, U0, running_cost, single.effort_cost, np.asarray(single.ts))
         x0 = np.concatenate([U0.ravel(), shooting.s0])
         x_lo = np.concatenate([lo_x, np.full(shooting.s0.size, -np.inf)])
         x_hi = np.concatenate([hi_x, np.full(shooting.s0.size, np.inf)])
-        unknowns = Functions.compiled(shooting.cost, shooting.constraints)
+        unknowns = Functions.of(shooting)  # compiled per shooting object (not a pytree)
     # SLSQP starts its quasi-Newton Hessian at the identity; the effort's Hessian is h w I, so the
     # cost is divided by h w (its first steps are otherwise 1/(h w) too long)
     scale = 1.0 / (a.h * a.effort) if a.effort > 0 else 1.0 / a.h

@@ -10,9 +10,10 @@ import dataclasses
 from collections.abc import Callable
 
 import jax
+import jax.numpy as jnp
 import numpy as np
 
-from ..compilation import compiler_options
+from ..compilation import jit
 
 __all__ = ["Functions", "SQPProblem", "StageResult", "solve_sqp"]
 
@@ -28,16 +29,55 @@ class Functions:
     constraints_jacobian: Callable
 
     @classmethod
-    def compiled(cls, cost: Callable, constraints: Callable) -> "Functions":
-        """The functions of `cost(x)` and `constraints(x)`, each compiled by `jax.jit` with gnipy's
-        compiler options (:func:`gnipy.compilation.compiler_options`; measured on the sleigh-steering
-        problem: XLA's compile time 6.3 s -> 4.2 s, the same optimum to the last digit)."""
-        options = compiler_options()
+    def of(cls, problem) -> "Functions":
+        """The functions of `problem.cost(x)` and `problem.constraints(x)`: two compiled programs,
+        the cost with its gradient and the constraints with their Jacobian, each computed once per
+        point (SciPy asks for a value and then its derivative at the same point). The programs are
+        module-level and take `problem` as an argument: a problem that is a pytree (an equinox
+        Module whose numbers are arrays) compiles once per structure, and every solve, warm start
+        and start of a multistart of that structure reuses the programs (gnipy.compilation.jit:
+        gnipy's compiler options; measured on the sleigh-steering problem: XLA's compile time
+        6.3 s -> 4.2 s with them, the same optimum to the last digit)."""
+        cost = _AtPoint(lambda x: _cost_and_gradient(problem, x))
+        constraints = _AtPoint(lambda x: _constraints_and_jacobian(problem, x))
+        return cls(cost=cost.first, cost_gradient=cost.second, constraints=constraints.first,
+                   constraints_jacobian=constraints.second)
 
-        def compiled(f):
-            return jax.jit(f, compiler_options=options)
 
-        return cls(compiled(cost), compiled(jax.grad(cost)), compiled(constraints), compiled(jax.jacrev(constraints)))
+class _AtPoint:
+    """A pair of arrays computed together at a point and kept for the last point asked."""
+
+    def __init__(self, fn):
+        self.fn, self.key, self.value = fn, None, None
+
+    def _at(self, x):
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        key = x.tobytes()
+        if key != self.key:
+            a, b = self.fn(jnp.asarray(x))
+            self.key, self.value = key, (np.asarray(a), np.asarray(b))
+        return self.value
+
+    def first(self, x):
+        return self._at(x)[0]
+
+    def second(self, x):
+        return self._at(x)[1]
+
+
+@jit
+def _cost_and_gradient(problem, x):
+    """The cost and its gradient at `x` (compiled once per problem structure)."""
+    return jax.value_and_grad(problem.cost)(x)
+
+
+@jit
+def _constraints_and_jacobian(problem, x):
+    """The constraints and their Jacobian at `x`, by reverse mode: one pass through the steps and
+    one adjoint per constraint (compiled once per problem structure)."""
+    g, pullback = jax.vjp(problem.constraints, x)
+    (J,) = jax.vmap(pullback)(jnp.eye(g.size, dtype=g.dtype))
+    return g, J
 
 
 @dataclasses.dataclass(frozen=True)
@@ -144,7 +184,6 @@ def solve_sqp(problem: SQPProblem, *, max_iterations: int, target_tol: float, kk
 
     res = _slsqp(objective, constraint_fns, problem.x0, x_lo, x_hi, max_iterations, counter)
     out = _finish(problem, res, "SLSQP", target_tol, kkt_tol)
-    iterations = int(res.nit)
     if not out.ok:
         # SLSQP's active set can stall (measured: the sleigh at h = 0.1 with |tau| <= 1.5, all 40
         # controls at a bound and a miss of 0.9); an interior-point method (trust-constr) from the
@@ -156,10 +195,11 @@ def solve_sqp(problem: SQPProblem, *, max_iterations: int, target_tol: float, kk
         res = _slsqp(objective, constraint_fns, np.clip(first.x, x_lo, x_hi), x_lo, x_hi, max_iterations, counter)
         retry = _finish(problem, res, f"SLSQP failed ({out.res.message}); trust-constr ({first.nit} iterations), "
                         "then SLSQP", target_tol, kkt_tol)
-        iterations += int(first.nit) + int(res.nit)
         if (retry.ok, -retry.kkt - retry.miss) > (out.ok, -out.kkt - out.miss):
             out = retry
-    return out, iterations
+    # the iterations as reported (SciPy's callback, once per iteration of each stage): trust-constr's
+    # own count (`nit`) can exceed its callbacks, and the progress report must count what it shows
+    return out, counter.count
 
 
 def _finish(problem: SQPProblem, res, stages: str, target_tol: float, kkt_tol: float) -> StageResult:
