@@ -55,6 +55,10 @@ What is measured (all gnipy runs in float64, the step size is h = 0.01 unless sa
    PyDy's Cython right-hand side, SciPy's DOP853 at matched accuracy): error, time per simulated
    second, energy and front-contact drift over 100 s (issue 32, :mod:`benchmarks.bicycle`; needs
    the `[bench]` extra, and runs only when named: ``--sections bicycle``).
+11. **control** -- optimal control against CasADi + IPOPT on the same discretization: the control
+   guide's worked problems at two resolutions, gnipy cold, from a warm compilation cache and the
+   solve alone (fresh processes), CasADi's build and solve (issue 34, :mod:`benchmarks.control`;
+   needs casadi, the `[bench]` extra, and runs only when named: ``--sections control``).
 6. **GPU** -- if JAX sees a GPU, sections 1 and 2 are run on it as well (the CPU rows are always
    run on the CPU device); the subprocess sections (3, 4) run on the CPU (``JAX_PLATFORMS=cpu``).
 
@@ -129,10 +133,10 @@ QUICK = Config(
     accuracy_T=(100.0,), accuracy_h=(0.01,), dop_reps=3, idle_sample_s=0.3,
 )
 
-SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy", "native", "monitor", "startup", "bicycle")
+SECTIONS = ("per-step", "batched", "compile", "memory", "accuracy", "native", "monitor", "startup", "bicycle", "control")
 #: the sections a plain `python -m benchmarks` runs: all but the bicycle's, which needs the [bench]
 #: extra (PyDy, Cython) and about 5 minutes (its compilations alone take 2): ask for it by name
-DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s != "bicycle")
+DEFAULT_SECTIONS = tuple(s for s in SECTIONS if s not in ("bicycle", "control"))
 
 #: (case, method) of section 1; the case names are those of benchmarks.numpy_gni.
 PER_STEP_CASES = (
@@ -1094,6 +1098,9 @@ def targets(results: dict) -> list[list[str]]:
     from benchmarks.bicycle import bicycle_targets
 
     rows += bicycle_targets(results, _how_far, g)
+    from benchmarks.control import control_targets
+
+    rows += control_targets(results, _how_far, g)
     return rows
 
 
@@ -1155,7 +1162,7 @@ def parse_args(argv):
     p.add_argument("--quick", action="store_true", help="smoke test (< 2 min): fewer steps and repetitions")
     p.add_argument("--out", default=str(REPO / "BENCHMARKS.md"), help="the Markdown report (default: %(default)s)")
     p.add_argument("--sections", default=",".join(DEFAULT_SECTIONS),
-                   help=f"comma-separated subset of {', '.join(SECTIONS)} (default: all but bicycle)")
+                   help=f"comma-separated subset of {', '.join(SECTIONS)} (default: all but bicycle and control)")
     p.add_argument("--plain", action="store_true", help="plain-text console output (no rich tables)")
     args = p.parse_args(argv)
     args.sections = [s.strip() for s in args.sections.split(",") if s.strip()]
@@ -1175,6 +1182,12 @@ def _bench_startup(cfg, rep, results, load) -> None:
     from benchmarks.startup import bench_startup
 
     bench_startup(cfg, rep, results, load)
+
+
+def _bench_control(cfg, rep, results, load) -> None:
+    from benchmarks.control import bench_control
+
+    bench_control(cfg, rep, results, load)
 
 
 def _bench_bicycle(cfg, rep, results, load) -> None:
@@ -1224,6 +1237,7 @@ def main(argv=None) -> int:
         "monitor": lambda load: _bench_monitor(cfg, rep, results, load),
         "startup": lambda load: _bench_startup(cfg, rep, results, load),
         "bicycle": lambda load: _bench_bicycle(cfg, rep, results, load),
+        "control": lambda load: _bench_control(cfg, rep, results, load),
     }
     for key in SECTIONS:
         if key not in args.sections:

@@ -278,7 +278,7 @@ def uncertainties(J, phi, scale, chi2: float, n_obs: int, sigma_known: bool, dis
     identifiable = exact & (spread < 1.0)
     cov = s2 * phis @ pinv @ phis.T
     undetermined = np.concatenate([Vr[:, ~keep].T, Vt[rank:]], axis=0)
-    combos = _combinations(phi, scale, undetermined, cov, identifiable, tuple(names), values)
+    combos = _combinations(phi, scale, undetermined, cov, identifiable, tuple(names), values) if finite else ()
     stderr, corr = _undetermined(cov, identifiable)
     return Uncertainties(stderr=stderr, covariance=cov, correlation=corr, identifiable=identifiable, rank=rank,
                          determined=int(keep.sum()), dof=dof, reduced_chi2=reduced, threshold=noise,
@@ -294,7 +294,7 @@ def _combinations(phi, scale, undetermined_vt, cov, identifiable, names, values)
     if bad.size < 2 or not names or not np.all(np.isfinite(cov)):
         return ()
     W = (phi @ (scale[:, None] * undetermined_vt.T))[bad]  # (|B|, undetermined)
-    if W.shape[1] == 0:
+    if W.shape[1] == 0 or not np.all(np.isfinite(W)):
         return ()
     _, sw, vt = np.linalg.svd(W.T, full_matrices=True)
     r = int(np.sum(sw > 1e-8 * max(sw[0], 1e-300))) if sw.size else 0

@@ -344,8 +344,8 @@ class _SingleShooting(eqx.Module):
         """`(the method's name, the number of the target's components)`: the problem checked once,
         eagerly, by a run from the warm start `U0`: the start, the method, the target's shape (clear
         errors before anything is compiled; no more components than `controls`)."""
-        first = simulate(self.system, self.method, self.q0, self.v0, R0=self.R0, h=float(self.h), steps=self.K,
-                         controls=U0, t0=float(self.t0), saveat=SaveAt(t1=True))
+        # the same run as the result's (every node): one compiled program for both
+        first = self.run(U0, concrete=True)
         g0 = np.asarray(self.g(_final_point(self.system, first), first.v[-1]))
         if g0.ndim != 1 or g0.size == 0:
             raise InputError(f"target: the residual g(b, v) must be a non-empty vector, got shape {g0.shape}")
@@ -411,12 +411,12 @@ def _sqp_problem(single: _SingleShooting, a: ControlArguments, U0, running_cost,
     if a.segments == 1:
         x0, x_lo, x_hi, unknowns = U0.ravel(), np.tile(a.lo, a.K), np.tile(a.hi, a.K), controls
     else:
-        shooting = _MultipleShooting(single.system, single.method, single.g, single.q0, single.v0, single.R0, a.h, a.K,
-                                     a.m, a.t0, a.segments, U0, running_cost, single.effort_cost, np.asarray(single.ts))
-        x0 = np.concatenate([U0.ravel(), shooting.s0])
-        x_lo = np.concatenate([lo_x, np.full(shooting.s0.size, -np.inf)])
-        x_hi = np.concatenate([hi_x, np.full(shooting.s0.size, np.inf)])
-        unknowns = Functions.of(shooting)  # compiled per shooting object (not a pytree)
+        shooting = _MultipleShooting.make(single, a.segments, U0)
+        s0 = np.asarray(shooting.s0)
+        x0 = np.concatenate([U0.ravel(), s0])
+        x_lo = np.concatenate([lo_x, np.full(s0.size, -np.inf)])
+        x_hi = np.concatenate([hi_x, np.full(s0.size, np.inf)])
+        unknowns = Functions.of(shooting)
     # SLSQP starts its quasi-Newton Hessian at the identity; the effort's Hessian is h w I, so the
     # cost is divided by h w (its first steps are otherwise 1/(h w) too long)
     scale = 1.0 / (a.h * a.effort) if a.effort > 0 else 1.0 / a.h
@@ -426,84 +426,96 @@ def _sqp_problem(single: _SingleShooting, a: ControlArguments, U0, running_cost,
                       hessian=scale * a.h * a.effort if effort_only else None)
 
 
-class _MultipleShooting:
+class _MultipleShooting(eqx.Module):
     """The functions of multiple shooting: the unknowns are the controls and, for segments 2..S,
     the method's state at the segment's start, $s_j = (x_j, \\eta_j, p^+_j)$ with the orientation
     $R_j = \\bar R_j\\exp(\\hat\\eta_j)$ about the warm start's $\\bar R_j$; the constraints are the
     defects at the boundaries (the end of segment j − 1 minus $s_j$; $\\log(R_j^{-1}R_{end})$ for
-    the orientation) and the target at the end of the last segment."""
+    the orientation) and the target at the end of the last segment. A pytree like
+    :class:`_SingleShooting`: compiled once per structure."""
 
-    def __init__(self, system, method, g, q0, v0, R0, h, K, m, t0, S, U0, running_cost, effort_cost, ts):
+    single: _SingleShooting
+    Rbar: Any  # the warm start's orientations at the boundaries, or None
+    s0: jax.Array  # the warm start's states at the boundaries (the unknowns' first guess)
+    cuts: tuple = eqx.field(static=True)
+    n: int = eqx.field(static=True)
+    N: int = eqx.field(static=True)
+    d: int = eqx.field(static=True)
+
+    @classmethod
+    def make(cls, single: _SingleShooting, S: int, U0) -> "_MultipleShooting":
+        """The multiple-shooting functions of `single`'s problem with S segments, about the run
+        of the warm start `U0`."""
         from ..integrators.gni import GNIState
 
-        self.system, self.method, self.g, self.q0, self.v0, self.R0 = system, method, g, q0, v0, R0
-        self.h, self.K, self.m, self.t0 = h, K, m, t0
-        self.cuts = np.linspace(0, K, S + 1).round().astype(int)
-        self.running_cost, self.effort_cost, self.ts = running_cost, effort_cost, ts
+        system, K, h, t0 = single.system, single.K, float(single.h), float(single.t0)
+        cuts = tuple(int(c) for c in np.linspace(0, K, S + 1).round().astype(int))
         # the warm start's states at the boundaries: the first guesses and the orientations R̄_j
-        guess = simulate(system, method, q0, v0, R0=R0, h=h, steps=K, controls=U0, t0=t0,
-                         saveat=SaveAt(ts=t0 + h * self.cuts[1:-1], states=True))
+        guess = simulate(system, single.method, single.q0, single.v0, R0=single.R0, h=h, steps=K, controls=U0, t0=t0,
+                         saveat=SaveAt(ts=t0 + h * np.asarray(cuts[1:-1]), states=True))
         states = guess.states
         if not isinstance(states, GNIState):
             raise InputError(f"segments: multiple shooting needs a method whose state is (b, p+) (the GNI family), "
                              f"not {guess.method}")
-        self.GNIState = GNIState
         space = system.space
-        self.n, self.N = system.n, system.dim
-        self.d = 0 if system.group is None else system.group.dim
-        x = np.asarray(space.coordinates(states.b)).reshape(S - 1, self.n)
-        self.Rbar = None if system.group is None else np.asarray(space.orientation(states.b))
-        p = np.asarray(states.p_plus).reshape(S - 1, self.N)
-        self.s0 = np.concatenate([x, np.zeros((S - 1, self.d)), p], axis=1).ravel()
+        n, N = system.n, system.dim
+        d = 0 if system.group is None else system.group.dim
+        x = np.asarray(space.coordinates(states.b)).reshape(S - 1, n)
+        Rbar = None if system.group is None else jnp.asarray(space.orientation(states.b))
+        p = np.asarray(states.p_plus).reshape(S - 1, N)
+        s0 = np.concatenate([x, np.zeros((S - 1, d)), p], axis=1).ravel()
+        return cls(single=single, Rbar=Rbar, s0=jnp.asarray(s0), cuts=cuts, n=n, N=N, d=d)
 
     def _state(self, j, s):
+        from ..integrators.gni import GNIState
         from ..spaces import Point
 
         x, eta, p = s[: self.n], s[self.n : self.n + self.d], s[self.n + self.d :]
-        if self.system.group is None:
-            b = x
-        else:
-            b = Point(x, jnp.asarray(self.Rbar[j]) @ self.system.group.exp(eta))
-        return self.GNIState(b, p, jnp.zeros_like(x))
+        system = self.single.system
+        b = x if system.group is None else Point(x, self.Rbar[j] @ system.group.exp(eta))
+        return GNIState(b, p, jnp.zeros_like(x))
 
     def _runs(self, x):
-        K, m, S = self.K, self.m, len(self.cuts) - 1
+        one = self.single
+        K, m, S = one.K, one.m, len(self.cuts) - 1
         U = x[: K * m].reshape(K, m)
         svars = x[K * m :].reshape(S - 1, self.n + self.d + self.N)
-        save = SaveAt(steps=True, states=True) if self.running_cost is not None else SaveAt(t1=True, states=True)
+        save = SaveAt(steps=True, states=True) if one.running_cost is not None else SaveAt(t1=True, states=True)
         sols = []
         for j in range(S):
             k0, k1 = int(self.cuts[j]), int(self.cuts[j + 1])
-            common = dict(h=self.h, steps=k1 - k0, controls=U[k0:k1], t0=self.t0 + k0 * self.h, saveat=save)
+            common = dict(h=one.h, steps=k1 - k0, controls=U[k0:k1], t0=one.t0 + k0 * one.h, saveat=save)
             if j == 0:
-                sols.append(simulate(self.system, self.method, self.q0, self.v0, R0=self.R0, **common))
+                sols.append(simulate(one.system, one.method, one.q0, one.v0, R0=one.R0, **common))
             else:
-                sols.append(simulate(self.system, self.method, state0=self._state(j - 1, svars[j - 1]), **common))
+                sols.append(simulate(one.system, one.method, state0=self._state(j - 1, svars[j - 1]), **common))
         return U, svars, sols
 
     def constraints(self, x):
         U, svars, sols = self._runs(x)
-        space = self.system.space
+        system = self.single.system
+        space = system.space
         parts = []
         for j in range(1, len(sols)):
             end = sols[j - 1].final_state
             start = self._state(j - 1, svars[j - 1])
             parts.append(space.coordinates(end.b) - space.coordinates(start.b))
-            if self.system.group is not None:
-                parts.append(self.system.group.log(space.orientation(start.b).T @ space.orientation(end.b)))
+            if system.group is not None:
+                parts.append(system.group.log(space.orientation(start.b).T @ space.orientation(end.b)))
             parts.append(end.p_plus - start.p_plus)
         last = sols[-1]
-        parts.append(self.g(_final_point(self.system, last), last.v[-1]))
+        parts.append(self.single.g(_final_point(system, last), last.v[-1]))
         return jnp.concatenate(parts)
 
     def cost(self, x):
-        U = x[: self.K * self.m].reshape(self.K, self.m)
-        J = self.effort_cost(U)
-        if self.running_cost is not None:
+        one = self.single
+        U = x[: one.K * one.m].reshape(one.K, one.m)
+        J = one.effort_cost(U)
+        if one.running_cost is not None:
             _, _, sols = self._runs(x)
             q = jnp.concatenate([s.q[:-1] for s in sols])
             v = jnp.concatenate([s.v[:-1] for s in sols])
-            J = J + self.h * jnp.sum(jax.vmap(self.running_cost)(q, v, U, jnp.asarray(self.ts)))
+            J = J + one.h * jnp.sum(jax.vmap(one.running_cost)(q, v, U, one.ts))
         return J
 
 
