@@ -29,10 +29,15 @@ for unstable dynamics. Multiple shooting (`segments=S`) is the remedy there: the
 $(b, p^+)$ at the starts of segments 2..S becomes an unknown (the orientation as
 $\\bar R\\exp(\\hat\\eta)$ about the warm start's), and the defects at the boundaries become
 constraints; each segment is still a run of the GNI's steps. Measured on the worked problems
-(2-core machine), single shooting was the better default: sleigh-steering 24 SQP iterations and
-13 s with one segment, 67 iterations and 41 s with four (the same optimum); ball-plate 41
-iterations and 27 s with one, and with four SLSQP reached its 500-iteration cap (the states'
-unknowns, of other scales than the controls, slow its quasi-Newton updates).
+(2-core machine, 2026-11-28), single shooting was the better default: sleigh-steering 23 SQP
+iterations and 5.4 s with one segment, 37 iterations and 13.6 s with four (the same optimum);
+ball-plate 108 iterations and 12.8 s with one, and with four SLSQP reached its 500-iteration cap
+(the states' unknowns, of other scales than the controls, slow its quasi-Newton updates).
+
+**Compiled once per structure.** The shooting problems are equinox Modules whose numbers are
+arrays, and the SQP's functions are two module-level compiled programs that take them as an
+argument (:meth:`gnipy.control.sqp.Functions.of`): solves, warm starts and multistarts of one
+structure share them.
 
 **Solver.** Sequential quadratic programming with bounds (SciPy's SLSQP, Kraft 1988) on the exact
 gradients, the cost scaled so that its Hessian starts near the identity (SLSQP's first guess of
