@@ -69,10 +69,12 @@ def tripwire(monkeypatch):
     import optimistix
 
     import gnipy.control.identification as identification
-    import gnipy.control.optimal_control as optimal_control
+    import gnipy.control.least_squares as least_squares
+    import gnipy.control.shooting as shooting
 
-    monkeypatch.setattr(optimal_control, "simulate", _tripwire)
+    monkeypatch.setattr(shooting, "simulate", _tripwire)
     monkeypatch.setattr(identification, "simulate", _tripwire)
+    monkeypatch.setattr(least_squares, "simulate", _tripwire)
     monkeypatch.setattr(optimistix, "least_squares", _tripwire)
 
 

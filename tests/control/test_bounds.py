@@ -76,6 +76,8 @@ def test_a_fit_that_leaves_the_valid_region_is_flagged_not_raised(particle_data)
     assert not res.success and res.solution is None and np.all(np.isnan(res.residuals))
     assert "not valid at the estimate (k = 1.5)" in res.message and "valid for k <= 1.2" in res.message
     assert "bounds=" in res.message and "the model" in res.summary()
+    with pytest.raises(InputError, match="no fitted run"):
+        gnipy.plots.plot_fit(res)
 
 
 def test_an_estimate_pressed_against_its_bound_is_flagged(particle_data):

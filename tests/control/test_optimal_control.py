@@ -215,9 +215,9 @@ def test_arguments_are_strict_and_the_memory_is_bounded_before_anything_is_compu
     """Issue 28 (D6, D9): a string or a boolean is not a number, anywhere; a problem beyond the
     memory bound (the SQP's matrices grow as (K·m)²) is refused naming steps, max_bytes=None lifts
     the bound. Every refusal comes before the first simulation (a tripwire)."""
-    import gnipy.control.optimal_control as optimal_control
+    import gnipy.control.shooting as shooting
 
-    monkeypatch.setattr(optimal_control, "simulate", _tripwire)
+    monkeypatch.setattr(shooting, "simulate", _tripwire)
     p = load_problem("sleigh-steering")
     ball = load_problem("ball-plate")
     base = dict(h=p.h, steps=p.steps, q0=p.q0, v0=p.v0, controls0=p.controls0, bounds=p.bounds)

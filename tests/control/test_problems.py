@@ -114,11 +114,13 @@ def tripwire():
     import optimistix
 
     import gnipy.control.identification as identification
-    import gnipy.control.optimal_control as optimal_control
+    import gnipy.control.least_squares as least_squares
+    import gnipy.control.shooting as shooting
 
     with pytest.MonkeyPatch.context() as mp:
-        mp.setattr(optimal_control, "simulate", _tripwire)
+        mp.setattr(shooting, "simulate", _tripwire)
         mp.setattr(identification, "simulate", _tripwire)
+        mp.setattr(least_squares, "simulate", _tripwire)
         mp.setattr(optimistix, "least_squares", _tripwire)
         yield
 

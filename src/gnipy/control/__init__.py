@@ -14,8 +14,9 @@ to steer them.
 - the steps of both: :mod:`gnipy.control.fit_arguments`, :mod:`gnipy.control.least_squares` and
   :mod:`gnipy.control.fit_result` (the fit's checked arguments, its least-squares problem, its
   result and statistics), :mod:`gnipy.control.control_arguments`,
-  :mod:`gnipy.control.control_result` and :mod:`gnipy.control.sqp` (the solve's checked arguments
-  and target, its result, and the staged SQP);
+  :mod:`gnipy.control.control_result`, :mod:`gnipy.control.shooting` and :mod:`gnipy.control.sqp`
+  (the solve's checked arguments and target, its result, the shooting transcriptions, and the
+  staged SQP);
 - :mod:`gnipy.control.problems`: optimal-control problems as TOML files (`gni control`), the
   worked problems (:data:`WORKED_PROBLEMS`) and the result file; :mod:`gnipy.control.fit_problems`
   the same for identification (`gni fit`); :mod:`gnipy.control.problem_files` reads both kinds of

@@ -121,11 +121,18 @@ def plot_fit(result, path=None, *, title: str | None = None, overwrite: bool = F
 
     Returns:
         The `matplotlib.figure.Figure`.
+
+    Raises:
+        InputError: a flagged result with no fitted run (the model not valid at the estimate).
     """
     Figure = require("matplotlib.figure", extra="plots").Figure
 
     obs = result.observations
     sol = result.solution
+    if sol is None:
+        from ..errors import InputError
+
+        raise InputError(f"result: the fit has no fitted run to draw ({result.message})")
     names = list(obs.variables)
     coords, vels = list(sol.coordinates), list(sol.velocities)
     t_obs = np.asarray(obs.times, dtype=float)
