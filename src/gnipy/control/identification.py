@@ -280,7 +280,7 @@ def fit(
         observations=data.observations, residuals=residuals, raw=y, jacobian=J, chi2=chi2, n_obs=data.n_obs,
         rank=stats.rank, dof=stats.dof, reduced_chi2=stats.reduced_chi2, sigma_known=data.sigma_known,
         success=bool(success), message="; ".join(notes), iterations=iterations, initial_guess=begin.y0,
-        method=solution.method if solution is not None else _method_name(method, model),
+        method=solution.method if solution is not None else _method_name(method),
         h=h, t0=t0, wall_time=time.perf_counter() - start, determined=stats.determined,
         threshold=stats.threshold, discretization=d, combinations=stats.combinations, bounds=limits.bounded,
         at_bound=at_bound, _problem=problem, _data=data.arrays,
@@ -406,7 +406,7 @@ def _fitted_run(problem: LeastSquares, model: FitModel, begin: FitStart, y, fixe
     return q0_fit, solution, None
 
 
-def _method_name(method, model: FitModel) -> str:
+def _method_name(method) -> str:
     """The method's name for a result without a fitted run."""
     if isinstance(method, str):
         return method

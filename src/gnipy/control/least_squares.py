@@ -81,7 +81,6 @@ class LeastSquares(eqx.Module):
     def outputs(self, y):
         """The reported quantities at `y`: the parameters, the estimated components of q0 and
         those of the projected v0."""
-        system, q0, v0 = self.unpack(y)
         npar, nq = len(self.param_names), len(self.q_idx)
         out = [jnp.asarray(y[:npar + nq], jnp.float64)]
         if self.v_idx:
