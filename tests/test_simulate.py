@@ -75,3 +75,21 @@ def test_throw_false_returns_truncated_solution():
     assert part.result == 1
     assert len(part.t) == part.failed_step + 1
     assert np.all(np.isfinite(np.asarray(part.energy)))
+
+
+def test_a_repeated_call_naming_its_method_checks_its_start_once(particle, monkeypatch):
+    """A method name gives one integrator per process (`gnipy.methods.shared_method`), so repeated
+    calls that name it share the checked start and the compiled programs of the first
+    (gnipy.preparation): `System.check` runs once for two calls, and both give the same bits."""
+    from gnipy.methods import get_method, shared_method
+
+    assert shared_method("gni-trapezoid") is shared_method("gni-trapezoid")
+    assert get_method("gni-trapezoid") is not get_method("gni-trapezoid")  # get_method: a fresh one
+    calls = []
+    check = System.check
+    monkeypatch.setattr(System, "check", lambda self, *a, **k: calls.append(1) or check(self, *a, **k))
+    q0, v0 = np.array([0.31, -0.27, 0.123456789]), np.array([0.7, 0.2, -0.45])  # a start no other test uses
+    a, b = (gnipy.simulate(particle, "gni-trapezoid", q0, v0, h=0.05, steps=7, project_v0=True) for _ in range(2))
+    assert len(calls) == 1
+    np.testing.assert_array_equal(np.asarray(a.q), np.asarray(b.q))
+    np.testing.assert_array_equal(np.asarray(a.hidden_momentum), np.asarray(b.hidden_momentum))

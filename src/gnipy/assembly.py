@@ -47,8 +47,14 @@ def labels(problem, prepared, backend: str) -> dict:
     return dict(system=system.name, method=method.name, h=h, coordinates=system.coordinates,
                 velocities=system.velocities, params=system.params,
                 start=getattr(method, "start_label", "continuous"),
-                method_settings=tuple(prepared.settings().items()) if isinstance(prepared, Integrator) else (),
+                method_settings=_settings(prepared),
                 backend=backend)
+
+
+def _settings(prepared) -> tuple:
+    """The prepared method's settings as pairs. Called through the class: an equinox Module's
+    bound method is a Module built on every access (about 35 µs), and every run reads these."""
+    return tuple(type(prepared).settings(prepared).items()) if isinstance(prepared, Integrator) else ()
 
 
 def _concrete(x):
@@ -75,13 +81,17 @@ def assemble(problem, out: dict, fields: dict) -> Solution:
 
 def _single(problem, out, fields) -> Solution:
     space = problem.system.space
-    q, R = space.coordinates(out["b"]), space.orientation(out["b"])
+    if "q" in out:  # computed inside the run's program (gnipy.preparation)
+        q, R = out["q"], out["R"]
+    else:
+        q, R = space.coordinates(out["b"]), space.orientation(out["b"])
     common = dict(iterations=out["iterations"], R=R, final_state=out["final_state"], states=out["states"],
                   monitor=None if out["monitor"] is None else np.asarray(out["monitor"]), **fields)
     fail_k = int(out["fail_k"])
     times = problem.times
     if fail_k < 0:
-        return Solution.of(t=jnp.asarray(times), q=q, v=out["v"], p=out["p"], energy=out["energy"],
+        t = out["t"] if out.get("t") is not None else jnp.asarray(times)  # the program's copy: no transfer
+        return Solution.of(t=t, q=q, v=out["v"], p=out["p"], energy=out["energy"],
                            constraint_residual=out["residual"], **common)
     good = int(np.searchsorted(np.asarray(problem.plan.nodes), fail_k, side="right"))  # saved nodes with index <= fail_k
     cut = {k: (None if common.get(k) is None else jax.tree_util.tree_map(lambda a: a[:good], common[k]))

@@ -457,7 +457,9 @@ def diagnostic_fields(system, core, b0, nodes, h, *, batched_system: bool = Fals
                      cached: dict | None = None, prepared=None, scheme: str = "approximate", times=None) -> dict:
     """The Solution's diagnostic fields: the GNI family's hidden momentum, its expected size and
     the energy of p⁺ (:mod:`gnipy.diagnostics`), and the sentence on what is conserved (kept in
-    `cached`, per system and start, when given)."""
+    `cached`, per system and start, when given). A single run passes `prepared = (Prepared, padded
+    nodes, arrays)`: the arrays when its program computed them (a native run), else the nodes
+    padded for :meth:`gnipy.preparation.Prepared.node_diagnostics`."""
     from .registry import registered_invariants
 
     gni_family = nodes[3] is not None
@@ -471,7 +473,9 @@ def diagnostic_fields(system, core, b0, nodes, h, *, batched_system: bool = Fals
                "energy_invariant": energy_is_invariant(system, b0)}
         if cached is not None:
             cached[key] = dict(out)
-    if gni_family and prepared is not None:  # a single run: its nodes come padded from the run's program
+    if gni_family and prepared is not None and prepared[2] is not None:  # computed by the run's program
+        out |= dict(zip(DIAGNOSTIC_ARRAYS, prepared[2]))
+    elif gni_family and prepared is not None:  # a single run: its nodes come padded from the run's program
         diag = prepared[0].node_diagnostics(prepared[1], h, int(np.shape(nodes[1])[0]), times=times)
         out |= dict(zip(DIAGNOSTIC_ARRAYS, diag))
     elif gni_family:

@@ -109,7 +109,7 @@ def _single(problem: Problem, reporter, use: str) -> Solution:
             jax.block_until_ready(out)
     fields = labels(problem, prep.method, use) | {"orientation": prep.cache["orientation"]}
     fields |= diagnostic_fields(system, prep.core, prep.b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
-                                cached=prep.cache, prepared=(prep, out.get("padded")),
+                                cached=prep.cache, prepared=(prep, out.get("padded"), out.get("diagnostics")),
                                 scheme=scheme_energy(problem.method),
                                 times=problem.times)
     return assemble(problem, out, fields)

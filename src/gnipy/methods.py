@@ -10,7 +10,7 @@ from collections.abc import Callable
 from .integrators.base import MethodError
 from .registry import set_method_lookup
 
-__all__ = ["get_method", "method_names", "is_method_name", "prepared_method", "METHOD_DESCRIPTIONS"]
+__all__ = ["get_method", "shared_method", "method_names", "is_method_name", "prepared_method", "METHOD_DESCRIPTIONS"]
 
 
 def _gni(ld_name: str):
@@ -133,6 +133,23 @@ def get_method(name: str):
         raise MethodError(f"method: unknown method {name!r} (known: {', '.join(_METHODS)}; compositions "
                           "'<scheme>-<symmetric method>' with scheme yoshida4, suzuki4, yoshida6, kahanli6)")
     return _METHODS[name][1]()
+
+
+_SHARED: dict = {}
+
+
+def shared_method(name: str):
+    """The integrator of a method name, one object per name and process (:func:`get_method` makes
+    a fresh one). Runs that name their method share it, and with it their checked starts and
+    compiled programs (:mod:`gnipy.preparation` keys them by the method object): a repeated
+    `simulate(system, "gni-midpoint", ...)` checks and dispatches nothing again. Integrators are
+    immutable (equinox modules), so sharing one is safe."""
+    method = _SHARED.get(name) if isinstance(name, str) else None
+    if method is None:
+        method = get_method(name)
+        if len(_SHARED) < 256:  # names are checked by get_method; compositions' names are unbounded
+            _SHARED[name] = method
+    return method
 
 
 def prepared_method(system, method, b0):

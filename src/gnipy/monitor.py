@@ -60,7 +60,12 @@ def initial(h: float, span: float, t0: float, *, energy_applies=True, members: i
 
 def with_end(monitor, k_end):
     """The monitor for a call whose loop takes `k_end` steps (traced or not): its iteration
-    k = k_end checks the last node and steps no further."""
+    k = k_end checks the last node and steps no further. A NumPy `monitor` with a Python `k_end`
+    gives a NumPy array (no dispatch to JAX)."""
+    if isinstance(monitor, np.ndarray) and isinstance(k_end, (int, float)):
+        out = np.array(monitor, dtype=np.float64)
+        out[..., _I["k_end"]] = float(k_end)
+        return out
     return jnp.asarray(monitor, jnp.float64).at[..., _I["k_end"]].set(jnp.asarray(k_end, jnp.float64))
 
 
@@ -213,8 +218,40 @@ def announce(sol, strict: bool = False, stacklevel: int = 3):
     texts = [w.removeprefix("WARNING: ") for w in sol.warnings()]
     message = f"{sol.system} with {sol.method}: {sol.health}.\n" + "\n".join(texts)
     if strict:
-        times = [v.first_time for kind in ("hidden", "energy") for v in sol._member_verdicts(kind).values()
+        times = [v.first_time for kind in ("hidden", "energy") for v in member_verdicts(sol, kind).values()
                  if not v.in_band]
         raise QualitativeFailure(message, time=min(times, default=None), solution=sol)
     warnings.warn(QualitativeFailureWarning(message), stacklevel=stacklevel)
     return sol
+
+
+# The verdicts' helpers are functions, not methods: an equinox Module's method is bound by building
+# a Module on every access (about 35 µs, measured), and every run reads them (gnipy.Solution.healthy).
+
+
+def member_verdicts(sol, kind: str = "hidden") -> dict:
+    """The verdicts of `sol` of one kind ("hidden" or "energy") by member index (a single trajectory:
+    index 0); a member without one (not the GNI family, or an energy that its motion does not
+    conserve) is left out."""
+    attr = f"{kind}_verdict"
+    if sol.batch_size is None:
+        v = getattr(sol, attr)
+        return {} if v is None else {0: v}
+    if kind == "hidden" and sol.hidden_momentum is None:
+        return {}
+    if sol.monitor is not None:
+        rows = np.asarray(sol.monitor)
+        found = ((i, hidden_verdict(r, sol.t) if kind == "hidden" else energy_verdict(r))
+                 for i, r in enumerate(rows))
+    else:
+        found = ((i, getattr(sol.member(i), attr)) for i in range(sol.batch_size))
+    return {i: v for i, v in found if v is not None}
+
+
+def verdicts_out(sol, kind: str):
+    """`(verdicts, out, first)`: the verdicts of `sol` of one kind by member, the members out of band,
+    and the one that left first (None when none did)."""
+    verdicts = member_verdicts(sol, kind)
+    out = [i for i, v in verdicts.items() if not v.in_band]
+    first = min(out, key=lambda i: verdicts[i].first_time) if out else None
+    return verdicts, out, first

@@ -2,8 +2,8 @@
 condition, computed once per call signature and kept: the checked start, the prepared method,
 the diagnostics' sentences, and the compiled programs with their inputs already split.
 
-A repeated call with the same system object, method object and initial condition (compared by
-value) checks nothing again (:meth:`gnipy.System.check`, `method.check`, `method.prepare` ran
+A repeated call with the same system object, method (the same object, or the same name:
+:func:`gnipy.methods.shared_method`) and initial condition (compared by value) checks nothing again (:meth:`gnipy.System.check`, `method.check`, `method.prepare` ran
 once) and calls its compiled programs directly: the arrays of the method and system are
 flattened once, and the programs are `jax.jit` functions shared by every run whose method and
 system have the same structure (the non-array parts, compared as equinox's `filter_jit` compares
@@ -89,13 +89,14 @@ class Prepared:
     diagnostics' host-side answers (`cache`) and the compiled programs of runs from this start."""
 
     __slots__ = ("b0", "v0", "method", "core", "cache", "refs", "_leaves", "_key", "_rebuild", "_sys_leaves",
-                 "_sys_key", "_sys_rebuild", "_start", "_runs")
+                 "_sys_key", "_sys_rebuild", "_start", "_runs", "_states")
 
     def __init__(self, b0, v0, method, core, refs):
         self.b0, self.v0, self.method, self.core, self.refs = b0, v0, method, core, refs
         self.cache = {}
         self._leaves = None
         self._runs = {}
+        self._states = {}  # h -> `method.init` at the checked start (host arrays), for native runs
 
     def _split(self):
         if self._leaves is None:
@@ -152,7 +153,9 @@ class Prepared:
         the method's step does not lower (then `self.cache["native"]` holds the reason)."""
         from .native.backend import native_loop, run_native
 
-        if state0 is None:
+        if state0 is None and float(h) in self._states:  # `method.init` at this start and h, computed once
+            state0 = self._states[float(h)]
+        elif state0 is None:
             program = self._runs.get("init")
             if program is None:
                 self._split()
@@ -167,15 +170,50 @@ class Prepared:
                 program = _program(None if self._key is None else ("init", self._key), make)
                 self._runs["init"] = program
             self._split()
-            state0 = program(self._leaves, self._start, np.float64(h))
-        loop = native_loop(self.method, self.core, state0)
+            state0 = jax.tree_util.tree_map(np.asarray, program(self._leaves, self._start, np.float64(h)))
+            if len(self._states) < 8:
+                self._states[float(h)] = state0
+        loop = self._runs.get("native")
+        if loop is None:  # the states of one start have one structure: one loop (and one lookup)
+            loop = self._runs["native"] = native_loop(self.method, self.core, state0)
         if not hasattr(loop, "run"):
             self.cache["native"] = str(loop)
             return None
         return run_native(loop, self.method, self.core, state0, h, lengths, tail, h_last, partial=partial,
                           save_final=save_final, save_states=save_states, monitor0=monitor0, times=times,
-                          complete=_complete,
-                          progress_stride=progress_stride)
+                          complete=_complete, progress_stride=progress_stride,
+                          post=self._native_post(partial, save_final, save_states))
+
+    def _native_post(self, partial: bool, save_final: bool, save_states: bool):
+        """The compiled :func:`gnipy.native.backend.post_body` of runs from this start with these
+        flags, called with the method's and system's leaves split once (:meth:`run`'s dispatch)."""
+        config = ("native-post", bool(partial), bool(save_final), bool(save_states))
+        program = self._runs.get(config)
+        if program is None:
+            from .native.backend import post_body
+
+            self._split()
+            rebuild = self._rebuild
+
+            def make(layout):
+                def post(leaves, saved, carry, h, h_last, times):
+                    method, system = rebuild(leaves)
+                    return post_body(method, system, layout, saved, carry, h, h_last, times, *config[1:],
+                                     False, False, functools.partial(_complete_with_diagnostics, h=h))
+                return post
+
+            jitted = {}
+
+            def program(layout, saved, carry, h, h_last, times):
+                # the layout (the state's tree structure and shapes) is static: one program each
+                run = jitted.get(layout)
+                if run is None:
+                    run = jitted[layout] = _program(None if self._key is None else (config, self._key, layout),
+                                                    lambda: make(layout))
+                return run(self._leaves, saved, carry, h, h_last, times)
+
+            self._runs[config] = program
+        return program
 
     def node_diagnostics(self, padded, h: float, T: int, times=None):
         """:func:`gnipy.diagnostics.node_diagnostics` at the first `T` of the padded saved
@@ -224,6 +262,21 @@ def _complete(system, out, times):
             return jnp.concatenate([a, jnp.repeat(a[-1:], pad, axis=0)]) if pad else a
 
         out["padded"] = jax.tree_util.tree_map(edge, (out["b"], out["v"], out["p"], out["hidden"]))
+    return out
+
+
+def _complete_with_diagnostics(system, out, times, *, h):
+    """:func:`_complete` for a native run (an unforced system): the GNI family's node diagnostics
+    computed in the same program (`out["diagnostics"]`, :meth:`Prepared.node_diagnostics`'s
+    arrays) rather than by a program of their own, a dispatch fewer per call."""
+    out["q"] = system.space.coordinates(out["b"])
+    out["R"] = system.space.orientation(out["b"])
+    out["t"] = times
+    if out["hidden"] is not None:
+        from .diagnostics import node_diagnostics
+
+        out["diagnostics"] = jax.vmap(lambda bb, vv, pp, xx: node_diagnostics(system, bb, vv, pp, xx, h))(
+            out["b"], out["v"], out["p"], out["hidden"])
     return out
 
 

@@ -166,7 +166,7 @@ def resolve_method(system, method):
     """The method object of a run of `system`: `method` itself (an integrator or the continuous
     reference), the one it names, or the system's default when None (its model's measured default,
     :func:`gnipy.registry.default_method_for`); :class:`~gnipy.MethodError` naming `method` otherwise."""
-    from .methods import get_method
+    from .methods import shared_method
     from .reference import ContinuousReference
 
     if method is None:
@@ -174,7 +174,7 @@ def resolve_method(system, method):
 
         method = default_method_for(system.model, system)
     if isinstance(method, str):
-        method = get_method(method)
+        method = shared_method(method)
     if not isinstance(method, (Integrator, ContinuousReference)):
         raise MethodError(f"method: expected an integrator or a method name, got {type(method).__name__}")
     return method

@@ -13,6 +13,7 @@ import numpy as np
 
 from .extras import require
 from .errors import SolverFailure
+from .monitor import verdicts_out
 
 __all__ = ["Solution", "SolverFailure", "RESULTS", "RESULT_SUCCESS", "RESULT_SOLVER_FAILED", "set_variable_attrs"]
 
@@ -383,39 +384,11 @@ class Solution(eqx.Module):
             ds.attrs.update(attrs)
         return ds
 
-    def _member_verdicts(self, kind: str = "hidden") -> dict:
-        """The verdicts of one kind ("hidden" or "energy") by member index (a single trajectory:
-        index 0); a member without one (not the GNI family, or an energy that its motion does not
-        conserve) is left out."""
-        attr = f"{kind}_verdict"
-        if self.batch_size is None:
-            v = getattr(self, attr)
-            return {} if v is None else {0: v}
-        if kind == "hidden" and self.hidden_momentum is None:
-            return {}
-        if self.monitor is not None:
-            from . import monitor
-
-            rows = np.asarray(self.monitor)
-            found = ((i, monitor.hidden_verdict(r, self.t) if kind == "hidden" else monitor.energy_verdict(r))
-                     for i, r in enumerate(rows))
-        else:
-            found = ((i, getattr(self.member(i), attr)) for i in range(self.batch_size))
-        return {i: v for i, v in found if v is not None}
-
-    def _verdicts_out(self, kind: str):
-        """`(verdicts, out, first)`: the verdicts of one kind by member, the members out of band,
-        and the one that left first (None when none did)."""
-        verdicts = self._member_verdicts(kind)
-        out = [i for i, v in verdicts.items() if not v.in_band]
-        first = min(out, key=lambda i: verdicts[i].first_time) if out else None
-        return verdicts, out, first
-
     def _verdict_attrs(self) -> dict:
         """The verdicts as file attributes."""
         attrs = {}
         for kind, prefix, largest in (("hidden", "hidden_momentum", "max_ratio"), ("energy", "energy_drift", "max_drift")):
-            verdicts, out, first = self._verdicts_out(kind)
+            verdicts, out, first = verdicts_out(self, kind)
             if not verdicts:
                 continue
             attrs[f"{prefix}_verdict"] = "in band" if not out else "out of band"
@@ -434,7 +407,7 @@ class Solution(eqx.Module):
         verdict stayed in band, at every node of the run (of every member of a batch). A run that
         converged but whose motion went qualitatively wrong is successful and not healthy; its
         :meth:`warnings` say from when and what to use instead."""
-        return self.success and not any(self._verdicts_out(kind)[1] for kind in ("hidden", "energy"))
+        return self.success and not any(verdicts_out(self, kind)[1] for kind in ("hidden", "energy"))
 
     @property
     def health(self) -> str:
@@ -444,7 +417,7 @@ class Solution(eqx.Module):
         texts = []
         for kind, what in (("hidden", "the hidden momentum left its O(h) band"),
                            ("energy", "the conserved energy drifted out of its band")):
-            verdicts, out, first = self._verdicts_out(kind)
+            verdicts, out, first = verdicts_out(self, kind)
             if out:
                 who = f" (member {first}; {len(out)} of {self.batch_size} members)" if self.batch_size is not None else ""
                 texts.append(f"{what} at t = {verdicts[first].first_time:.6g}{who}")
@@ -458,7 +431,7 @@ class Solution(eqx.Module):
         and an energy that the motion conserves drifting away (:mod:`gnipy.diagnostics`)."""
         texts = []
         for kind in ("hidden", "energy"):
-            verdicts, out, first = self._verdicts_out(kind)
+            verdicts, out, first = verdicts_out(self, kind)
             if not out:
                 continue
             text = verdicts[first].warning(self.method, self.system)
@@ -472,7 +445,7 @@ class Solution(eqx.Module):
         if self.energy_plus is not None and self.batch_size is None:
             ep = np.asarray(self.energy_plus)
             lines.append(f"  energy of p+: initial {ep[0]:.12g}, max |E+ - E+0| = {np.max(np.abs(ep - ep[0])):.3e}")
-        verdicts, out, _ = self._verdicts_out("hidden")
+        verdicts, out, _ = verdicts_out(self, "hidden")
         if verdicts and not out:
             lines.append(f"  hidden momentum |p+ - p̄|/|p̄|: max {max(v.max_ratio for v in verdicts.values()):.3e}, "
                          "in its O(h) band")

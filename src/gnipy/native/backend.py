@@ -24,6 +24,7 @@ by a JAX transformation (gradients stay on XLA), and every primitive of the step
 
 from __future__ import annotations
 
+import math
 import warnings
 
 import equinox as eqx
@@ -157,9 +158,11 @@ def _flat_state(treedef, shapes, flat):
     return jax.tree_util.tree_unflatten(treedef, leaves)
 
 
-@jit
-def _post(method, system, layout, saved, carry, h, h_last, times, partial: bool, save_final: bool,
-          save_states: bool, batched: bool, system_batched: bool, complete):
+def post_body(method, system, layout, saved, carry, h, h_last, times, partial: bool, save_final: bool,
+              save_states: bool, batched: bool, system_batched: bool, complete):
+    """What :func:`run_native` computes on XLA after the loop (traced): the saved nodes and the
+    final carry read back as :func:`gnipy.stepping.run_nodes`'s result, completed by `complete`.
+    `layout` is `(treedef, shapes, S)` of the flat state."""
     treedef, shapes, S = layout
 
     def one(system, sv, c):
@@ -174,6 +177,9 @@ def _post(method, system, layout, saved, carry, h, h_last, times, partial: bool,
     if not batched:
         return one(system, saved, carry)
     return eqx.filter_vmap(one, in_axes=(eqx.if_array(0) if system_batched else None, 0, 0))(system, saved, carry)
+
+
+_post = jit(post_body)
 
 
 @jit
@@ -208,31 +214,39 @@ def _run_reporting(loop, carry, h, blocks, stride: int):
     return carry, saved[..., np.asarray(ends), :]
 
 
+#: The loop's counters at the start of a run (gnipy.stepping.initial_carry: step, failed step, its
+#: residual, the Newton iterations' total and largest).
+_COUNTERS = np.array([0.0, -1.0, 0.0, 0.0, 0.0])
+
+
 def run_native(loop, method, system, state0, h, lengths, tail, h_last, *, partial: bool, save_final: bool,
                save_states: bool, monitor0, batched: bool = False, system_batched: bool = False, times=None,
-               complete=None, progress_stride: int | None = None) -> dict:
+               complete=None, progress_stride: int | None = None, post=None) -> dict:
     """The run of :func:`gnipy.stepping.run_nodes` (same arguments and result; `state0` with a
     leading member axis when `batched`) on the compiled `loop`; `complete(system, out, times)`
     adds fields inside the same XLA program. With `system_batched`, `system` is a stack of
     systems (:func:`gnipy.stack_systems`), one per member, and `loop` was built with `params`.
     With `progress_stride`, the steps done are reported every `progress_stride` steps or so (the
     loop then runs in pieces). `monitor0` is the monitor at the start (:func:`gnipy.monitor.initial`:
-    (SIZE,), or (B, SIZE) for a batch)."""
+    (SIZE,), or (B, SIZE) for a batch). `post(layout, saved, carry, h, h_last, times)`, when given,
+    is a compiled :func:`post_body` for this method, system and flags (a repeated run's caller
+    keeps one: :class:`gnipy.preparation.Prepared`), called instead of partitioning the method and
+    system again."""
     leaves, treedef = jax.tree_util.tree_flatten(state0)
     shapes = tuple(tuple(np.shape(x))[1 if batched else 0:] for x in leaves)
-    S = int(sum(int(np.prod(s, dtype=np.int64)) for s in shapes))
-    if batched:
-        flat = np.asarray(_flatten_states(state0), dtype=np.float64)
-    else:
-        flat = np.concatenate([np.ravel(np.asarray(x, dtype=np.float64)) for x in leaves])
-    counters = np.array([0.0, -1.0, 0.0, 0.0, 0.0])
+    S = sum(math.prod(s) for s in shapes)
     # the loop's last iteration only checks the last node (gnipy.stepping.watched_run)
     monitor0, tail = watched_run(monitor0, lengths, tail, bool(partial))
-    watch = np.broadcast_to(np.asarray(monitor0, np.float64), flat.shape[:-1] + (SIZE,))
-    carry0 = np.concatenate([flat, np.broadcast_to(counters, flat.shape[:-1] + (5,)), watch], axis=-1)
+    if batched:
+        flat = np.asarray(_flatten_states(state0), dtype=np.float64)
+        watch = np.broadcast_to(np.asarray(monitor0, np.float64), flat.shape[:-1] + (SIZE,))
+        carry0 = np.concatenate([flat, np.broadcast_to(_COUNTERS, flat.shape[:-1] + (5,)), watch], axis=-1)
+    else:
+        carry0 = np.concatenate([np.ravel(np.asarray(x, dtype=np.float64)) for x in leaves]
+                                + [_COUNTERS, np.asarray(monitor0, np.float64)])
     if system_batched:  # each member's parameter values after its counters (build_loop's params)
         values, _ = system_params(system)
-        carry0 = np.concatenate([carry0] + [np.reshape(np.asarray(v, np.float64), (flat.shape[0], -1))
+        carry0 = np.concatenate([carry0] + [np.reshape(np.asarray(v, np.float64), (carry0.shape[0], -1))
                                             for v in values], axis=-1)
     if carry0.shape[-1] != loop.n_carry:
         raise ValueError(f"run_native: a carry of {carry0.shape[-1]} values for a loop of {loop.n_carry}")
@@ -241,6 +255,9 @@ def run_native(loop, method, system, state0, h, lengths, tail, h_last, *, partia
         carry, saved = _run_reporting(loop, carry0, float(h), blocks, int(progress_stride))
     else:
         carry, saved = loop.run(carry0, float(h), blocks)
+    times = None if times is None else np.asarray(times, np.float64)
+    if post is not None:
+        return post((treedef, shapes, S), saved, carry, np.float64(h), np.float64(h_last), times)
     return _post(method, system, (treedef, shapes, S), saved, carry, np.float64(h), np.float64(h_last),
-                 None if times is None else np.asarray(times, np.float64), bool(partial), bool(save_final),
+                 times, bool(partial), bool(save_final),
                  bool(save_states), bool(batched), bool(system_batched), complete)
