@@ -272,10 +272,9 @@ def _polish(x, c_val, c_jac, lo, hi, tol, max_steps: int = 8):
         if J.shape[1] < J.shape[0] or not np.all(np.isfinite(J)):
             break
         dx = np.zeros_like(x)
-        try:
-            dx[free] = -J.T @ np.linalg.solve(J @ J.T, c)
-        except np.linalg.LinAlgError:  # J has dependent rows: the target is not reachable to first order here
-            break
+        # the least-norm Gauss–Newton step by SVD: defined also when the target's rows are dependent
+        # (a redundant target: ControlResult.redundant_components), where J Jᵀ is singular
+        dx[free] = -np.linalg.lstsq(J, c, rcond=None)[0]
         x_new = np.clip(x + dx, lo, hi)
         c_new = np.asarray(c_val(x_new))
         miss_new = float(np.max(np.abs(c_new)))
