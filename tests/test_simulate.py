@@ -77,6 +77,29 @@ def test_throw_false_returns_truncated_solution():
     assert np.all(np.isfinite(np.asarray(part.energy)))
 
 
+def test_under_jit_throw_false_leaves_nan_after_the_failed_step_and_no_host_callback():
+    """Under a transformation a failed step raises at run time (eqx.error_if, a host callback that
+    keeps JAX's persistent cache from storing the program); with throw=False the saved nodes after
+    it are NaN instead, those before it the concrete run's, and the program has no callback."""
+    import jax
+
+    s = _wall_system()
+    q0, v0 = jnp.asarray([0.5, 0.0, 0.0]), jnp.asarray([1.0, 0.0, 0.0])
+    part = gnipy.simulate(s, GNI(Midpoint()), q0, v0, h=0.1, steps=40, throw=False)
+    k = part.failed_step
+    assert 0 < k < 40
+
+    def run(q0, throw):
+        return gnipy.simulate(s, GNI(Midpoint()), q0, v0, h=0.1, steps=40, throw=throw).q
+
+    quiet = jax.jit(lambda q: run(q, False))
+    q = np.asarray(quiet(q0))
+    np.testing.assert_allclose(q[:k + 1], np.asarray(part.q), rtol=0, atol=1e-13)
+    assert np.all(np.isnan(q[k + 1:]))
+    assert "callback" not in quiet.lower(q0).as_text()
+    assert "callback" in jax.jit(lambda q: run(q, True)).lower(q0).as_text()
+
+
 def test_a_repeated_call_naming_its_method_checks_its_start_once(particle, monkeypatch):
     """A method name gives one integrator per process (`gnipy.methods.shared_method`), so repeated
     calls that name it share the checked start and the compiled programs of the first

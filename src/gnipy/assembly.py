@@ -9,7 +9,8 @@ path returns the same fields. What differs is what a failure leaves:
   `throw` a :class:`~gnipy.SolverFailure` that carries them;
 - a batch: every member's nodes, a failed member's NaN after its failed step (never its last state
   repeated), each member's result code, failed step and residual;
-- under a transformation: the failure is raised at run time (`equinox.error_if`).
+- under a transformation: the failure is raised at run time (`equinox.error_if`); with `throw=False`
+  the saved nodes after the failed step are NaN instead (no run-time error).
 
 The diagnostics (:mod:`gnipy.diagnostics`: the GNI family's hidden momentum, the conserved
 quantity's sentence) are computed by the path that has what they need and passed in `fields`;
@@ -163,8 +164,25 @@ def _traced(problem, out, fields) -> Solution:
     if plan.save_final:
         k[-1] = problem.steps + problem.partial
     times = jnp.asarray(problem.t0, jnp.float64) + hj * k
-    q = eqx.error_if(system.space.coordinates(out["b"]), out["fail_k"] >= 0,
-                     f"{fields['method']}: a step failed (its solve did not converge or gave a non-finite value)")
-    return Solution(times, q, out["v"], out["p"], out["energy"], out["residual"], iterations=out["iterations"],
-                    R=system.space.orientation(out["b"]), final_state=out["final_state"], states=out["states"],
-                    **fields)
+    q, R = system.space.coordinates(out["b"]), system.space.orientation(out["b"])
+    v, p, energy, residual = out["v"], out["p"], out["energy"], out["residual"]
+    states, final_state = out["states"], out["final_state"]
+    if problem.throw:
+        q = eqx.error_if(q, out["fail_k"] >= 0,
+                         f"{fields['method']}: a step failed (its solve did not converge or gave a non-finite value)")
+    else:
+        # no run-time error: the saved nodes after the failed step are NaN, as a batch's failed member's.
+        # A program without eqx.error_if's host callback can be kept in JAX's persistent cache
+        # (gnipy.control's compiled constraints: a fresh process then compiles nothing again)
+        after = (out["fail_k"] >= 0) & (jnp.asarray(k) > out["fail_k"])
+
+        def blank(a, bad=after):
+            if a is None or not jnp.issubdtype(a.dtype, jnp.inexact):
+                return a
+            return jnp.where(jnp.reshape(bad, jnp.shape(bad) + (1,) * (a.ndim - jnp.ndim(bad))), jnp.nan, a)
+
+        q, R, v, p, energy, residual = (blank(a) for a in (q, R, v, p, energy, residual))
+        states = jax.tree_util.tree_map(blank, states)
+        final_state = jax.tree_util.tree_map(lambda a: blank(a, out["fail_k"] >= 0), final_state)
+    return Solution(times, q, v, p, energy, residual, iterations=out["iterations"], R=R,
+                    final_state=final_state, states=states, **fields)

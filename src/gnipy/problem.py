@@ -284,8 +284,6 @@ def _traced(system, systems, method, q0, v0, R0, h, steps, t_final, t0, state0, 
         raise InputError("system: under a JAX transformation, batch with jax.vmap over one system's parameters")
     if isinstance(method, ContinuousReference):
         raise MethodError("method: the continuous reference (scipy) cannot be differentiated or traced; use an integrator")
-    if not common["throw"]:
-        raise InputError("throw: under a JAX transformation a failed step is raised at run time (throw=True)")
     h_c, t0_c = concrete_value(h), concrete_value(t0)
     if h_c is None and steps is None:
         raise InputError("steps: h is traced (jax.jit), so the number of steps cannot follow from t_final; give steps")

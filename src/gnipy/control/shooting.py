@@ -60,7 +60,10 @@ class SingleShooting(eqx.Module):
         """The run driven by the controls `U` (every node); `concrete`: outside a compiled program
         (the step and start time as numbers, as a run the user makes)."""
         h, t0 = (float(self.h), float(self.t0)) if concrete else (self.h, self.t0)
-        return simulate(self.system, self.method, self.q0, self.v0, R0=self.R0, h=h, steps=self.K, controls=U, t0=t0)
+        # compiled, a failed step leaves NaN nodes (throw=False), which the SQP's host side turns into a
+        # SolverFailure (gnipy.control.sqp): no host callback, so JAX's persistent cache keeps the programs
+        return simulate(self.system, self.method, self.q0, self.v0, R0=self.R0, h=h, steps=self.K, controls=U, t0=t0,
+                        throw=concrete)
 
     def check(self, U0, controls: int) -> tuple[str, int]:
         """`(the method's name, the number of the target's components)`: the problem checked once,
@@ -206,7 +209,8 @@ class MultipleShooting(eqx.Module):
         sols = []
         for j in range(S):
             k0, k1 = int(self.cuts[j]), int(self.cuts[j + 1])
-            common = dict(h=one.h, steps=k1 - k0, controls=U[k0:k1], t0=one.t0 + k0 * one.h, saveat=save)
+            common = dict(h=one.h, steps=k1 - k0, controls=U[k0:k1], t0=one.t0 + k0 * one.h, saveat=save,
+                          throw=False)  # NaN after a failed step, no host callback (SingleShooting.run)
             if j == 0:
                 sols.append(simulate(one.system, one.method, one.q0, one.v0, R0=one.R0, **common))
             else:

@@ -14,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..compilation import jit
+from ..errors import SolverFailure
 
 __all__ = ["Functions", "SQPProblem", "StageResult", "solve_sqp"]
 
@@ -38,24 +39,34 @@ class Functions:
         and start of a multistart of that structure reuses the programs (gnipy.compilation.jit:
         gnipy's compiler options; measured on the sleigh-steering problem: XLA's compile time
         6.3 s -> 4.2 s with them, the same optimum to the last digit)."""
-        cost = _AtPoint(lambda x: _cost_and_gradient(problem, x))
-        constraints = _AtPoint(lambda x: _constraints_and_jacobian(problem, x))
+        cost = _AtPoint(lambda x: _cost_and_gradient(problem, x), "cost and its gradient")
+        constraints = _AtPoint(lambda x: _constraints_and_jacobian(problem, x), "constraints and their Jacobian")
         return cls(cost=cost.first, cost_gradient=cost.second, constraints=constraints.first,
                    constraints_jacobian=constraints.second)
 
 
 class _AtPoint:
-    """A pair of arrays computed together at a point and kept for the last point asked."""
+    """A pair of arrays computed together at a point and kept for the last point asked. A value
+    that is not finite stops the solve with a :class:`~gnipy.SolverFailure`: the compiled runs
+    leave NaN nodes after a failed step (`simulate(..., throw=False)` under a transformation, so
+    that the programs have no host callback and JAX's persistent cache keeps them)."""
 
-    def __init__(self, fn):
-        self.fn, self.key, self.value = fn, None, None
+    def __init__(self, fn, what: str):
+        self.fn, self.what, self.key, self.value = fn, what, None, None
 
     def _at(self, x):
         x = np.ascontiguousarray(x, dtype=np.float64)
         key = x.tobytes()
         if key != self.key:
             a, b = self.fn(jnp.asarray(x))
-            self.key, self.value = key, (np.asarray(a), np.asarray(b))
+            a, b = np.asarray(a), np.asarray(b)
+            if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
+                raise SolverFailure(
+                    f"control: the {self.what} are not finite at an iterate of the optimizer (largest unknown "
+                    f"{np.max(np.abs(x), initial=0.0):.3g}): a step of the run failed (its solve did not converge) or "
+                    "the cost or target gave a non-finite value; bound the controls, start from a better warm start "
+                    "or use a smaller h", step=-1, time=float("nan"), residual=float("nan"))
+            self.key, self.value = key, (a, b)
         return self.value
 
     def first(self, x):
