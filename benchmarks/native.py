@@ -9,7 +9,7 @@ for its whole life; see section 1).
 
 1. **one trajectory**: µs/step of the hand-written loop (`run_<case>(state0, h, S)`) and of gnipy's
    native and XLA loops (the marginal cost of a step, (median(S) − median(1))/(S − 1), as in section
-   1); ratio native ÷ hand-written (target ≤ 2);
+   1); ratio native ÷ hand-written (target ≤ 1.5, in `simulate`: issue 35);
 2. **batched**: trajectory-steps per second of B trajectories: the hand-written batch
    (`numba.prange` over B copies of its initial state, every core) and gnipy native (B perturbed
    initial conditions, split across every core); targets ≥ 15 M/s (rolling ball ex. 2) and ≥ 50 M/s
@@ -32,7 +32,9 @@ NATIVE_CASES = (
     ("chaplygin_sphere", "gni-trapezoid", "chaplygin-sphere"),
 )
 NATIVE_BATCH_TARGETS = {"rolling_ball_ex2": 15e6, "contact_oscillator": 50e6}
-TARGET_RATIO = 2.0
+#: Issue 35: gnipy's native loop within this factor of the fastest hand-written step (issue 16's was 2,
+#: against the first, slower, hand-written version)
+TARGET_RATIO = 1.5
 #: Issue 35: a repeated native `simulate` call (warm: same system, method name and start) costs at most this
 TARGET_CALL_US = 500.0
 TARGET_BUILD_S = 5.0
@@ -70,6 +72,8 @@ for name, method, nb_name in spec["cases"]:
         return sol
 
     case.run(s0, h, S)  # compiles (or loads Numba's cache)
+    legacy = numba_gni.LEGACY_CASES[nb_name]  # the hand-written baseline before issue 35
+    legacy.run(s0, h, S)
     first = clock(lambda: gn(S, "native"))
     gn(1, "native")
     Sx = min(S, spec["xla_steps"])
@@ -86,18 +90,31 @@ for name, method, nb_name in spec["cases"]:
                             + [np.array([0.0, -1.0, 0.0, 0.0, 0.0]),
                                np.asarray(monitor.with_end(monitor.initial(h, S * h, 0.0), S), np.float64)])
     loop.run(carry0, h, [S])
-    hand, loop_t, nat, nat1, xla, xla1 = [], [], [], [], [], []
+    hand, hand_v1, loop_t, nat, nat1, xla, xla1 = [], [], [], [], [], [], []
     for _ in range(reps):  # interleaved
         hand.append(clock(lambda: case.run(s0, h, S)))
+        hand_v1.append(clock(lambda: legacy.run(s0, h, S)))
         loop_t.append(clock(lambda: loop.run(carry0, h, [S])))
         nat.append(clock(lambda: gn(S, "native")))
         nat1.append(clock(lambda: gn(1, "native")))
         xla.append(clock(lambda: gn(Sx, "xla")))
         xla1.append(clock(lambda: gn(1, "xla")))
+    # the call cost of repeated calls (issue 35: warm, one after the other, as in an optimization's loop)
+    calls = [clock(lambda: gn(1, "native")) for _ in range(50)]
     sol = gn(S, "native")
+    c_us = None
+    if nb_name == "rolling-ball-ex2":  # the same kernel in C (-O3, IEEE), timed inside C
+        from benchmarks import c_gni
+        try:
+            c_us = c_gni.time_rolling_ball_ex2_c(s0, h, S, 5 * reps) / S * 1e6
+        except c_gni.CompilerNotFoundError:
+            c_us = None
     row = {"S": S, "hand_us": statistics.median(hand) / S * 1e6, "loop_us": statistics.median(loop_t) / S * 1e6,
+           "hand_v1_us": statistics.median(hand_v1) / S * 1e6, "c_us": c_us,
+           "hand_its": numba_gni.count_iterations(nb_name, h, S)[0],
+           "hand_v1_its": numba_gni.count_iterations(nb_name, h, S, legacy=True)[0],
            "native_us": (statistics.median(nat) - statistics.median(nat1)) / (S - 1) * 1e6,
-           "native_call_us": statistics.median(nat1) * 1e6,
+           "native_call_us": statistics.median(calls) * 1e6,
            "xla_us": (statistics.median(xla) - statistics.median(xla1)) / (Sx - 1) * 1e6,
            "first_native_s": first, "backend": sol.backend, "its": float(np.asarray(sol.iterations)[0]) / S}
     out[name] = row
@@ -182,16 +199,22 @@ def bench_native(cfg, rep, results: dict, load) -> None:
         f"iterations grow with T), h = {H}. The hand-written loop's µs/step is median(S)/S; gnipy's compiled loop "
         "alone (`NativeLoop.run` from gnipy's start state, as the hand-written loop is timed) likewise; "
         "'simulate' is the marginal cost of a step in `gnipy.simulate`, (median(S) − median(1))/(S − 1) (the "
-        "checks, the XLA observation of the nodes and the dispatch are in the call cost); XLA (gnipy's only "
+        "checks, the XLA observation of the nodes and the dispatch are in the call cost: 'native call cost' is the "
+        "median of 50 calls of 1 step made one after the other, as an optimization's loop makes them); XLA (gnipy's only "
         "compiler before issue 16) for reference. Everything in the same fresh process, interleaved, "
         f"{cfg.reps} timed repetitions each; {P} processes, the table gives the median over the processes and "
-        "each process's ratio. **Ratio** = gnipy's loop ÷ hand-written (target ≤ 2). Batched: B trajectories, "
+        "each process's ratio. **Ratio** = gnipy's loop ÷ hand-written (target ≤ 1.5, issue 35; issue 16's target was 2 "
+        "against the first hand-written version, kept as a column: same scheme, Gaussian elimination and a stopping "
+        "test that costs a confirming iteration). The C column: the same kernel as the hand-written rolling ball "
+        "ported to C (`benchmarks/c_gni.c`, `cc -O3 -march=native -fno-fast-math -ffp-contract=off`, the same bits), "
+        "minimum over repetitions timed inside C: the machine's limit, not Numba's. Batched: B trajectories, "
         f"S = {work:,} // B steps, both using every core (Numba `prange`; gnipy splits the batch in one chunk "
         "per core); the hand-written batch runs B copies of its initial state, gnipy B perturbed initial "
         "conditions (section 2's ensemble); targets ≥ 15 M/s (rolling ball ex. 2) and ≥ 50 M/s (contact "
         "oscillator).",
-        ["case", "method", "S", "hand-written µs/step", "gnipy native loop µs/step", "ratio (per process)",
-         "gnipy native simulate µs/step", "gnipy XLA µs/step", "native call cost µs", "Newton its/step"],
+        ["case", "method", "S", "hand-written µs/step (its/step)", "hand-written before issue 35 µs/step (its/step)",
+         "C -O3 µs/step", "gnipy native loop µs/step", "ratio (per process)", "gnipy native simulate µs/step",
+         "gnipy XLA µs/step", "native call cost µs", "gnipy Newton its/step"],
         background_load=load,
     )
     spec = {"cases": [list(c) for c in NATIVE_CASES], "h": H, "reps": cfg.reps, "steps": steps,
@@ -216,7 +239,13 @@ def bench_native(cfg, rep, results: dict, load) -> None:
             call = statistics.median(r["native_call_us"] for r in rows)
             results.setdefault("native", {})[name] = {"ratio": ratio, "hand_us": hand, "native_us": loop,
                                                       "simulate_us": nat, "xla_us": xla, "call_us": call}
-            rep.row(sec, [LABELS[name], method, f"{rows[0]['S']:,}", g(hand), g(loop),
+            hand_v1 = statistics.median(r["hand_v1_us"] for r in rows)
+            c_all = [r["c_us"] for r in rows if r.get("c_us") is not None]
+            c_us = statistics.median(c_all) if c_all else None
+            results["native"][name].update(hand_v1_us=hand_v1, c_us=c_us)
+            rep.row(sec, [LABELS[name], method, f"{rows[0]['S']:,}", f"{g(hand)} ({g(rows[0]['hand_its'])})",
+                          f"{g(hand_v1)} ({g(rows[0]['hand_v1_its'])})",
+                          "—" if c_us is None else g(c_us), g(loop),
                           f"{g(ratio)} ({', '.join(g(x) for x in ratios)})", g(nat), g(xla),
                           g(call), g(rows[0]["its"])],
                     f"{label}: hand-written {g(hand)} µs/step, gnipy native loop {g(loop)} µs/step (ratio {g(ratio)}), "
@@ -311,9 +340,11 @@ def native_targets(results: dict, how_far, labels, g, mrate) -> list[list[str]]:
     """The summary rows of section 7."""
     rows = []
     for name, r in results.get("native", {}).items():
-        met, far = how_far(r["ratio"], TARGET_RATIO, False)
-        rows.append([f"native loop ≤ {TARGET_RATIO:g}× the hand-written Numba step: {labels[name]}",
-                     f"{g(r['ratio'])}× ({g(r['native_us'])} vs {g(r['hand_us'])} µs/step)", met, far])
+        sim = r["simulate_us"] / r["hand_us"]  # issue 35: measured in simulate, the number users get
+        met, far = how_far(sim, TARGET_RATIO, False)
+        rows.append([f"native step in simulate ≤ {TARGET_RATIO:g}× the hand-written Numba step: {labels[name]}",
+                     f"{g(sim)}× ({g(r['simulate_us'])} vs {g(r['hand_us'])} µs/step; the loop alone "
+                     f"{g(r['ratio'])}×)", met, far])
         if "call_us" in r:
             met, far = how_far(r["call_us"], TARGET_CALL_US, False)
             rows.append([f"native simulate call ≤ {TARGET_CALL_US / 1000:g} ms (repeated, warm): {labels[name]}",

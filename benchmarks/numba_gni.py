@@ -5,45 +5,120 @@ factor: the same three GNI steps as :mod:`benchmarks.numpy_gni` (and thus as gni
 by hand to scalar, allocation-free Numba code the way a performance-minded researcher would write
 them for one model. Issue 16's target for gnipy's native backend is to come within 2× of these
 timings (µs/step of one trajectory, trajectory-steps/s of a batch). gnipy itself never imports or
-uses this module; it exists only for the benchmark and its test
+uses this module; it exists only for the benchmark and its tests
 (`tests/test_benchmark_numba.py`, which checks it against numpy_gni and gnipy).
+
+There are two generations of kernels (issue 35, point 1: "the baseline is the limit"):
+
+- the current kernels (`run_rolling_ball_ex2`, ..., `CASES`): the fastest scalar code we could write
+  for each case (below);
+- the first version, kept unchanged as the "old baseline" so that the benchmark can show the
+  history: `run_rolling_ball_ex2_v1`, `run_chaplygin_sphere_v1`, `run_contact_oscillator_v1` (and
+  their `_batch_v1`, `run_ball_v1`, `run_oscillator_v1`), gathered as :class:`Case` objects in
+  `LEGACY_CASES` (`get_case(name, legacy=True)`). It solves for the increments with Gaussian
+  elimination (partial pivoting) and stops Newton at $\\|\\delta\\| \\le 10^{-14}\\max(1, \\|z\\|)$
+  (`NEWTON_TOL_V1`): ~3 iterations per step, the last one only confirming convergence.
+
+`benchmarks/c_gni.c` (loaded by :mod:`benchmarks.c_gni`) is the rolling ball's current kernel
+ported line by line to C: it computes the same numbers bit for bit.
+
+Measured on the 2-core test machine (µs per step of one trajectory at h = 0.01 from the case's
+initial state, 2,000 steps for the rolling ball and 100,000 for the others; minimum of 30 runs
+interleaved in one process, noisy to ~5%; in parentheses the mean iterations per step):
+
+    case                 first version   newton        chord         predicted-newton
+    rolling-ball-ex2     0.135 (2.97)    0.056 (2.00)  0.055 (2.26)  0.051 (1.00)   case: predicted-newton
+    contact-oscillator   0.087 (2.76)    0.040 (2.00)  0.037 (2.00)  0.038 (1.00)   case: chord
+    chaplygin-sphere     0.137 (3.00)    0.069 (2.02)  0.075 (3.00)  0.079 (1.93)   case: newton
+
+The C port of the rolling ball takes 0.046 µs/step (timed inside C; `cc -O3 -march=native
+-fno-fast-math -ffp-contract=off`, GCC 12). Where the gain comes from (rolling ball; the others
+alike): the first version with the stopping test loosened to 1e-10 (2.0 iterations) takes 0.105;
+Cramer's rule instead of the pivoted elimination saves ~25% of the current step (0.077 -> 0.058
+with the same iterations); the predictor sweeps save one Jacobian and solve (0.056 -> 0.051);
+Numba-level inlining ~3%.
 
 How it was derived. Every formula is numpy_gni's (read its docstring: reflection (Comb), the
 discrete Legendre transforms FL⁻/FL⁺ of the trapezoid and midpoint discrete Lagrangians, the Cayley
-retraction and dcay⁻¹, the node report p̄, v̄), written out component by component:
+retraction and dcay⁻¹, the node report p̄, v̄), written out component by component. Each choice
+below was timed and checked against a long-double run of the same scheme (the first version's
+formulas in 80-bit arithmetic, Newton to 1e-30).
 
-- the projectors: $C = \\mu\\mathbb{G}^{-1}\\mu^T$ is 2×2 (balls) or 1×1 (contact oscillator) and is
-  inverted in closed form; $\\mathbb{G}$ is diagonal;
-- 3×3 matrices (R, cay(σ), dcay⁻¹, the Newton Jacobians) are written as nine scalars, cross products
-  and outer products are expanded; the state is kept in a tuple of scalars inside the step loop, so
-  the loop allocates nothing;
-- the balls' FL⁻ is block diagonal in $z = (x_{k+1}, \\sigma_k)$: its x-part $m(x_{k+1} - x_k)/h$
-  is linear, so the increment $\\Delta x = (h/m)p^-_x$ is solved in closed form (what Newton on the
-  full 5×5 system does in its first iteration anyway) and Newton runs on the 3×3 σ-part only;
-- the unknowns are increments (σ for the balls, $d = q_{k+1} - q_k$ for the oscillator, Δx), and
-  FL⁺ is evaluated from the increment itself rather than from the rounded difference
-  $x_{k+1} - x_k$: every term of the residual is then O(h) and its round-off that of the increment,
-  not that of $q_k$. This is the same map in exact arithmetic; in floating point it keeps the
-  trajectory within ~1e-14 of a long-double run of the same scheme over 1000 steps at h = 0.01
-  (numpy_gni, which solves for $q_{k+1}$ and differences it, drifts by ~4e-13);
-- divisions by h, m and the inertia are kept as divisions outside Newton's update: replacing them
-  by products with precomputed reciprocals (1/h is not exact) biases every step the same way and
-  was measured to make the drift from gnipy ~1e-13 instead of ~1e-14, for at most ~10% of
-  speed (within the timing noise of the 2-core test machine);
-- Newton's method on $FL^-(b_k, z) = p^-_k$ uses the analytic Jacobian (numpy_gni's
-  `legendre_minus_jacobian`: $I + \\tfrac12(\\hat\\sigma I - \\widehat{I\\sigma}) +
-  \\tfrac14((\\sigma^TI\\sigma)E + 2\\sigma\\sigma^TI)$ for the balls, $E + \\tfrac{h^2}{4}\\nabla^2V$ for
-  the oscillator, both multiplied by h together with the residual) and a hand-written 3×3 Gaussian
-  elimination with partial pivoting, from numpy_gni's (and gnipy's) first guess
-  $z_0 = (x_k + h\\dot{\\bar x}_k, h\\bar\\xi_k)$: $\\sigma_0 = h\\bar\\xi_k$ for the balls,
-  $d_0 = h\\bar v_k$ (i.e. $q_k + h\\bar v_k$) for the oscillator.
+- **The unknown is the step's mean velocity**: $\\xi = \\sigma/h$ for the balls (σ the Cayley
+  coordinate of the rotation), $v = (q_{k+1} - q_k)/h$ for the oscillator; the residual is
+  $F = FL^- - p^-$ itself, $\\mathbb{G}\\xi + O(h) - p^-$: its two big terms are subtracted first
+  (`(M0 - pm2)`, exact when within a factor 2) and the O(h) terms added after, and the new
+  position is $x_k + h\\xi$, so the round-off is that of the increment, not of $x_k$ (as in the
+  first version, which solved for the increment itself).
+- **FL⁺ from the identity FL⁺ = FL⁻ − (FL⁻ − FL⁺)**: at the solution FL⁻ = p⁻, so
+  $p^+_{k+1} = p^- - h\\,\\xi\\times I\\xi$ (balls) and $p^- - h\\nabla V(\\bar q)$ (oscillator), and
+  the balls' x-part is simply $p^+_x = p^-_x$ (their l_d is quadratic in Δx). The same map in
+  exact arithmetic, but a Newton error e of ξ enters p⁺ as O(|ξ|e) instead of O(e/h) (FL⁺
+  evaluated directly amplifies the residual by 1/h): the reason why Newton may stop earlier. No
+  division by h is left in the step.
+- **The gyroscopic term in Euler's form**: with I diagonal, $\\xi\\times I\\xi = ((I_3 - I_2)\\xi_1\\xi_2,
+  (I_1 - I_3)\\xi_0\\xi_2, (I_2 - I_1)\\xi_0\\xi_1)$, and the Jacobian's skew part
+  $\\tfrac h2(\\hat\\xi I - \\widehat{I\\xi})$ has the six entries $\\tfrac h2(I_3 - I_2)\\xi_2$, ...:
+  two products per entry instead of four, and no cancellation.
+- **Residual and Jacobian fused** (`_ball_fj`, `_osc_fj`): they share Iξ, ξ·Iξ, (h²/4)ξ, the
+  mid-point and its squares; $J = I + \\tfrac h2(\\hat\\xi I - \\widehat{I\\xi}) + \\tfrac{h^2}{4}((\\xi\\cdot
+  I\\xi)E + 2\\xi(I\\xi)^T)$ (balls), $E + \\tfrac{h^2}{4}\\nabla^2V(\\bar q)$ (oscillator).
+- **Closed-form solves**: Cramer's rule for the balls' 3×3 (the adjugate times one reciprocal of
+  det J: J = I + O(h) is far from singular, no pivoting needed, and the cofactors do not wait for
+  one another as elimination's pivots do); the oscillator's y-equation is linear (V is ½y² in y)
+  and solved in closed form, its (x, z) part is a 2×2 inverted by its adjugate.
+- **Projectors in closed form**: the rolling ball's μ is constant, so $C = \\mu\\mathbb{G}^{-1}\\mu^T$
+  is diagonal and λ is one quotient per component, $\\lambda_0 = (I_2(p_0 - \\Pi_0) - mr\\,p_3)/(I_2 +
+  mr^2)$ (one division instead of four); the Chaplygin sphere's 2×2 C(R) is inverted by its
+  adjugate; the oscillator's C = 1 + y² is a scalar.
+- **The Cayley map applied without forming cay(σ)**: $R\\,\\mathrm{cay}(\\sigma) = R + \\alpha(A +
+  \\tfrac12 A\\hat\\sigma)$ with the rows $A_i = R_i\\times\\sigma$ (Chaplygin sphere, body frame),
+  $\\mathrm{cay}(\\sigma)R = R + \\alpha(B + \\tfrac12\\hat\\sigma B)$ with the columns $B_j = \\sigma\\times
+  R_{:j}$ (rolling ball, space frame), $\\alpha = 4/(4 + |\\sigma|^2)$: the division overlaps the
+  cross products, which shortens the Chaplygin sphere's dependency chain (its R enters the next
+  projector); measured faster than cay(σ) and a 3×3 product for both balls.
+- **Divisions**: every division that rounds a *result* stays a division (by m, by I in the
+  Chaplygin projector, by the projectors' determinants, by $1 + h^2/4$ and $4 + |\\sigma|^2$): a
+  product with a precomputed reciprocal rounds the same way at every step, a bias that adds up (the
+  first version measured ~1e-13 instead of ~1e-14 drift over 1000 steps from 1/h; reciprocals of I
+  in the Chaplygin projector would gain ~4%, within the noise, for no measured loss of accuracy).
+  Reciprocals are used only where the rounding is corrected later: the first guess
+  ($\\bar\\xi = \\bar p_\\omega/I$), the predictor sweeps (Newton follows) and Newton's update (one
+  reciprocal of det: the increment is ~1e-9 at the last iteration).
+- **Inlined by Numba** (`inline="always"` on the step's pieces): LLVM's inliner leaves a function
+  as large as the step or its Newton solve as a call (arguments through the stack, the loop
+  invariants h/2, (h/2)(I3 − I2), 1/I recomputed each step); inlined, the step loop is one
+  function (measured ~3-4% faster).
+- **No allocation**: the state is a tuple of scalars inside the step loop, 3×3 matrices are nine
+  scalars, cross products are written out.
+- **IEEE arithmetic**: `fastmath=False` (no reassociation, no FMA contraction); every sum is
+  evaluated in the order written.
 
-Newton's stopping rule: iterate $z \\leftarrow z + \\delta$ until the update's max-norm satisfies
-$\\|\\delta\\|_\\infty \\le 10^{-14}\\max(1, \\|z\\|_\\infty)$ (`NEWTON_TOL`, with z = σ for the balls and
-$z = q_{k+1} = q_k + d$ for the oscillator), at most 20 iterations
-(`NEWTON_MAXITER`). A step whose Newton iteration has not met the test after 20 iterations (or
-produced a non-finite value) returns NaN for the whole state, which then stays NaN: a failure is
-never silent. At h = 0.01 Newton takes 2-3 iterations per step.
+The iteration (issue 35). Three solvers were written and timed for each case (`SOLVERS`; all are
+available through the general kernels' `solver` argument and :func:`count_iterations`):
+
+- `"newton"`: full Newton from gnipy's first guess ($\\xi_0 = \\bar\\xi_k$, $v_0 = \\bar v_k$), the
+  Jacobian refreshed at every iterate;
+- `"chord"`: the Jacobian frozen at the first guess (gnipy's phase 1), its inverse formed once;
+- `"predicted-newton"`: `PREDICTOR_SWEEPS` fixed-point sweeps $\\xi \\leftarrow I^{-1}(p^- - \\tfrac h2
+  \\xi\\times I\\xi - \\tfrac{h^2}{4}\\xi(\\xi\\cdot I\\xi))$ (oscillator: $v \\leftarrow p^- - \\tfrac h2
+  \\nabla V(q_k + \\tfrac h2 v)$) from the same guess, each as cheap as a residual and contracting by
+  ~h|ξ|, then Newton.
+
+Stopping rules. Newton (both variants) stops at an increment $\\|\\delta\\|_\\infty \\le
+10^{-8}\\max(1, \\|z\\|_\\infty)$ (`NEWTON_TOL`, z = ξ or v): Newton converges quadratically, so the
+error left after that update is $\\approx K\\|\\delta\\|^2$, $K = \\tfrac12\\|J^{-1}\\|\\,\\|F''\\|$ at most
+~1e-2 here ($F'' = O(h)$ for the balls, $O(h^2)$ for the oscillator): $\\le 10^{-18}$, below the
+round-off of z (ε|z| ≈ 1e-16). The chord iteration converges linearly; with the contraction θ
+estimated from two consecutive increments it stops when Hairer–Wanner's estimate of the error
+left, $\\theta\\|\\delta\\|/(1 - \\theta)$, is $\\le 10^{-17}\\max(1, \\|z\\|)$ (`CHORD_TOL`; at least two
+iterations, or a zero increment). At most `NEWTON_MAXITER` = 20 iterations; a step that has not met
+its test (or produced a non-finite value) returns NaN for the whole state, which then stays NaN: a
+failure is never silent. All three solvers and the first version agree to ≤ 7e-15 (relative) over
+1000 steps, and the case's solver (`CASE_SOLVER`: the fastest, see the table; `EX2_SOLVER`,
+`OSC_SOLVER`, `CHAPLYGIN_SOLVER`) is within ~2e-15 of the long-double run after 1000 steps (the first
+version: ~4e-15); over 20,000 steps all of them, the first version included, drift from it alike
+(the rolling ball's trajectory amplifies round-off to ~1e-11, the others stay below ~3e-14).
 
 States (flat float64 vectors, the integrator state, not the reported node):
 
@@ -54,21 +129,25 @@ API:
 
 - `run_rolling_ball_ex2(state0, h, steps)`, `run_contact_oscillator(state0, h, steps)`,
   `run_chaplygin_sphere(state0, h, steps)` -> the final state (one trajectory; the whole loop is
-  compiled);
+  compiled); the first version: the same names with `_v1`;
 - `run_rolling_ball_ex2_batch(states0, h, steps)` etc. -> the final states (B, m): `numba.prange`
   over the trajectories (`parallel=True`, all cores);
-- the general kernels `run_ball(state0, h, steps, params, chaplygin)` /
-  `run_ball_batch(...)` (params `(m, r, I1, I2, I3, Omega)`) and
-  `run_oscillator(state0, h, steps, eps)` / `run_oscillator_batch(...)`;
+- the general kernels `run_ball(state0, h, steps, params, chaplygin, solver=-1)` /
+  `run_ball_batch(...)` (params `(m, r, I1, I2, I3, Omega)`; solver: a value of `SOLVERS`, by
+  default the case's) and `run_oscillator(state0, h, steps, eps, solver=OSC_SOLVER)` /
+  `run_oscillator_batch(...)`;
 - `CASES[name]` (names as gnipy's models: "rolling-ball-ex2", "contact-oscillator",
   "chaplygin-sphere") -> a :class:`Case` with `initial_state()`, `run(state0, h, steps)`,
   `run_batch(states0, h, steps)`, `observe(state)` (`dict(q, v, p, R)` as numpy_gni's observe:
-  the reported node $\\bar v$, $\\bar p$), and `numpy_case`/`method` (numpy_gni's name and method).
+  the reported node $\\bar v$, $\\bar p$), and `numpy_case`/`method` (numpy_gni's name and method);
+  `LEGACY_CASES[name]`: the same with the first version's kernels;
+- `count_iterations(name, h, steps, solver=None, legacy=False)` -> (the mean number of Newton or
+  chord iterations per step, the final state).
 
 Parameters and initial conditions are copied from numpy_gni (so from gnipy's models). All
-functions are compiled with `@numba.njit(cache=True, fastmath=False, error_model="numpy")`: IEEE
-arithmetic, no reassociation or FMA contraction. Over 1000 steps at h = 0.01 the final nodes agree
-with gnipy's to ~1e-14 and with numpy_gni's to ~1e-12 (relative; numpy_gni's own round-off).
+functions are compiled with `@numba.njit(cache=True, fastmath=False, error_model="numpy")`.
+Over 1000 steps at h = 0.01 the final nodes agree with gnipy's to ≤ 2e-14 and with numpy_gni's to
+≤ 9e-13 (numpy_gni's own round-off: SciPy's `root` stops at a relative tolerance of 1e-12).
 """
 
 from __future__ import annotations
@@ -80,27 +159,62 @@ import numpy as np
 
 __all__ = [
     "CASES",
+    "CASE_SOLVER",
     "CHAPLYGIN_PARAMS",
+    "CHAPLYGIN_SOLVER",
+    "CHORD_TOL",
     "EX2_PARAMS",
+    "EX2_SOLVER",
+    "LEGACY_CASES",
     "NEWTON_MAXITER",
     "NEWTON_TOL",
+    "NEWTON_TOL_V1",
     "OSCILLATOR_EPS",
+    "OSC_SOLVER",
+    "PREDICTOR_SWEEPS",
+    "SOLVERS",
     "Case",
+    "count_iterations",
     "get_case",
     "run_ball",
     "run_ball_batch",
+    "run_ball_batch_v1",
+    "run_ball_v1",
     "run_chaplygin_sphere",
     "run_chaplygin_sphere_batch",
+    "run_chaplygin_sphere_batch_v1",
+    "run_chaplygin_sphere_v1",
     "run_contact_oscillator",
     "run_contact_oscillator_batch",
+    "run_contact_oscillator_batch_v1",
+    "run_contact_oscillator_v1",
     "run_oscillator",
     "run_oscillator_batch",
+    "run_oscillator_batch_v1",
+    "run_oscillator_v1",
     "run_rolling_ball_ex2",
     "run_rolling_ball_ex2_batch",
+    "run_rolling_ball_ex2_batch_v1",
+    "run_rolling_ball_ex2_v1",
 ]
 
-NEWTON_TOL = 1e-14  # stop when max|δ| <= NEWTON_TOL * max(1, max|z|)
+#: Newton (both variants) stops when max|δ| <= NEWTON_TOL * max(1, max|z|) (z = ξ or v)
+NEWTON_TOL = 1e-8
+#: the chord iteration stops when θ max|δ| / (1 − θ) <= CHORD_TOL * max(1, max|z|)
+CHORD_TOL = 1e-17
 NEWTON_MAXITER = 20
+#: the first version's test: max|δ| <= NEWTON_TOL_V1 * max(1, max|z|) (z = σ, or q_{k+1})
+NEWTON_TOL_V1 = 1e-14
+
+#: the solvers (the `solver` argument of the general kernels)
+NEWTON, CHORD, PREDICTED = 0, 1, 2
+SOLVERS = {"newton": NEWTON, "chord": CHORD, "predicted-newton": PREDICTED}
+#: fixed-point sweeps before Newton in the "predicted-newton" solver, (balls, oscillator)
+PREDICTOR_SWEEPS = (2, 2)
+#: each case's solver: the fastest at h = 0.01 (timed, see the module docstring)
+EX2_SOLVER = PREDICTED
+CHAPLYGIN_SOLVER = NEWTON
+OSC_SOLVER = CHORD
 
 #: (m, r, I1, I2, I3, Omega): numpy_gni.RollingBallEx2.PARAMS (gnipy's rolling_ball.example_2())
 EX2_PARAMS = (3.0, 1.0, 1.0, 1.1, 1.2, 0.2)
@@ -110,8 +224,481 @@ CHAPLYGIN_PARAMS = (1.0, 1.0, 0.3, 0.4, 0.5, 0.0)
 OSCILLATOR_EPS = 0.3
 
 _JIT = {"cache": True, "fastmath": False, "error_model": "numpy"}
+#: the step's pieces are inlined by Numba itself: LLVM's inliner leaves a function as big as a step
+#: (or its Newton solve) as a call, which costs the call and the hoisting of the loop invariants
+#: (h/2, the reciprocals of I, ...) out of the step loop (measured: ~3-4% per step)
+_JIT_INLINE = {**_JIT, "inline": "always"}
 _NAN16 = (math.nan,) * 16
 _NAN6 = (math.nan,) * 6
+_BALL_SWEEPS, _OSC_SWEEPS = PREDICTOR_SWEEPS
+
+
+# ---------------------------------------------------------------------------------------------
+# A ball on a table, R^2 x SO(3), trapezoid l_d (rolling ball ex. 2 and the Chaplygin sphere)
+# ---------------------------------------------------------------------------------------------
+#
+# With σ = hξ, the σ-part of FL⁻ = p⁻ (numpy_gni's dcay⁻¹_σᵀ(Iσ/h) = p⁻_ω) reads
+#
+#     F(ξ) = Iξ + (h/2) ξ×Iξ + (h²/4) ξ (ξ·Iξ) − p⁻_ω = 0,
+#
+# and FL⁺ = Iξ − (h/2) ξ×Iξ + (h²/4) ξ (ξ·Iξ) = p⁻_ω − h ξ×Iξ at the solution.
+
+
+@numba.njit(**_JIT_INLINE)
+def _ball_f(k0, k1, k2, pm2, pm3, pm4, c2, I1, I2, I3, a, b, c):
+    """The residual F(ξ) alone (chord iterations, predictor sweeps): (F0, F1, F2).
+
+    a, b, c = (h/2)(I3 − I2), (h/2)(I1 − I3), (h/2)(I2 − I1): (h/2)ξ×Iξ = (a ξ1ξ2, b ξ0ξ2, c ξ0ξ1).
+    (M − p⁻) first: the two big terms cancel exactly when within a factor 2; then the O(h) terms.
+    """
+    M0, M1, M2 = I1 * k0, I2 * k1, I3 * k2
+    sM = k0 * M0 + k1 * M1 + k2 * M2
+    return (
+        (M0 - pm2) + a * (k1 * k2) + (c2 * k0) * sM,
+        (M1 - pm3) + b * (k0 * k2) + (c2 * k1) * sM,
+        (M2 - pm4) + c * (k0 * k1) + (c2 * k2) * sM,
+    )
+
+
+@numba.njit(**_JIT_INLINE)
+def _ball_fj(k0, k1, k2, pm2, pm3, pm4, c2, I1, I2, I3, a, b, c):
+    """F(ξ) and its Jacobian, fused (they share Iξ, ξ·Iξ, (h²/4)ξ): (F0, F1, F2, J00, ..., J22).
+
+    J = I + (h/2)(ξ̂I − (Iξ)^) + (h²/4)((ξ·Iξ)E + 2ξ(Iξ)ᵀ); the skew part is, in Euler's form,
+    [[0, a ξ2, a ξ1], [b ξ2, 0, b ξ0], [c ξ1, c ξ0, 0]].
+    """
+    M0, M1, M2 = I1 * k0, I2 * k1, I3 * k2
+    sM = k0 * M0 + k1 * M1 + k2 * M2
+    u0, u1, u2 = c2 * k0, c2 * k1, c2 * k2
+    q = c2 * sM
+    t0, t1, t2 = 2.0 * u0, 2.0 * u1, 2.0 * u2
+    return (
+        (M0 - pm2) + a * (k1 * k2) + u0 * sM,
+        (M1 - pm3) + b * (k0 * k2) + u1 * sM,
+        (M2 - pm4) + c * (k0 * k1) + u2 * sM,
+        (I1 + t0 * M0) + q, a * k2 + t0 * M1, a * k1 + t0 * M2,
+        b * k2 + t1 * M0, (I2 + t1 * M1) + q, b * k0 + t1 * M2,
+        c * k1 + t2 * M0, c * k0 + t2 * M1, (I3 + t2 * M2) + q,
+    )  # fmt: skip
+
+
+@numba.njit(**_JIT_INLINE)
+def _newton_update3(F0, F1, F2, J00, J01, J02, J10, J11, J12, J20, J21, J22):
+    """δ = −J⁻¹F by Cramer's rule: the adjugate (cofactors) times one reciprocal of det J."""
+    C00 = J11 * J22 - J12 * J21
+    C01 = J12 * J20 - J10 * J22
+    C02 = J10 * J21 - J11 * J20
+    C10 = J02 * J21 - J01 * J22
+    C11 = J00 * J22 - J02 * J20
+    C12 = J01 * J20 - J00 * J21
+    C20 = J01 * J12 - J02 * J11
+    C21 = J02 * J10 - J00 * J12
+    C22 = J00 * J11 - J01 * J10
+    nid = -1.0 / (J00 * C00 + J01 * C01 + J02 * C02)
+    return (
+        (C00 * F0 + C10 * F1 + C20 * F2) * nid,
+        (C01 * F0 + C11 * F1 + C21 * F2) * nid,
+        (C02 * F0 + C12 * F1 + C22 * F2) * nid,
+    )
+
+
+@numba.njit(**_JIT_INLINE)
+def _ball_solve(pm2, pm3, pm4, pb2, pb3, pb4, h, I1, I2, I3, solver):
+    """Solve F(ξ) = 0 from ξ̄ = p̄_ω/I: (ξ0, ξ1, ξ2, iterations, ok)."""
+    c2 = 0.25 * h * h
+    c1 = 0.5 * h
+    a, b, c = c1 * (I3 - I2), c1 * (I1 - I3), c1 * (I2 - I1)
+    r1, r2, r3 = 1.0 / I1, 1.0 / I2, 1.0 / I3  # guesses only: Newton corrects their rounding
+    k0, k1, k2 = pb2 * r1, pb3 * r2, pb4 * r3
+    if solver == PREDICTED:
+        for _ in range(_BALL_SWEEPS):
+            M0, M1, M2 = I1 * k0, I2 * k1, I3 * k2
+            sM = k0 * M0 + k1 * M1 + k2 * M2
+            n0 = (pm2 - a * (k1 * k2) - (c2 * k0) * sM) * r1
+            n1 = (pm3 - b * (k0 * k2) - (c2 * k1) * sM) * r2
+            n2 = (pm4 - c * (k0 * k1) - (c2 * k2) * sM) * r3
+            k0, k1, k2 = n0, n1, n2
+    if solver == CHORD:
+        F0, F1, F2, J00, J01, J02, J10, J11, J12, J20, J21, J22 = _ball_fj(
+            k0, k1, k2, pm2, pm3, pm4, c2, I1, I2, I3, a, b, c
+        )
+        # J(ξ₀)⁻¹ = adj(J)/det once; then each iteration is a residual and a 3×3 product
+        C00 = J11 * J22 - J12 * J21
+        C01 = J12 * J20 - J10 * J22
+        C02 = J10 * J21 - J11 * J20
+        nid = -1.0 / (J00 * C00 + J01 * C01 + J02 * C02)
+        A00, A01, A02 = C00 * nid, (J02 * J21 - J01 * J22) * nid, (J01 * J12 - J02 * J11) * nid
+        A10, A11, A12 = C01 * nid, (J00 * J22 - J02 * J20) * nid, (J02 * J10 - J00 * J12) * nid
+        A20, A21, A22 = C02 * nid, (J01 * J20 - J00 * J21) * nid, (J00 * J11 - J01 * J10) * nid
+        prev = math.inf
+        for it in range(1, NEWTON_MAXITER + 1):
+            if it > 1:
+                F0, F1, F2 = _ball_f(k0, k1, k2, pm2, pm3, pm4, c2, I1, I2, I3, a, b, c)
+            d0 = A00 * F0 + A01 * F1 + A02 * F2
+            d1 = A10 * F0 + A11 * F1 + A12 * F2
+            d2 = A20 * F0 + A21 * F1 + A22 * F2
+            k0 += d0
+            k1 += d1
+            k2 += d2
+            size = max(abs(d0), abs(d1), abs(d2))
+            th = size / prev
+            if size == 0.0 or (
+                it > 1 and th < 0.5 and th * size <= CHORD_TOL * (1.0 - th) * max(1.0, abs(k0), abs(k1), abs(k2))
+            ):
+                return k0, k1, k2, it, True
+            prev = size
+        return k0, k1, k2, NEWTON_MAXITER, False
+    for it in range(1, NEWTON_MAXITER + 1):
+        F0, F1, F2, J00, J01, J02, J10, J11, J12, J20, J21, J22 = _ball_fj(
+            k0, k1, k2, pm2, pm3, pm4, c2, I1, I2, I3, a, b, c
+        )
+        d0, d1, d2 = _newton_update3(F0, F1, F2, J00, J01, J02, J10, J11, J12, J20, J21, J22)
+        k0 += d0
+        k1 += d1
+        k2 += d2
+        if max(abs(d0), abs(d1), abs(d2)) <= NEWTON_TOL * max(1.0, abs(k0), abs(k1), abs(k2)):
+            return k0, k1, k2, it, True
+    return k0, k1, k2, NEWTON_MAXITER, False
+
+
+@numba.njit(**_JIT_INLINE)
+def _ball_step(s, h, params, chaplygin, solver):
+    """One GNI (trapezoid, Cayley) step of a ball: (16-tuple, iterations); NaNs if Newton fails.
+
+    The reflection (Comb) p⁻ = p⁺ − 2μᵀλ, p̄ = p⁺ − μᵀλ, λ = C⁻¹μG⁻¹(p⁺ − Π), μ = [[1, 0, a],
+    [0, 1, c]], G = diag(m, m, I), Π = (−mΩy, mΩx, 0, 0, 0): the rolling ball has a = (0, −r, 0),
+    c = (r, 0, 0), so C is diagonal and λ_i is one quotient; the Chaplygin sphere has
+    a = −r R[1, :], c = r R[0, :] and a 2×2 C(R).
+    """
+    m, r, I1, I2, I3, W = params
+    x, y = s[0], s[1]
+    p0, p1, p2, p3, p4 = s[11], s[12], s[13], s[14], s[15]
+    mW = m * W
+    if chaplygin:
+        # C = μG⁻¹μᵀ = 1/m + r²[[R1·R1/I, −R1·R0/I], [., R0·R0/I]]; μG⁻¹(p⁺ − Π) likewise
+        e0, e1, e2 = s[2] / I1, s[3] / I2, s[4] / I3  # R[0, :]/I
+        f0, f1, f2 = s[5] / I1, s[6] / I2, s[7] / I3  # R[1, :]/I
+        rr = r * r
+        C00 = 1.0 / m + rr * (s[5] * f0 + s[6] * f1 + s[7] * f2)
+        C11 = 1.0 / m + rr * (s[2] * e0 + s[3] * e1 + s[4] * e2)
+        C01 = -rr * (s[5] * e0 + s[6] * e1 + s[7] * e2)
+        g0 = (p0 + mW * y) / m - r * (f0 * p2 + f1 * p3 + f2 * p4)
+        g1 = (p1 - mW * x) / m + r * (e0 * p2 + e1 * p3 + e2 * p4)
+        det = C00 * C11 - C01 * C01
+        l0 = (C11 * g0 - C01 * g1) / det
+        l1 = (C00 * g1 - C01 * g0) / det
+        # μᵀλ, ω-part: a l0 + c l1 = r(R[0, :] l1 − R[1, :] l0)
+        q2 = r * (s[2] * l1 - s[5] * l0)
+        q3 = r * (s[3] * l1 - s[6] * l0)
+        q4 = r * (s[4] * l1 - s[7] * l0)
+    else:
+        # C = diag(1/m + r²/I2, 1/m + r²/I1): λ_i = (μG⁻¹(p⁺ − Π))_i / C_ii, times m I_i above and below
+        mr = m * r
+        l0 = (I2 * (p0 + mW * y) - mr * p3) / (I2 + mr * r)
+        l1 = (I1 * (p1 - mW * x) + mr * p2) / (I1 + mr * r)
+        q2, q3, q4 = r * l1, -r * l0, 0.0
+    pm0, pm1 = p0 - 2.0 * l0, p1 - 2.0 * l1
+    pm2, pm3, pm4 = p2 - 2.0 * q2, p3 - 2.0 * q3, p4 - 2.0 * q4
+    k0, k1, k2, its, ok = _ball_solve(pm2, pm3, pm4, p2 - q2, p3 - q3, p4 - q4, h, I1, I2, I3, solver)
+    if not ok:  # also when an update is NaN (comparisons with NaN are false)
+        return _NAN16, its
+    # σ = hξ; cay(σ) = E + α(σ̂ + ½σ̂²), α = 4/(4 + |σ|²), applied to R without forming it: the
+    # division overlaps the cross products (measured faster than forming cay(σ) and a 3×3 product,
+    # though a few more operations: shorter dependency chain)
+    s0, s1, s2 = h * k0, h * k1, h * k2
+    al = 4.0 / (4.0 + (s0 * s0 + s1 * s1 + s2 * s2))
+    z0, z1, z2 = 0.5 * s0, 0.5 * s1, 0.5 * s2
+    R00, R01, R02, R10, R11, R12, R20, R21, R22 = s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10]
+    if chaplygin:  # R_{k+1} = R cay(σ): row i += α(A + A×σ/2), A = R_i×σ (R_i σ̂ = R_i×σ)
+        A0, A1, A2 = R01 * s2 - R02 * s1, R02 * s0 - R00 * s2, R00 * s1 - R01 * s0
+        B0, B1, B2 = R11 * s2 - R12 * s1, R12 * s0 - R10 * s2, R10 * s1 - R11 * s0
+        C0, C1, C2 = R21 * s2 - R22 * s1, R22 * s0 - R20 * s2, R20 * s1 - R21 * s0
+        N00 = R00 + al * (A0 + (A1 * z2 - A2 * z1))
+        N01 = R01 + al * (A1 + (A2 * z0 - A0 * z2))
+        N02 = R02 + al * (A2 + (A0 * z1 - A1 * z0))
+        N10 = R10 + al * (B0 + (B1 * z2 - B2 * z1))
+        N11 = R11 + al * (B1 + (B2 * z0 - B0 * z2))
+        N12 = R12 + al * (B2 + (B0 * z1 - B1 * z0))
+        N20 = R20 + al * (C0 + (C1 * z2 - C2 * z1))
+        N21 = R21 + al * (C1 + (C2 * z0 - C0 * z2))
+        N22 = R22 + al * (C2 + (C0 * z1 - C1 * z0))
+    else:  # R_{k+1} = cay(σ) R: column j += α(B + σ×B/2), B = σ×R_{:j}
+        A0, A1, A2 = s1 * R20 - s2 * R10, s2 * R00 - s0 * R20, s0 * R10 - s1 * R00
+        B0, B1, B2 = s1 * R21 - s2 * R11, s2 * R01 - s0 * R21, s0 * R11 - s1 * R01
+        C0, C1, C2 = s1 * R22 - s2 * R12, s2 * R02 - s0 * R22, s0 * R12 - s1 * R02
+        N00 = R00 + al * (A0 + (z1 * A2 - z2 * A1))
+        N10 = R10 + al * (A1 + (z2 * A0 - z0 * A2))
+        N20 = R20 + al * (A2 + (z0 * A1 - z1 * A0))
+        N01 = R01 + al * (B0 + (z1 * B2 - z2 * B1))
+        N11 = R11 + al * (B1 + (z2 * B0 - z0 * B2))
+        N21 = R21 + al * (B2 + (z0 * B1 - z1 * B0))
+        N02 = R02 + al * (C0 + (z1 * C2 - z2 * C1))
+        N12 = R12 + al * (C1 + (z2 * C0 - z0 * C2))
+        N22 = R22 + al * (C2 + (z0 * C1 - z1 * C0))
+    # FL⁺: the x-part is m Δx/h = p⁻_x; the ω-part p⁻_ω − h ξ×Iξ (Euler's form, as in F)
+    hd = h * (I3 - I2), h * (I1 - I3), h * (I2 - I1)
+    return (
+        x + h * pm0 / m, y + h * pm1 / m,
+        N00, N01, N02, N10, N11, N12, N20, N21, N22,
+        pm0, pm1,
+        pm2 - hd[0] * (k1 * k2), pm3 - hd[1] * (k0 * k2), pm4 - hd[2] * (k0 * k1),
+    ), its  # fmt: skip
+
+
+@numba.njit(**_JIT)
+def _ball_loop(state0, h, steps, params, chaplygin, solver, out):
+    """`steps` steps from state0 (16,) into out (16,); returns the total number of iterations.
+
+    The state lives in a tuple of scalars: the loop allocates nothing."""
+    s = (
+        state0[0], state0[1], state0[2], state0[3], state0[4], state0[5], state0[6], state0[7],
+        state0[8], state0[9], state0[10], state0[11], state0[12], state0[13], state0[14], state0[15],
+    )  # fmt: skip
+    n = 0
+    for _ in range(steps):
+        s, its = _ball_step(s, h, params, chaplygin, solver)
+        n += its
+    for i in range(16):
+        out[i] = s[i]
+    return n
+
+
+@numba.njit(**_JIT)
+def run_ball(state0, h, steps, params, chaplygin, solver=-1):
+    """`steps` GNI steps of a ball from the flat state0 (16,); returns the final state (16,).
+
+    params = (m, r, I1, I2, I3, Omega); chaplygin: False for the rolling ball (constant μ,
+    R_{k+1} = cay(σ)R_k), True for the Chaplygin sphere (μ(R), R_{k+1} = R_k cay(σ)); solver: one
+    of `SOLVERS`' values (default: `CHAPLYGIN_SOLVER` or `EX2_SOLVER`, as the cases).
+    """
+    if solver < 0:
+        solver = CHAPLYGIN_SOLVER if chaplygin else EX2_SOLVER
+    out = np.empty(16)
+    _ball_loop(state0, h, steps, params, chaplygin, solver, out)
+    return out
+
+
+@numba.njit(parallel=True, **_JIT)
+def run_ball_batch(states0, h, steps, params, chaplygin, solver=-1):
+    """:func:`run_ball` for each row of states0 (B, 16), in parallel over the rows (all cores)."""
+    if solver < 0:
+        solver = CHAPLYGIN_SOLVER if chaplygin else EX2_SOLVER
+    B = states0.shape[0]
+    out = np.empty((B, 16))
+    for b in numba.prange(B):
+        _ball_loop(states0[b], h, steps, params, chaplygin, solver, out[b])
+    return out
+
+
+@numba.njit(**_JIT)
+def _ball_count(state0, h, steps, params, chaplygin, solver):
+    out = np.empty(16)
+    return _ball_loop(state0, h, steps, params, chaplygin, solver, out), out
+
+
+@numba.njit(**_JIT)
+def run_rolling_ball_ex2(state0, h, steps):
+    """The rolling ball, example 2 (gni-trapezoid): final state (16,) after `steps` steps."""
+    out = np.empty(16)
+    _ball_loop(state0, h, steps, EX2_PARAMS, False, EX2_SOLVER, out)
+    return out
+
+
+@numba.njit(parallel=True, **_JIT)
+def run_rolling_ball_ex2_batch(states0, h, steps):
+    """The rolling ball, example 2: final states (B, 16), in parallel over the trajectories."""
+    B = states0.shape[0]
+    out = np.empty((B, 16))
+    for b in numba.prange(B):
+        _ball_loop(states0[b], h, steps, EX2_PARAMS, False, EX2_SOLVER, out[b])
+    return out
+
+
+@numba.njit(**_JIT)
+def run_chaplygin_sphere(state0, h, steps):
+    """The Chaplygin sphere (gni-trapezoid): final state (16,) after `steps` steps."""
+    out = np.empty(16)
+    _ball_loop(state0, h, steps, CHAPLYGIN_PARAMS, True, CHAPLYGIN_SOLVER, out)
+    return out
+
+
+@numba.njit(parallel=True, **_JIT)
+def run_chaplygin_sphere_batch(states0, h, steps):
+    """The Chaplygin sphere: final states (B, 16), in parallel over the trajectories."""
+    B = states0.shape[0]
+    out = np.empty((B, 16))
+    for b in numba.prange(B):
+        _ball_loop(states0[b], h, steps, CHAPLYGIN_PARAMS, True, CHAPLYGIN_SOLVER, out[b])
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# The contact oscillator on R^3, midpoint l_d (gni-midpoint)
+# ---------------------------------------------------------------------------------------------
+#
+# V = ½(|q|² + εx²z²). With v = (q_{k+1} − q_k)/h and the mid-point q̄ = q_k + (h/2)v, FL⁻ = p⁻ is
+#
+#     F(v) = v + (h/2)∇V(q̄) − p⁻ = 0,   J = E + (h²/4)∇²V(q̄),
+#
+# and FL⁺ = v − (h/2)∇V(q̄) = p⁻ − h∇V(q̄) at the solution. ∇V = (x + εxz², y, z + εx²z): the
+# y-equation v_y(1 + h²/4) = p⁻_y − (h/2)y is linear and solved in closed form; (x, z) is a 2×2.
+
+
+@numba.njit(**_JIT_INLINE)
+def _osc_f(x, z, v0, v2, pm0, pm2, hh, eps):
+    """The (x, z) residual alone: (F0, F2)."""
+    mx, mz = x + hh * v0, z + hh * v2
+    return (v0 - pm0) + hh * (mx + eps * mx * (mz * mz)), (v2 - pm2) + hh * (mz + eps * (mx * mx) * mz)
+
+
+@numba.njit(**_JIT_INLINE)
+def _osc_fj(x, z, v0, v2, pm0, pm2, hh, c4, eps):
+    """The (x, z) residual and its 2×2 Jacobian, fused (they share q̄ and its squares):
+    (F0, F2, J00, J02, J22)."""
+    mx, mz = x + hh * v0, z + hh * v2
+    xx, zz = mx * mx, mz * mz
+    return (
+        (v0 - pm0) + hh * (mx + eps * mx * zz),
+        (v2 - pm2) + hh * (mz + eps * xx * mz),
+        1.0 + c4 * (1.0 + eps * zz),
+        c4 * (2.0 * eps * mx * mz),
+        1.0 + c4 * (1.0 + eps * xx),
+    )
+
+
+@numba.njit(**_JIT_INLINE)
+def _osc_solve(x, z, pm0, pm2, pb0, pb2, h, eps, solver):
+    """Solve the (x, z) equations from v̄ (G = E, so v̄ = p̄): (v0, v2, iterations, ok)."""
+    hh = 0.5 * h
+    c4 = 0.25 * h * h
+    v0, v2 = pb0, pb2
+    if solver == PREDICTED:
+        for _ in range(_OSC_SWEEPS):
+            mx, mz = x + hh * v0, z + hh * v2
+            v0, v2 = pm0 - hh * (mx + eps * mx * (mz * mz)), pm2 - hh * (mz + eps * (mx * mx) * mz)
+    if solver == CHORD:
+        F0, F2, J00, J02, J22 = _osc_fj(x, z, v0, v2, pm0, pm2, hh, c4, eps)
+        nid = -1.0 / (J00 * J22 - J02 * J02)  # −J(v₀)⁻¹ = −adj(J)/det, formed once
+        A00, A02, A22 = J22 * nid, -J02 * nid, J00 * nid
+        prev = math.inf
+        for it in range(1, NEWTON_MAXITER + 1):
+            if it > 1:
+                F0, F2 = _osc_f(x, z, v0, v2, pm0, pm2, hh, eps)
+            d0 = A00 * F0 + A02 * F2
+            d2 = A02 * F0 + A22 * F2
+            v0 += d0
+            v2 += d2
+            size = max(abs(d0), abs(d2))
+            th = size / prev
+            if size == 0.0 or (
+                it > 1 and th < 0.5 and th * size <= CHORD_TOL * (1.0 - th) * max(1.0, abs(v0), abs(v2))
+            ):
+                return v0, v2, it, True
+            prev = size
+        return v0, v2, NEWTON_MAXITER, False
+    for it in range(1, NEWTON_MAXITER + 1):
+        F0, F2, J00, J02, J22 = _osc_fj(x, z, v0, v2, pm0, pm2, hh, c4, eps)
+        nid = -1.0 / (J00 * J22 - J02 * J02)
+        d0 = (J22 * F0 - J02 * F2) * nid
+        d2 = (J00 * F2 - J02 * F0) * nid
+        v0 += d0
+        v2 += d2
+        if max(abs(d0), abs(d2)) <= NEWTON_TOL * max(1.0, abs(v0), abs(v2)):
+            return v0, v2, it, True
+    return v0, v2, NEWTON_MAXITER, False
+
+
+@numba.njit(**_JIT_INLINE)
+def _osc_step(s, h, eps, solver):
+    """One GNI (midpoint) step of the contact oscillator: (6-tuple, iterations); NaNs if Newton fails.
+
+    The reflection: μ = (1, 0, y), G = E, Π = 0, C = 1 + y², λ = μp⁺/C, μᵀλ = (λ, 0, yλ).
+    """
+    x, y, z, p0, p1, p2 = s
+    lam = (p0 + y * p2) / (1.0 + y * y)
+    yl = y * lam
+    pm0, pm2 = p0 - 2.0 * lam, p2 - 2.0 * yl
+    hh = 0.5 * h
+    v1 = (p1 - hh * y) / (1.0 + 0.25 * h * h)  # the y-equation, linear (p⁻_y = p⁺_y)
+    v0, v2, its, ok = _osc_solve(x, z, pm0, pm2, p0 - lam, p2 - yl, h, eps, solver)
+    if not ok or not math.isfinite(v1):
+        return _NAN6, its
+    mx, my, mz = x + hh * v0, y + hh * v1, z + hh * v2
+    return (
+        x + h * v0, y + h * v1, z + h * v2,
+        pm0 - h * (mx + eps * mx * (mz * mz)),
+        p1 - h * my,
+        pm2 - h * (mz + eps * (mx * mx) * mz),
+    ), its  # fmt: skip
+
+
+@numba.njit(**_JIT)
+def _osc_loop(state0, h, steps, eps, solver, out):
+    """`steps` steps from state0 (6,) into out (6,); returns the total number of iterations."""
+    s = (state0[0], state0[1], state0[2], state0[3], state0[4], state0[5])
+    n = 0
+    for _ in range(steps):
+        s, its = _osc_step(s, h, eps, solver)
+        n += its
+    for i in range(6):
+        out[i] = s[i]
+    return n
+
+
+@numba.njit(**_JIT)
+def run_oscillator(state0, h, steps, eps, solver=OSC_SOLVER):
+    """`steps` GNI-midpoint steps of the contact oscillator from state0 = (q, p⁺) (6,)."""
+    out = np.empty(6)
+    _osc_loop(state0, h, steps, eps, solver, out)
+    return out
+
+
+@numba.njit(parallel=True, **_JIT)
+def run_oscillator_batch(states0, h, steps, eps, solver=OSC_SOLVER):
+    """:func:`run_oscillator` for each row of states0 (B, 6), in parallel over the rows."""
+    B = states0.shape[0]
+    out = np.empty((B, 6))
+    for b in numba.prange(B):
+        _osc_loop(states0[b], h, steps, eps, solver, out[b])
+    return out
+
+
+@numba.njit(**_JIT)
+def _osc_count(state0, h, steps, eps, solver):
+    out = np.empty(6)
+    return _osc_loop(state0, h, steps, eps, solver, out), out
+
+
+@numba.njit(**_JIT)
+def run_contact_oscillator(state0, h, steps):
+    """The contact oscillator (gni-midpoint, ε = 0.3): final state (6,) after `steps` steps."""
+    out = np.empty(6)
+    _osc_loop(state0, h, steps, OSCILLATOR_EPS, OSC_SOLVER, out)
+    return out
+
+
+@numba.njit(parallel=True, **_JIT)
+def run_contact_oscillator_batch(states0, h, steps):
+    """The contact oscillator: final states (B, 6), in parallel over the trajectories."""
+    B = states0.shape[0]
+    out = np.empty((B, 6))
+    for b in numba.prange(B):
+        _osc_loop(states0[b], h, steps, OSCILLATOR_EPS, OSC_SOLVER, out[b])
+    return out
+
+
+# =============================================================================================
+# The first version (v1), kept unchanged as the benchmark's "old baseline" (issue 35)
+# =============================================================================================
+#
+# Its design: the unknowns are the increments σ (balls) and d = q_{k+1} − q_k (oscillator); FL⁺
+# is evaluated from the increment (M = Iσ/h, d/h); Newton with the analytic Jacobian, solved by
+# the 3×3 Gaussian elimination with partial pivoting below (also for the oscillator's
+# block-diagonal Jacobian), stopping at max|δ| <= 1e-14 max(1, max|z|) (`NEWTON_TOL_V1`), which
+# takes one more iteration than needed (the last one only confirms convergence); the projectors
+# with one division per entry. Its only change: each step also returns its iteration count (for
+# `count_iterations`; an integer sum per step, no measurable cost). The node report
+# (`_ball_reflect`/`ball_observe`, `_osc_reflect`/`oscillator_observe`) is shared by both versions.
 
 
 # ---------------------------------------------------------------------------------------------
@@ -120,7 +707,7 @@ _NAN6 = (math.nan,) * 6
 
 
 @numba.njit(**_JIT)
-def solve3(a00, a01, a02, a10, a11, a12, a20, a21, a22, b0, b1, b2):
+def _solve3_v1(a00, a01, a02, a10, a11, a12, a20, a21, a22, b0, b1, b2):
     """Solve A u = b for a 3×3 A (row-major scalars) by Gaussian elimination with partial pivoting.
 
     The pivots' reciprocals are taken once (3 divisions): this only rounds the Newton update, which
@@ -198,7 +785,7 @@ def _ball_reflect(s, params, chaplygin):
 
 
 @numba.njit(**_JIT)
-def _ball_step(s, h, params, chaplygin):
+def _ball_step_v1(s, h, params, chaplygin):
     """One GNI (trapezoid, Cayley) step of a ball: 16-tuple -> 16-tuple (NaNs if Newton fails)."""
     m, r, I1, I2, I3, W = params
     x, y = s[0], s[1]
@@ -211,7 +798,7 @@ def _ball_step(s, h, params, chaplygin):
     t0, t1, t2 = h * pm2, h * pm3, h * pm4
     s0, s1, s2 = h * rf[7] / I1, h * rf[8] / I2, h * rf[9] / I3
     ok = False
-    for _ in range(NEWTON_MAXITER):
+    for it in range(1, NEWTON_MAXITER + 1):
         M0, M1, M2 = I1 * s0, I2 * s1, I3 * s2
         sM = s0 * M0 + s1 * M1 + s2 * M2
         F0 = M0 + 0.5 * (s1 * M2 - s2 * M1) + 0.25 * s0 * sM - t0
@@ -228,15 +815,15 @@ def _ball_step(s, h, params, chaplygin):
         J20 = 0.5 * (-s1 * I1 + M1) + 0.5 * s2 * M0
         J21 = 0.5 * (s0 * I2 - M0) + 0.5 * s2 * M1
         J22 = I3 + q + 0.5 * s2 * M2
-        d0, d1, d2 = solve3(J00, J01, J02, J10, J11, J12, J20, J21, J22, -F0, -F1, -F2)
+        d0, d1, d2 = _solve3_v1(J00, J01, J02, J10, J11, J12, J20, J21, J22, -F0, -F1, -F2)
         s0 += d0
         s1 += d1
         s2 += d2
-        if max(abs(d0), abs(d1), abs(d2)) <= NEWTON_TOL * max(1.0, abs(s0), abs(s1), abs(s2)):
+        if max(abs(d0), abs(d1), abs(d2)) <= NEWTON_TOL_V1 * max(1.0, abs(s0), abs(s1), abs(s2)):
             ok = True
             break
     if not ok:  # also when an update is NaN (comparisons with NaN are false)
-        return _NAN16
+        return _NAN16, NEWTON_MAXITER
     # cay(σ) = E + α(σ̂ + ½σ̂²), σ̂² = σσᵀ − |σ|²E, α = 4/(4 + |σ|²)
     n2 = s0 * s0 + s1 * s1 + s2 * s2
     al = 4.0 / (4.0 + n2)
@@ -269,42 +856,51 @@ def _ball_step(s, h, params, chaplygin):
         M0 - 0.5 * (s1 * M2 - s2 * M1) + 0.25 * s0 * sM,
         M1 - 0.5 * (s2 * M0 - s0 * M2) + 0.25 * s1 * sM,
         M2 - 0.5 * (s0 * M1 - s1 * M0) + 0.25 * s2 * sM,
-    )  # fmt: skip
+    ), it  # fmt: skip
 
 
 @numba.njit(**_JIT)
-def _ball_loop(state0, h, steps, params, chaplygin, out):
+def _ball_loop_v1(state0, h, steps, params, chaplygin, out):
     """`steps` steps from state0 (16,) into out (16,): the state lives in a tuple of scalars."""
     s = (
         state0[0], state0[1], state0[2], state0[3], state0[4], state0[5], state0[6], state0[7],
         state0[8], state0[9], state0[10], state0[11], state0[12], state0[13], state0[14], state0[15],
     )  # fmt: skip
+    n = 0
     for _ in range(steps):
-        s = _ball_step(s, h, params, chaplygin)
+        s, its = _ball_step_v1(s, h, params, chaplygin)
+        n += its
     for i in range(16):
         out[i] = s[i]
+    return n
 
 
 @numba.njit(**_JIT)
-def run_ball(state0, h, steps, params, chaplygin):
+def run_ball_v1(state0, h, steps, params, chaplygin):
     """`steps` GNI steps of a ball from the flat state0 (16,); returns the final state (16,).
 
     params = (m, r, I1, I2, I3, Omega); chaplygin: False for the rolling ball (constant μ,
     R_{k+1} = cay(σ)R_k), True for the Chaplygin sphere (μ(R), R_{k+1} = R_k cay(σ)).
     """
     out = np.empty(16)
-    _ball_loop(state0, h, steps, params, chaplygin, out)
+    _ball_loop_v1(state0, h, steps, params, chaplygin, out)
     return out
 
 
 @numba.njit(parallel=True, **_JIT)
-def run_ball_batch(states0, h, steps, params, chaplygin):
-    """:func:`run_ball` for each row of states0 (B, 16), in parallel over the rows (all cores)."""
+def run_ball_batch_v1(states0, h, steps, params, chaplygin):
+    """:func:`run_ball_v1` for each row of states0 (B, 16), in parallel over the rows (all cores)."""
     B = states0.shape[0]
     out = np.empty((B, 16))
     for b in numba.prange(B):
-        _ball_loop(states0[b], h, steps, params, chaplygin, out[b])
+        _ball_loop_v1(states0[b], h, steps, params, chaplygin, out[b])
     return out
+
+
+@numba.njit(**_JIT)
+def _ball_count_v1(state0, h, steps, params, chaplygin):
+    out = np.empty(16)
+    return _ball_loop_v1(state0, h, steps, params, chaplygin, out), out
 
 
 @numba.njit(**_JIT)
@@ -322,34 +918,34 @@ def ball_observe(state, params, chaplygin):
 
 
 @numba.njit(**_JIT)
-def run_rolling_ball_ex2(state0, h, steps):
+def run_rolling_ball_ex2_v1(state0, h, steps):
     """The rolling ball, example 2 (gni-trapezoid): final state (16,) after `steps` steps."""
-    return run_ball(state0, h, steps, EX2_PARAMS, False)
+    return run_ball_v1(state0, h, steps, EX2_PARAMS, False)
 
 
 @numba.njit(parallel=True, **_JIT)
-def run_rolling_ball_ex2_batch(states0, h, steps):
+def run_rolling_ball_ex2_batch_v1(states0, h, steps):
     """The rolling ball, example 2: final states (B, 16), in parallel over the trajectories."""
     B = states0.shape[0]
     out = np.empty((B, 16))
     for b in numba.prange(B):
-        _ball_loop(states0[b], h, steps, EX2_PARAMS, False, out[b])
+        _ball_loop_v1(states0[b], h, steps, EX2_PARAMS, False, out[b])
     return out
 
 
 @numba.njit(**_JIT)
-def run_chaplygin_sphere(state0, h, steps):
+def run_chaplygin_sphere_v1(state0, h, steps):
     """The Chaplygin sphere (gni-trapezoid): final state (16,) after `steps` steps."""
-    return run_ball(state0, h, steps, CHAPLYGIN_PARAMS, True)
+    return run_ball_v1(state0, h, steps, CHAPLYGIN_PARAMS, True)
 
 
 @numba.njit(parallel=True, **_JIT)
-def run_chaplygin_sphere_batch(states0, h, steps):
+def run_chaplygin_sphere_batch_v1(states0, h, steps):
     """The Chaplygin sphere: final states (B, 16), in parallel over the trajectories."""
     B = states0.shape[0]
     out = np.empty((B, 16))
     for b in numba.prange(B):
-        _ball_loop(states0[b], h, steps, CHAPLYGIN_PARAMS, True, out[b])
+        _ball_loop_v1(states0[b], h, steps, CHAPLYGIN_PARAMS, True, out[b])
     return out
 
 
@@ -368,7 +964,7 @@ def _osc_reflect(s):
 
 
 @numba.njit(**_JIT)
-def _osc_step(s, h, eps):
+def _osc_step_v1(s, h, eps):
     """One GNI (midpoint) step of the contact oscillator: 6-tuple -> 6-tuple (NaNs if Newton fails).
 
     With V = ½(|q|² + εx²z²) and the unknown increment d = q_{k+1} − q_k:
@@ -384,7 +980,7 @@ def _osc_step(s, h, eps):
     c = 0.5 * h * h
     c4 = 0.25 * h * h
     ok = False
-    for _ in range(NEWTON_MAXITER):
+    for it in range(1, NEWTON_MAXITER + 1):
         mx, my, mz = x + 0.5 * u0, y + 0.5 * u1, z + 0.5 * u2
         F0 = u0 + c * (mx + eps * mx * mz * mz) - t0
         F1 = u1 + c * my - t1
@@ -393,16 +989,16 @@ def _osc_step(s, h, eps):
         J02 = c4 * (2.0 * eps * mx * mz)
         J11 = 1.0 + c4
         J22 = 1.0 + c4 * (1.0 + eps * mx * mx)
-        d0, d1, d2 = solve3(J00, 0.0, J02, 0.0, J11, 0.0, J02, 0.0, J22, -F0, -F1, -F2)
+        d0, d1, d2 = _solve3_v1(J00, 0.0, J02, 0.0, J11, 0.0, J02, 0.0, J22, -F0, -F1, -F2)
         u0 += d0
         u1 += d1
         u2 += d2
         # z = q_{k+1} = q_k + d
-        if max(abs(d0), abs(d1), abs(d2)) <= NEWTON_TOL * max(1.0, abs(x + u0), abs(y + u1), abs(z + u2)):
+        if max(abs(d0), abs(d1), abs(d2)) <= NEWTON_TOL_V1 * max(1.0, abs(x + u0), abs(y + u1), abs(z + u2)):
             ok = True
             break
     if not ok:
-        return _NAN6
+        return _NAN6, NEWTON_MAXITER
     mx, my, mz = x + 0.5 * u0, y + 0.5 * u1, z + 0.5 * u2
     hh = 0.5 * h
     return (
@@ -410,34 +1006,43 @@ def _osc_step(s, h, eps):
         u0 / h - hh * (mx + eps * mx * mz * mz),
         u1 / h - hh * my,
         u2 / h - hh * (mz + eps * mx * mx * mz),
-    )  # fmt: skip
+    ), it  # fmt: skip
 
 
 @numba.njit(**_JIT)
-def _osc_loop(state0, h, steps, eps, out):
+def _osc_loop_v1(state0, h, steps, eps, out):
     s = (state0[0], state0[1], state0[2], state0[3], state0[4], state0[5])
+    n = 0
     for _ in range(steps):
-        s = _osc_step(s, h, eps)
+        s, its = _osc_step_v1(s, h, eps)
+        n += its
     for i in range(6):
         out[i] = s[i]
+    return n
 
 
 @numba.njit(**_JIT)
-def run_oscillator(state0, h, steps, eps):
+def run_oscillator_v1(state0, h, steps, eps):
     """`steps` GNI-midpoint steps of the contact oscillator from state0 = (q, p⁺) (6,)."""
     out = np.empty(6)
-    _osc_loop(state0, h, steps, eps, out)
+    _osc_loop_v1(state0, h, steps, eps, out)
     return out
 
 
 @numba.njit(parallel=True, **_JIT)
-def run_oscillator_batch(states0, h, steps, eps):
-    """:func:`run_oscillator` for each row of states0 (B, 6), in parallel over the rows."""
+def run_oscillator_batch_v1(states0, h, steps, eps):
+    """:func:`run_oscillator_v1` for each row of states0 (B, 6), in parallel over the rows."""
     B = states0.shape[0]
     out = np.empty((B, 6))
     for b in numba.prange(B):
-        _osc_loop(states0[b], h, steps, eps, out[b])
+        _osc_loop_v1(states0[b], h, steps, eps, out[b])
     return out
+
+
+@numba.njit(**_JIT)
+def _osc_count_v1(state0, h, steps, eps):
+    out = np.empty(6)
+    return _osc_loop_v1(state0, h, steps, eps, out), out
 
 
 @numba.njit(**_JIT)
@@ -449,18 +1054,18 @@ def oscillator_observe(state):
 
 
 @numba.njit(**_JIT)
-def run_contact_oscillator(state0, h, steps):
+def run_contact_oscillator_v1(state0, h, steps):
     """The contact oscillator (gni-midpoint, ε = 0.3): final state (6,) after `steps` steps."""
-    return run_oscillator(state0, h, steps, OSCILLATOR_EPS)
+    return run_oscillator_v1(state0, h, steps, OSCILLATOR_EPS)
 
 
 @numba.njit(parallel=True, **_JIT)
-def run_contact_oscillator_batch(states0, h, steps):
+def run_contact_oscillator_batch_v1(states0, h, steps):
     """The contact oscillator: final states (B, 6), in parallel over the trajectories."""
     B = states0.shape[0]
     out = np.empty((B, 6))
     for b in numba.prange(B):
-        _osc_loop(states0[b], h, steps, OSCILLATOR_EPS, out[b])
+        _osc_loop_v1(states0[b], h, steps, OSCILLATOR_EPS, out[b])
     return out
 
 
@@ -475,14 +1080,16 @@ class Case:
     Attributes:
         name: gnipy's model name; numpy_case, method: numpy_gni's case name and the gnipy method.
         size: the length of the flat state.
+        version: "v2" (the current kernels) or "v1" (the first version, `LEGACY_CASES`).
     """
 
-    def __init__(self, name, numpy_case, method, size, state0, run, run_batch, observe):
+    def __init__(self, name, numpy_case, method, size, state0, run, run_batch, observe, version="v2"):
         self.name, self.numpy_case, self.method, self.size = name, numpy_case, method, size
         self._state0, self._run, self._run_batch, self._observe = state0, run, run_batch, observe
+        self.version = version
 
     def __repr__(self):
-        return f"numba_gni.Case({self.name!r}, {self.method!r})"
+        return f"numba_gni.Case({self.name!r}, {self.method!r}, {self.version!r})"
 
     def initial_state(self):
         """The flat float64 start state (numpy_gni's initial_state(), flattened; p⁺₀ = G v₀)."""
@@ -523,28 +1130,88 @@ def _osc_observe(state):
     return {"q": q, "v": v, "p": p, "R": None}
 
 
+_EX2_STATE0 = _ball_state0(EX2_PARAMS, (1.0, 0.0), (0.0, 0.4, -0.2, 0.0, 0.4))
+_OSC_STATE0 = np.array([1.0, 1.0, 1.0, -1.0, 1.0, 1.0])  # (q0, p⁺0 = v0)
+_CHAPLYGIN_STATE0 = _ball_state0(CHAPLYGIN_PARAMS, (0.0, 0.0), (0.5, -1.0, 1.0, 0.5, 2.0))
+
 CASES = {
     "rolling-ball-ex2": Case(
-        "rolling-ball-ex2", "rolling_ball_ex2", "gni-trapezoid", 16,
-        _ball_state0(EX2_PARAMS, (1.0, 0.0), (0.0, 0.4, -0.2, 0.0, 0.4)),
+        "rolling-ball-ex2", "rolling_ball_ex2", "gni-trapezoid", 16, _EX2_STATE0,
         run_rolling_ball_ex2, run_rolling_ball_ex2_batch, _ball_observer(EX2_PARAMS, False),
     ),
     "contact-oscillator": Case(
-        "contact-oscillator", "contact_oscillator", "gni-midpoint", 6,
-        np.array([1.0, 1.0, 1.0, -1.0, 1.0, 1.0]),  # (q0, p⁺0 = v0)
+        "contact-oscillator", "contact_oscillator", "gni-midpoint", 6, _OSC_STATE0,
         run_contact_oscillator, run_contact_oscillator_batch, _osc_observe,
     ),
     "chaplygin-sphere": Case(
-        "chaplygin-sphere", "chaplygin_sphere", "gni-trapezoid", 16,
-        _ball_state0(CHAPLYGIN_PARAMS, (0.0, 0.0), (0.5, -1.0, 1.0, 0.5, 2.0)),
+        "chaplygin-sphere", "chaplygin_sphere", "gni-trapezoid", 16, _CHAPLYGIN_STATE0,
         run_chaplygin_sphere, run_chaplygin_sphere_batch, _ball_observer(CHAPLYGIN_PARAMS, True),
     ),
 }  # fmt: skip
 
+#: The first version's kernels as cases (the "old baseline" of the benchmark's history).
+LEGACY_CASES = {
+    "rolling-ball-ex2": Case(
+        "rolling-ball-ex2", "rolling_ball_ex2", "gni-trapezoid", 16, _EX2_STATE0,
+        run_rolling_ball_ex2_v1, run_rolling_ball_ex2_batch_v1, _ball_observer(EX2_PARAMS, False), "v1",
+    ),
+    "contact-oscillator": Case(
+        "contact-oscillator", "contact_oscillator", "gni-midpoint", 6, _OSC_STATE0,
+        run_contact_oscillator_v1, run_contact_oscillator_batch_v1, _osc_observe, "v1",
+    ),
+    "chaplygin-sphere": Case(
+        "chaplygin-sphere", "chaplygin_sphere", "gni-trapezoid", 16, _CHAPLYGIN_STATE0,
+        run_chaplygin_sphere_v1, run_chaplygin_sphere_batch_v1, _ball_observer(CHAPLYGIN_PARAMS, True), "v1",
+    ),
+}  # fmt: skip
 
-def get_case(name):
-    """The :class:`Case` called `name` (also accepts numpy_gni's names, e.g. "rolling_ball_ex2")."""
+#: The solver each case's `run`/`run_batch` uses, by name.
+CASE_SOLVER = {
+    name: next(k for k, v in SOLVERS.items() if v == code)
+    for name, code in (
+        ("rolling-ball-ex2", EX2_SOLVER),
+        ("contact-oscillator", OSC_SOLVER),
+        ("chaplygin-sphere", CHAPLYGIN_SOLVER),
+    )
+}
+
+_MODEL_ARGS = {
+    "rolling-ball-ex2": (EX2_PARAMS, False),
+    "chaplygin-sphere": (CHAPLYGIN_PARAMS, True),
+    "contact-oscillator": (OSCILLATOR_EPS,),
+}
+
+
+def get_case(name, legacy=False):
+    """The :class:`Case` called `name` (also accepts numpy_gni's names, e.g. "rolling_ball_ex2");
+    `legacy=True`: the first version's (`LEGACY_CASES`)."""
     key = name.replace("_", "-")
     if key not in CASES:
         raise ValueError(f"case: expected one of {tuple(CASES)}, got {name!r}")
-    return CASES[key]
+    return (LEGACY_CASES if legacy else CASES)[key]
+
+
+def count_iterations(name, h=0.01, steps=1000, solver=None, legacy=False, state0=None):
+    """The mean number of Newton (or chord) iterations per step of a case.
+
+    Runs `steps` steps of size h from the case's initial state (or `state0`) with the solver
+    `solver` (a name of `SOLVERS`; default: the case's own, `CASE_SOLVER`), or with the first
+    version (`legacy=True`). Counted: Jacobian solves (Newton) or increments (chord), including the
+    last one that meets the stopping test; not the predictor's fixed-point sweeps
+    (`PREDICTOR_SWEEPS`, a fixed number per step). Returns `(mean_iterations, final_state)`.
+    """
+    case = get_case(name)
+    s0 = case.initial_state() if state0 is None else np.ascontiguousarray(state0, dtype=np.float64)
+    args = _MODEL_ARGS[case.name]
+    if legacy:
+        if solver is not None:
+            raise ValueError("solver: the first version has only its Newton iteration")
+        count = _ball_count_v1 if case.size == 16 else _osc_count_v1
+        n, out = count(s0, float(h), int(steps), *args)
+    else:
+        solver = CASE_SOLVER[case.name] if solver is None else solver
+        if solver not in SOLVERS:
+            raise ValueError(f"solver: expected one of {tuple(SOLVERS)}, got {solver!r}")
+        count = _ball_count if case.size == 16 else _osc_count
+        n, out = count(s0, float(h), int(steps), *args, SOLVERS[solver])
+    return n / max(int(steps), 1), out
