@@ -107,7 +107,10 @@ def _single(problem: Problem, reporter, use: str) -> Solution:
                            monitor0=watch0 if problem.check_every_node else None)
         if reporter.active:
             jax.block_until_ready(out)
-    fields = labels(problem, prep.method, use) | {"orientation": prep.cache["orientation"]}
+    key = ("labels", use, float(h))  # the run's labels depend on its start, method, h and backend only
+    if key not in prep.cache:
+        prep.cache[key] = labels(problem, prep.method, use) | {"orientation": prep.cache["orientation"]}
+    fields = dict(prep.cache[key])
     fields |= diagnostic_fields(system, prep.core, prep.b0, (out["b"], out["v"], out["p"], out["hidden"]), h,
                                 cached=prep.cache, prepared=(prep, out.get("padded"), out.get("diagnostics")),
                                 scheme=scheme_energy(problem.method),
