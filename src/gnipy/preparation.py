@@ -3,8 +3,9 @@ condition, computed once per call signature and kept: the checked start, the pre
 the diagnostics' sentences, and the compiled programs with their inputs already split.
 
 A repeated call with the same system object, method (the same object, or the same name:
-:func:`gnipy.methods.shared_method`) and initial condition (compared by value) checks nothing again (:meth:`gnipy.System.check`, `method.check`, `method.prepare` ran
-once) and calls its compiled programs directly: the arrays of the method and system are
+:func:`gnipy.methods.shared_method`) and initial condition (compared by value) checks nothing
+again (:meth:`gnipy.System.check`, `method.check`, `method.prepare` ran once) and calls its
+compiled programs directly: the arrays of the method and system are
 flattened once, and the programs are `jax.jit` functions shared by every run whose method and
 system have the same structure (the non-array parts, compared as equinox's `filter_jit` compares
 them) and whose numbers of saved nodes fall in one bucket (:func:`node_bucket`).
