@@ -341,3 +341,23 @@ def test_a_multistart_reuses_the_compiled_problem_and_lists_the_optima():
             solve_optimal_control(p.system, p.target, starts=bad, **kw)
     with pytest.raises(gnipy.InputError, match="starts"):
         solve_optimal_control(p.system, p.target, starts=2, segments=2, **kw)
+
+
+def test_a_value_that_is_not_finite_at_an_iterate_stops_the_solve_with_a_solver_failure():
+    """The compiled runs leave NaN nodes after a failed step (simulate(..., throw=False) under a
+    transformation: no host callback, so JAX's persistent cache keeps the programs); the SQP's host
+    side turns a value that is not finite into a SolverFailure that says what to do, never NaN
+    handed to SciPy."""
+    import jax.numpy as jnp
+
+    from gnipy.control.sqp import _AtPoint
+
+    def fn(x):
+        return jnp.sum(x) * jnp.array([1.0, jnp.nan]), jnp.ones((2, x.size))
+
+    at = _AtPoint(fn, "constraints and their Jacobian")
+    with pytest.raises(gnipy.SolverFailure, match="constraints and their Jacobian are not finite.*smaller h"):
+        at.first(np.array([0.5, -2.0]))
+    finite = _AtPoint(lambda x: (x**2, 2 * x), "cost and its gradient")
+    np.testing.assert_array_equal(finite.first(np.array([3.0])), [9.0])
+    np.testing.assert_array_equal(finite.second(np.array([3.0])), [6.0])  # the same point: computed once
