@@ -116,3 +116,42 @@ def test_a_repeated_call_naming_its_method_checks_its_start_once(particle, monke
     assert len(calls) == 1
     np.testing.assert_array_equal(np.asarray(a.q), np.asarray(b.q))
     np.testing.assert_array_equal(np.asarray(a.hidden_momentum), np.asarray(b.hidden_momentum))
+
+
+def test_calls_from_threads_that_name_one_method_share_its_start_safely(particle):
+    """Threads that name one method share one integrator, and so one prepared start per initial
+    condition (gnipy.preparation, which sets a start's parts before the one that says it is made,
+    and changes its caches under a lock): threads started at once, with the interpreter switching
+    threads every microsecond, all succeed and give the bits of the others at the same h."""
+    import sys
+    import threading
+
+    n, rounds, errors, results = 8, 12, [], {}
+    starts = [np.array([0.1 + 0.01 * r, -0.2, 0.05 * r]) for r in range(rounds)]
+    v0 = np.array([0.3, 0.1, -0.2])
+
+    def work(i, r, barrier):
+        try:
+            barrier.wait(timeout=60)
+            sol = gnipy.simulate(particle, "gni-midpoint", starts[r], v0, h=0.05 * (1 + i % 2), steps=5,
+                                 project_v0=True, backend="native")
+            results[(i, r)] = np.asarray(sol.q)
+        except Exception as e:  # noqa: BLE001 -- reported below with its thread
+            errors.append((i, r, repr(e)))
+
+    interval = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)
+    try:
+        for r in range(rounds):
+            barrier = threading.Barrier(n)
+            threads = [threading.Thread(target=work, args=(i, r, barrier)) for i in range(n)]
+            for t in threads:
+                t.start()
+            for t in threads:
+                t.join()
+    finally:
+        sys.setswitchinterval(interval)
+    assert errors == []
+    for r in range(rounds):
+        for i in range(2, n):
+            np.testing.assert_array_equal(results[(i, r)], results[(i % 2, r)])

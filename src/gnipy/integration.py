@@ -85,7 +85,7 @@ def _single(problem: Problem, reporter, use: str) -> Solution:
 
     system, h, partial, plan = problem.system, problem.h, problem.partial, problem.plan
     prep = prepare(system, problem.method, problem.q0, problem.v0, problem.R0, problem.project_v0, problem.state0)
-    if "orientation" not in prep.cache:
+    if "energy_invariant" not in prep.cache:  # set last: another thread finding it finds both
         prep.cache["orientation"] = describe_orientations([system])
         prep.cache["energy_invariant"] = energy_is_invariant(system, prep.b0)
     watch0 = monitor.start(problem.monitor0, problem.state0, h, problem.steps + partial, problem.t0,

@@ -16,6 +16,7 @@ them) and whose numbers of saved nodes fall in one bucket (:func:`node_bucket`).
 from __future__ import annotations
 
 import functools
+import threading
 
 import jax
 import jax.numpy as jnp
@@ -28,6 +29,8 @@ from .stepping import run_nodes, split_arrays
 __all__ = ["Prepared", "prepare", "state_point", "node_padding", "node_bucket"]
 
 _CACHE: dict = {}
+#: held while the caches below change (runs may come from several threads)
+_LOCK = threading.Lock()
 _CACHE_MAX = 64
 _PROGRAMS: dict = {}
 _READINGS: dict = {}
@@ -69,9 +72,10 @@ def _program(key, make):
         return _PROGRAMS[key]
     program = jax.jit(make(), compiler_options=compiler_options())
     if key is not None:
-        if len(_PROGRAMS) >= _PROGRAMS_MAX:
-            _PROGRAMS.pop(next(iter(_PROGRAMS)))
-        _PROGRAMS[key] = program
+        with _LOCK:
+            if len(_PROGRAMS) >= _PROGRAMS_MAX:
+                _PROGRAMS.pop(next(iter(_PROGRAMS), None), None)
+            _PROGRAMS[key] = program
     return program
 
 
@@ -101,10 +105,13 @@ class Prepared:
 
     def _split(self):
         if self._leaves is None:
-            self._leaves, self._key, self._rebuild = split_arrays((self.method, self.core))
+            # `_leaves` set last: a thread that finds it set finds the rest set too (calls from threads
+            # that name one method share one Prepared: gnipy.methods.shared_method)
+            leaves, self._key, self._rebuild = split_arrays((self.method, self.core))
             self._sys_leaves, self._sys_key, self._sys_rebuild = split_arrays(self.core)
             self._start = None if self.v0 is None else (
                 jax.tree_util.tree_map(jnp.asarray, self.b0), jnp.asarray(self.v0, jnp.float64))
+            self._leaves = leaves
 
     def run(self, state0, h: float, lengths, tail: int, h_last: float, times, *, partial: bool, save_final: bool,
             save_states: bool, progress: bool, progress_stride: int, monitor0):
@@ -301,9 +308,10 @@ def _state_reading(system, method):
 
         hit = (ref_def, [r.shape for r in ref_leaves], jax.jit(point))  # also called under transformations
         if key is not None:
-            if len(_READINGS) >= _CACHE_MAX:
-                _READINGS.pop(next(iter(_READINGS)))
-            _READINGS[key] = hit
+            with _LOCK:
+                if len(_READINGS) >= _CACHE_MAX:
+                    _READINGS.pop(next(iter(_READINGS), None), None)
+                _READINGS[key] = hit
     ref_def, shapes, point = hit
     return ref_def, shapes, lambda state: point(leaves, state)
 
@@ -343,7 +351,8 @@ def prepare(system, method, q0, v0, R0, project_v0: bool, state0) -> Prepared:
     method.validate(system, b0)
     prepared = Prepared(b0, v0c, method.prepare(system, b0), system.without_metadata(), (system, method))
     if key is not None:
-        if len(_CACHE) >= _CACHE_MAX:
-            _CACHE.pop(next(iter(_CACHE)))
-        _CACHE[key] = prepared
+        with _LOCK:
+            if len(_CACHE) >= _CACHE_MAX:
+                _CACHE.pop(next(iter(_CACHE), None), None)
+            _CACHE[key] = prepared
     return prepared

@@ -89,9 +89,11 @@ def simulate(
         throw: raise :class:`~gnipy.SolverFailure` if a step fails; with `False`, return the
             solution up to the last good saved node with `result = RESULTS.solve_failed` (in a batch:
             a failed member's nodes after its failure are NaN; :meth:`Solution.failures` gives each
-            failure's member, step, time and residual; under a JAX transformation, where a failure
-            raises at run time, the saved nodes after the failed step are NaN instead, and the
-            compiled program has no host callback, so JAX's persistent cache can keep it). With `"strict"`, also raise
+            failure's member, step, time and residual). Under a JAX transformation, where `True`
+            raises the failure at run time, `False` leaves the saved nodes after the failed step
+            and the final state NaN instead: that is the only sign of it there (`sol.result` is
+            fixed when the program is traced and says nothing of its run), and the compiled program
+            has no host callback, so JAX's persistent cache can keep it. With `"strict"`, also raise
             :class:`~gnipy.QualitativeFailure` when the steps converged but the motion went
             qualitatively wrong (see Returns).
         progress: `True` shows a progress bar (rich) updated as the steps advance; a callable is

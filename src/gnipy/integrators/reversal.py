@@ -127,8 +127,8 @@ class Reversed(_Wrapped):
 class ForwardOnly(_Wrapped):
     """A method that is not symmetric on the system, run with a traced h (under `jax.jit`): its
     steps are the method's own when h > 0 and fail when h < 0 (:func:`backward`: its formula at
-    $-h$ is not the inverse of its steps with h). With `simulate(..., throw=True)`, the only
-    choice under a transformation, the failed step is raised at run time."""
+    $-h$ is not the inverse of its steps with h). With `simulate(..., throw=True)` the failed step
+    is raised at run time; with `throw=False` the saved nodes from the first step on are NaN."""
 
     def check(self, system, q0) -> None:
         self.method.validate(system, q0)
