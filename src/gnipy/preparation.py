@@ -256,12 +256,18 @@ class Prepared:
         return out if out[0].shape[0] == T else _first(out, T)
 
 
-def _complete(system, out, times):
-    """A run's result completed inside its program: the nodes' coordinates `q`, orientations `R`,
-    times `t`, and for the GNI family the nodes padded for :meth:`Prepared.node_diagnostics`."""
+def _observed(system, out, times):
+    """The nodes' coordinates `q`, orientations `R` and times `t`, added to a run's result."""
     out["q"] = system.space.coordinates(out["b"])
     out["R"] = system.space.orientation(out["b"])
     out["t"] = times
+    return out
+
+
+def _complete(system, out, times):
+    """A run's result completed inside its program: :func:`_observed`, and for the GNI family the
+    nodes padded for :meth:`Prepared.node_diagnostics`."""
+    out = _observed(system, out, times)
     if out["hidden"] is not None:
         T = out["v"].shape[0]
         pad = node_padding(T) - T
@@ -277,9 +283,7 @@ def _complete_with_diagnostics(system, out, times, *, h):
     """:func:`_complete` for a native run (an unforced system): the GNI family's node diagnostics
     computed in the same program (`out["diagnostics"]`, :meth:`Prepared.node_diagnostics`'s
     arrays) rather than by a program of their own, a dispatch fewer per call."""
-    out["q"] = system.space.coordinates(out["b"])
-    out["R"] = system.space.orientation(out["b"])
-    out["t"] = times
+    out = _observed(system, out, times)
     if out["hidden"] is not None:
         from .diagnostics import node_diagnostics
 

@@ -32,6 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .extras import require
+from .inputs import is_traced
 from . import monitor
 
 __all__ = ["run_nodes", "run_nodes_checkpointed", "finish_native", "checkpoint_blocks", "progress_reporter", "Progress",
@@ -151,7 +152,7 @@ def watched_run(monitor0, lengths, tail, partial: bool):
     """`(monitor0, tail)` for a loop that checks every node: the monitor told how many steps the
     loop takes, and the tail one iteration longer (the check of the last node) unless the run
     ends with a shortened step (whose node :func:`_finish` checks)."""
-    if not any(isinstance(x, jax.core.Tracer) for x in (monitor0, lengths, tail)):  # on the host: no dispatch
+    if not is_traced(monitor0, lengths, tail):  # on the host: no dispatch
         total = int(np.sum(np.asarray(lengths, np.int64))) + int(tail)
         return monitor.with_end(np.asarray(monitor0, np.float64), total + (1 if partial else 0)), \
             int(tail) + (0 if partial else 1)

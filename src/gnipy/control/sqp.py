@@ -280,7 +280,7 @@ def _polish(x, c_val, c_jac, lo, hi, tol, max_steps: int = 8):
         at_lo, at_hi = _at_bounds(x, lo, hi)
         free = ~(at_lo | at_hi)
         J = np.asarray(c_jac(x))[:, free]
-        if J.shape[1] < J.shape[0] or not np.all(np.isfinite(J)):
+        if J.shape[1] < J.shape[0]:  # (values that are not finite stop the solve earlier: _AtPoint)
             break
         dx = np.zeros_like(x)
         # the least-norm Gauss–Newton step by SVD: defined also when the target's rows are dependent
@@ -297,11 +297,10 @@ def _polish(x, c_val, c_jac, lo, hi, tol, max_steps: int = 8):
 
 
 def _kkt(grad, Jg, x, lo, hi):
-    """KKT residual over the free controls, the multipliers, the active bounds and their signs."""
+    """KKT residual over the free controls, the multipliers, the active bounds and their signs
+    (`grad` and `Jg` are finite: :class:`_AtPoint` stops the solve at a value that is not)."""
     at_lo, at_hi = _at_bounds(x, lo, hi)
     free = ~(at_lo | at_hi)
-    if not (np.all(np.isfinite(grad)) and np.all(np.isfinite(Jg))):  # a run that blew up: no KKT point
-        return float("inf"), np.full(Jg.shape[0], np.nan), int(np.sum(~free)), False
     lam = np.linalg.lstsq(Jg[:, free].T, -grad[free], rcond=None)[0] if np.any(free) else np.zeros(Jg.shape[0])
     r = grad + Jg.T @ lam
     # relative to the size of the terms that must cancel, ∇J and J_gᵀλ (a fixed scale would pass
