@@ -36,7 +36,7 @@ from hypothesis import strategies as st
 from hypothesis.extra import numpy as hnp
 
 import gnipy
-from gnipy.linalg import solve, solve_spd
+from gnipy.linalg import LU_UNROLL_MAX, lu_factor, lu_solve, solve, solve_spd
 
 # `gnipy.projectors` is the function (re-exported by the package): reach the module
 # itself
@@ -315,6 +315,29 @@ def test_solve_spd_agrees_with_numpy(data):
         assert_solves(
             np.asarray(solve_spd(jnp.asarray(A), jnp.asarray(rhs))), A, rhs
         )  # op by op in JAX
+
+
+_lu_solve_jit = jax.jit(lambda A, b: lu_solve(lu_factor(A), b))
+
+
+@property_settings(8)
+@given(st.data())
+def test_lu_factor_and_solve_agree_with_numpy_on_metrics_and_saddle_points(data):
+    """The chord iteration's factors (gnipy.linalg.lu_factor, no pivoting up to LU_UNROLL_MAX,
+    LAPACK's above): an SPD metric, and the saddle-point matrix [[G, μᵀ], [μ, 0]] of a step with
+    multipliers (13 unknowns: the Whipple bicycle's DLA step), whose zero block needs no pivoting
+    when the multipliers come last; one size above LAPACK's threshold."""
+    n = data.draw(st.sampled_from([3, 8, LU_UNROLL_MAX + 2]), label="n")
+    G = data.draw(spd_metrics(n), label="G")
+    if data.draw(st.booleans(), label="saddle"):
+        m = {3: 1, 8: 5}.get(n, 3)  # 8 + 5: the bicycle's size; one m per n (each shape compiles once)
+        mu = orthonormal_columns(data.draw(matrices(n, n)), m).T  # full rank: the block is regular
+        A = np.block([[G, mu.T], [mu, np.zeros((m, m))]])
+    else:
+        A = G
+    b = data.draw(vectors(A.shape[0], 10.0), label="b")
+    for x in (lu_solve(lu_factor(A), b), _lu_solve_jit(A, b)):
+        assert_solves(np.asarray(x), A, b)
 
 
 # --------------------------------------------------------------------------------------

@@ -9,8 +9,10 @@ rest of the step (measured 0.25 µs for a 5×5 SPD solve, 0.38 µs with partial 
 well-kept library offers this (lineax and jax.scipy both call LAPACK on CPU). Above
 :data:`UNROLL_MAX` unknowns the LAPACK path is used.
 
-Both functions accept a right-hand side `b` of shape (N,) or (N, K) and work under `jit`,
-`vmap` and automatic differentiation (they are ordinary jnp code). Inside a program each is traced
+:func:`solve` and :func:`solve_spd` accept a right-hand side `b` of shape (N,) or (N, K);
+:func:`lu_factor` and :func:`lu_solve` factor once and solve many times (the chord iteration of a
+step with many unknowns). All work under `jit`, `vmap` and automatic differentiation (they are
+ordinary jnp code). Inside a program each is traced
 once per shape (:func:`gnipy.compilation.traced_once`): a step solves with the metric several times.
 """
 
@@ -20,10 +22,17 @@ import jax.numpy as jnp
 
 from .compilation import traced_once
 
-__all__ = ["solve", "solve_spd", "UNROLL_MAX"]
+__all__ = ["solve", "solve_spd", "lu_factor", "lu_solve", "UNROLL_MAX", "LU_UNROLL_MAX"]
 
 #: Largest N for which the elimination is unrolled (beyond it the trace grows as N³).
 UNROLL_MAX = 12
+#: Largest N for which :func:`lu_factor` is unrolled. The chord iteration of
+#: :func:`gnipy.integrators.base.newton` factors its Jacobian once per step above UNROLL_MAX and
+#: solves with the factors at each iteration: a third of the inverse's arithmetic, worth unrolling
+#: further (the Whipple bicycle's DLA step, 13 unknowns: LAPACK's pivoted `lu`, which the native
+#: backend writes out with a select per swapped entry, and its 13 right-hand sides cost 6 µs of a
+#: 12 µs step, measured on the 2-core machine).
+LU_UNROLL_MAX = 16
 
 
 def _as_matrix_rhs(b, n):
@@ -102,3 +111,63 @@ def solve(A, b):
         x[k] = s / M[k, k]
     X = jnp.stack(x)
     return X[:, 0] if vec else X
+
+
+@traced_once
+def lu_factor(A):
+    """Factor $A = LDU$ once, for several solves with :func:`lu_solve`: Gaussian elimination
+    without pivoting (as :func:`solve_spd`, for matrices that need none), unrolled for N ≤
+    :data:`LU_UNROLL_MAX`; beyond it LAPACK's pivoted factorization (`jax.scipy.linalg.lu_factor`).
+
+    The unrolled elimination works on the trailing block as a whole (an outer product per column),
+    so XLA sees O(N) operations rather than O(N³) scalars; the native backend writes the same
+    arithmetic out as scalars. The factors are the unit lower triangle L, the reciprocals of the
+    pivots $D^{-1}$ and the unit upper triangle $D^{-1}U$: the solves multiply, no division on
+    their chain of dependent operations, and each is one `triangular_solve` for XLA.
+
+    Arguments:
+        A: (N, N).
+
+    Returns:
+        the factors, an opaque tuple for :func:`lu_solve` (non-finite entries where a pivot is zero).
+    """
+    n = A.shape[-1]
+    if n > LU_UNROLL_MAX:
+        import jax.scipy.linalg as jsl
+
+        return jsl.lu_factor(A)
+    lower, upper, inv = [], [], []
+    block = A
+    for k in range(n):
+        r = 1.0 / block[0, 0]
+        m = block[1:, 0] * r
+        pad = jnp.zeros(k + 1, dtype=A.dtype)
+        lower.append(jnp.concatenate([pad, m]))
+        upper.append(jnp.concatenate([pad, block[0, 1:] * r]))
+        inv.append(r)
+        block = block[1:, 1:] - m[:, None] * block[0, 1:][None, :]
+    return jnp.stack(lower, axis=1), jnp.stack(inv), jnp.stack(upper)
+
+
+@traced_once
+def lu_solve(factors, b):
+    """Solve $A x = b$ with the factors of :func:`lu_factor`: forward substitution with L, the
+    pivots' reciprocals, back substitution with $D^{-1}U$.
+
+    Arguments:
+        factors: from :func:`lu_factor`.
+        b: (N,).
+
+    Returns:
+        x, (N,).
+    """
+    import jax.lax as lax
+
+    if len(factors) == 2:  # LAPACK's factors (N > LU_UNROLL_MAX)
+        import jax.scipy.linalg as jsl
+
+        return jsl.lu_solve(factors, b)
+    lower, inv, upper = factors
+    y = lax.linalg.triangular_solve(lower, b[:, None], left_side=True, lower=True, unit_diagonal=True)
+    return lax.linalg.triangular_solve(upper, y * inv[:, None], left_side=True, lower=False,
+                                       unit_diagonal=True)[:, 0]

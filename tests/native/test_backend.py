@@ -168,6 +168,33 @@ def test_methods_on_a_linear_model_equal_xla(method):
     _assert_agree(a, b)
 
 
+def _chain_lagrangian(q, v):
+    # eight coupled pendulum angles, the metric depending on the neighbours' angles
+    weight = 1.0 + 0.3 * jnp.cos(jnp.roll(q, 1))
+    return 0.5 * jnp.sum(weight * v**2) + jnp.sum(jnp.cos(q))
+
+
+def _chain_mu(q):
+    # five rows v_j − ½ sin(q_{j+3}) v_{j+3}: full rank (unit pivots in columns 0..4)
+    rows = [jnp.zeros(8).at[j].set(1.0).at[j + 3].add(-0.5 * jnp.sin(q[j + 3])) for j in range(5)]
+    return jnp.stack(rows)
+
+
+def test_a_step_with_more_unknowns_than_the_unrolled_inverse_equals_xla():
+    """DLA on 8 coordinates with 5 constraints solves for 13 unknowns, above
+    gnipy.linalg.UNROLL_MAX: the chord iteration factors its Jacobian (gnipy.linalg.lu_factor) and
+    substitutes at each iteration (the Whipple bicycle's path); native and XLA agree."""
+    from gnipy.linalg import LU_UNROLL_MAX, UNROLL_MAX
+
+    assert UNROLL_MAX < 8 + 5 <= LU_UNROLL_MAX
+    s = gnipy.System(_chain_lagrangian, _chain_mu, n=8, name="pendulum-chain")
+    q0 = np.linspace(0.1, 0.8, 8)
+    v0 = np.array([0.0, 0.0, 0.0, 0.0, 0.0, 0.4, -0.3, 0.2])  # projected onto the constraints
+    a, b = _pair(s, "dla", q0=q0, v0=v0, project_v0=True, h=0.01, steps=2000, save_every=500)
+    _assert_agree(a, b)
+    assert a.healthy and b.healthy
+
+
 @pytest.mark.slow
 def test_shortened_last_step_backward_run_states_and_continuation():
     s = gnipy.make_system("chaplygin-sphere")
