@@ -110,10 +110,12 @@ def measure(reps: int = 3, long: bool = True) -> dict:
     """The section's numbers (see the module docstring)."""
     from scipy.integrate import solve_ivp
 
+    import importlib
+
     try:
         from pydy.codegen.ode_function_generators import generate_ode_function
-        import Cython  # noqa: F401  (PyDy's Cython generator)
-        import symbrim  # noqa: F401
+        importlib.import_module("Cython")  # PyDy's Cython generator: only its presence is checked
+        importlib.import_module("symbrim")
     except ImportError as e:
         raise ImportError(f"the bicycle section needs {e.name}: pip install '.[bench]'") from e
 

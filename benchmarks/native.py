@@ -9,7 +9,9 @@ for its whole life; see section 1).
 
 1. **one trajectory**: µs/step of the hand-written loop (`run_<case>(state0, h, S)`) and of gnipy's
    native and XLA loops (the marginal cost of a step, (median(S) − median(1))/(S − 1), as in section
-   1); ratio native ÷ hand-written (target ≤ 1.5, in `simulate`: issue 35);
+   1); ratio native ÷ hand-written (target ≤ 1.5, in `simulate`: issue 35); on the three cases and
+   on two more (issue 35 point 2, `NATIVE_CASES`): yoshida4-gni-trapezoid on the rolling ball ex. 2
+   (a composition) and sgni-trapezoid on Suslov's problem (a group model with unequal moments);
 2. **batched**: trajectory-steps per second of B trajectories: the hand-written batch
    (`numba.prange` over B copies of its initial state, every core) and gnipy native (B perturbed
    initial conditions, split across every core); targets ≥ 15 M/s (rolling ball ex. 2) and ≥ 50 M/s
@@ -25,11 +27,19 @@ import statistics
 import tempfile
 import time
 
-#: (case of benchmarks.numpy_gni / run.py, method, numba_gni case)
+#: (case of run.py's `build` (benchmarks.numpy_gni's name for the first three), method, numba_gni
+#: case: also the key of the case's rows and results). Issue 35 point 2: the three cases and two more,
+#: a composition (Yoshida's triple jump of gni-trapezoid on the rolling ball ex. 2; both gnipy and the
+#: hand-written kernel start consistently, p⁺₀ = p̄₀ − (γ₁h/2)μᵀλ₀) and a group model with unequal
+#: moments (Suslov's problem on SO(3), full inertia tensor, with sgni-trapezoid: gni-trapezoid is
+#: qualitatively wrong there, its hidden momentum leaves its band at t ≈ 27). Those two have no
+#: first hand-written version ("—" in its column).
 NATIVE_CASES = (
     ("rolling_ball_ex2", "gni-trapezoid", "rolling-ball-ex2"),
     ("contact_oscillator", "gni-midpoint", "contact-oscillator"),
     ("chaplygin_sphere", "gni-trapezoid", "chaplygin-sphere"),
+    ("rolling_ball_ex2", "yoshida4-gni-trapezoid", "rolling-ball-ex2-yoshida4"),
+    ("suslov", "sgni-trapezoid", "suslov"),
 )
 NATIVE_BATCH_TARGETS = {"rolling_ball_ex2": 15e6, "contact_oscillator": 50e6}
 #: Issue 35: gnipy's native loop within this factor of the fastest hand-written step (issue 16's was 2,
@@ -63,8 +73,8 @@ def clock(fn):
 for name, method, nb_name in spec["cases"]:
     system, q0, v0 = build(name)
     case = numba_gni.CASES[nb_name]
-    s0 = case.initial_state()
-    S = spec["steps"].get(name, spec["steps"]["*"])
+    s0 = case.initial_state(h)  # the composition's consistent start depends on h
+    S = spec["steps"].get(nb_name, spec["steps"]["*"])
 
     def gn(steps, backend, Q=q0, V=v0):
         sol = gnipy.simulate(system, method, Q, V, h=h, steps=steps, save_every=steps, backend=backend)
@@ -72,8 +82,9 @@ for name, method, nb_name in spec["cases"]:
         return sol
 
     case.run(s0, h, S)  # compiles (or loads Numba's cache)
-    legacy = numba_gni.LEGACY_CASES[nb_name]  # the hand-written baseline before issue 35
-    legacy.run(s0, h, S)
+    legacy = numba_gni.get_case(nb_name, legacy=True)  # the hand-written baseline before issue 35 (or None)
+    if legacy is not None:
+        legacy.run(s0, h, S)
     first = clock(lambda: gn(S, "native"))
     gn(1, "native")
     Sx = min(S, spec["xla_steps"])
@@ -93,7 +104,8 @@ for name, method, nb_name in spec["cases"]:
     hand, hand_v1, loop_t, nat, nat1, xla, xla1 = [], [], [], [], [], [], []
     for _ in range(reps):  # interleaved
         hand.append(clock(lambda: case.run(s0, h, S)))
-        hand_v1.append(clock(lambda: legacy.run(s0, h, S)))
+        if legacy is not None:
+            hand_v1.append(clock(lambda: legacy.run(s0, h, S)))
         loop_t.append(clock(lambda: loop.run(carry0, h, [S])))
         nat.append(clock(lambda: gn(S, "native")))
         nat1.append(clock(lambda: gn(1, "native")))
@@ -110,15 +122,15 @@ for name, method, nb_name in spec["cases"]:
         except c_gni.CompilerNotFoundError:
             c_us = None
     row = {"S": S, "hand_us": statistics.median(hand) / S * 1e6, "loop_us": statistics.median(loop_t) / S * 1e6,
-           "hand_v1_us": statistics.median(hand_v1) / S * 1e6, "c_us": c_us,
+           "hand_v1_us": statistics.median(hand_v1) / S * 1e6 if hand_v1 else None, "c_us": c_us,
            "hand_its": numba_gni.count_iterations(nb_name, h, S)[0],
-           "hand_v1_its": numba_gni.count_iterations(nb_name, h, S, legacy=True)[0],
+           "hand_v1_its": numba_gni.count_iterations(nb_name, h, S, legacy=True)[0] if legacy is not None else None,
            "native_us": (statistics.median(nat) - statistics.median(nat1)) / (S - 1) * 1e6,
            "native_call_us": statistics.median(calls) * 1e6,
            "xla_us": (statistics.median(xla) - statistics.median(xla1)) / (Sx - 1) * 1e6,
            "first_native_s": first, "backend": sol.backend, "its": float(np.asarray(sol.iterations)[0]) / S}
-    out[name] = row
-    for B in spec["batch"].get(name, []):
+    out[nb_name] = row
+    for B in spec["batch"].get(nb_name, []):
         Sb = max(spec["work"] // B, 10)
         Q, V = ensemble(name, system, q0, v0, B)
         states = np.tile(s0, (B, 1))
@@ -147,12 +159,12 @@ for name, method, nb_name in spec["cases"]:
         gp(Sx, "xla")
         px = clock(lambda: gp(Sx, "xla"))
         psol = gp(Sb, "native")
-        out[f"{name} B={B}"] = {"B": B, "S": Sb, "hand_rate": B * Sb / statistics.median(hb),
-                                "native_rate": B * Sb / statistics.median(nb), "backend": sol.backend,
-                                "failed": int(np.sum(np.asarray(sol.results) != 0)),
-                                "param_rate": B * Sb / statistics.median(pb), "param_xla_rate": B * Sx / px,
-                                "param_backend": psol.backend,
-                                "param_failed": int(np.sum(np.asarray(psol.results) != 0))}
+        out[f"{nb_name} B={B}"] = {"B": B, "S": Sb, "hand_rate": B * Sb / statistics.median(hb),
+                                   "native_rate": B * Sb / statistics.median(nb), "backend": sol.backend,
+                                   "failed": int(np.sum(np.asarray(sol.results) != 0)),
+                                   "param_rate": B * Sb / statistics.median(pb), "param_xla_rate": B * Sx / px,
+                                   "param_backend": psol.backend,
+                                   "param_failed": int(np.sum(np.asarray(psol.results) != 0))}
 print(json.dumps(out))
 '''
 
@@ -184,19 +196,25 @@ def bench_native(cfg, rep, results: dict, load) -> None:
 
     full = cfg.name == "full"
     # the rolling ball ex. 2 gains energy from its turntable (its Newton iterations per step grow
-    # with T): timed over T = 20 as in section 1; the others over 10⁵ steps
-    steps = {"*": 100_000 if full else 20_000, "rolling_ball_ex2": 2_000}
-    batch = {"rolling_ball_ex2": (1_000, 10_000) if full else (1_000,),
-             "contact_oscillator": (1_000, 10_000) if full else (1_000,)}
+    # with T): timed over T = 20 as in section 1, with gni-trapezoid and with its composition; the
+    # others (Suslov included) over 10⁵ steps. Keyed by numba_gni's case names (NATIVE_CASES).
+    steps = {"*": 100_000 if full else 20_000, "rolling-ball-ex2": 2_000, "rolling-ball-ex2-yoshida4": 2_000}
+    batch = {"rolling-ball-ex2": (1_000, 10_000) if full else (1_000,),
+             "contact-oscillator": (1_000, 10_000) if full else (1_000,)}
     work = 10_000_000 if full else 1_000_000
     P = cfg.per_step_processes
     sec = rep.open(
         "native", "7. Native backend against hand-written machine code",
         f"**Hand-written**: `benchmarks.numba_gni`, the same GNI steps written by hand in scalar Numba (the "
         "limit). **gnipy native**: `gnipy.simulate(..., backend='native')`, gnipy's own step traced from JAX and "
-        f"compiled by LLVM. One trajectory: S = {steps['*']:,} steps (the rolling ball ex. 2: "
-        f"{steps['rolling_ball_ex2']:,}, T = 20 as in section 1: its turntable feeds it energy and its Newton "
-        f"iterations grow with T), h = {H}. The hand-written loop's µs/step is median(S)/S; gnipy's compiled loop "
+        f"compiled by LLVM. One trajectory: S = {steps['*']:,} steps (the rolling ball ex. 2, with gni-trapezoid "
+        f"and with its composition: {steps['rolling-ball-ex2']:,}, T = 20 as in section 1: its turntable feeds it "
+        f"energy and its Newton iterations grow with T), h = {H}. Besides the three cases, two more (issue 35): a "
+        "composition, yoshida4-gni-trapezoid (Yoshida's triple jump of gni-trapezoid: three substeps, the hidden "
+        "impulse rescaled between them, a consistent start; its/step summed over the substeps), and a group model "
+        "with unequal moments, Suslov's problem on SO(3) (full inertia tensor) with sgni-trapezoid (gni-trapezoid "
+        "is qualitatively wrong on it); neither has a first hand-written version ('—'). "
+        "The hand-written loop's µs/step is median(S)/S; gnipy's compiled loop "
         "alone (`NativeLoop.run` from gnipy's start state, as the hand-written loop is timed) likewise; "
         "'simulate' is the marginal cost of a step in `gnipy.simulate`, (median(S) − median(1))/(S − 1) (the "
         "checks, the XLA observation of the nodes and the dispatch are in the call cost: 'native call cost' is the "
@@ -224,10 +242,10 @@ def bench_native(cfg, rep, results: dict, load) -> None:
     for i in range(P):
         rep.say(f"[native] one trajectory: process {i + 1} of {P}")
         children.append(run_child(_CHILD_NATIVE, spec, timeout=1800.0)[0])
-    for name, method, _ in NATIVE_CASES:
+    for name, method, nb_name in NATIVE_CASES:
         label = f"{LABELS[name]} {method}"
         with rep.case(sec, label):
-            rows = [c[name] for c in children]
+            rows = [c[nb_name] for c in children]
             if any(r["backend"] != "native" for r in rows):
                 raise RuntimeError("the native backend did not run")
             ratios = [r["loop_us"] / r["hand_us"] for r in rows]
@@ -237,14 +255,16 @@ def bench_native(cfg, rep, results: dict, load) -> None:
             ratio = statistics.median(ratios)
             xla = statistics.median(r["xla_us"] for r in rows)
             call = statistics.median(r["native_call_us"] for r in rows)
-            results.setdefault("native", {})[name] = {"ratio": ratio, "hand_us": hand, "native_us": loop,
-                                                      "simulate_us": nat, "xla_us": xla, "call_us": call}
-            hand_v1 = statistics.median(r["hand_v1_us"] for r in rows)
+            results.setdefault("native", {})[nb_name] = {"ratio": ratio, "hand_us": hand, "native_us": loop,
+                                                         "simulate_us": nat, "xla_us": xla, "call_us": call,
+                                                         "label": label}
+            v1_all = [r["hand_v1_us"] for r in rows if r.get("hand_v1_us") is not None]
+            hand_v1 = statistics.median(v1_all) if v1_all else None  # None: no first version
             c_all = [r["c_us"] for r in rows if r.get("c_us") is not None]
             c_us = statistics.median(c_all) if c_all else None
-            results["native"][name].update(hand_v1_us=hand_v1, c_us=c_us)
+            results["native"][nb_name].update(hand_v1_us=hand_v1, c_us=c_us)
             rep.row(sec, [LABELS[name], method, f"{rows[0]['S']:,}", f"{g(hand)} ({g(rows[0]['hand_its'])})",
-                          f"{g(hand_v1)} ({g(rows[0]['hand_v1_its'])})",
+                          "—" if hand_v1 is None else f"{g(hand_v1)} ({g(rows[0]['hand_v1_its'])})",
                           "—" if c_us is None else g(c_us), g(loop),
                           f"{g(ratio)} ({', '.join(g(x) for x in ratios)})", g(nat), g(xla),
                           g(call), g(rows[0]["its"])],
@@ -264,18 +284,18 @@ def bench_native(cfg, rep, results: dict, load) -> None:
          "target M/s", "parameter batch: native M/s", "parameter batch: XLA M/s"],
         background_load=load,
     )
-    spec = dict(spec, cases=[list(c) for c in NATIVE_CASES if c[0] in batch], batch=batch, steps={"*": 2_000},
+    spec = dict(spec, cases=[list(c) for c in NATIVE_CASES if c[2] in batch], batch=batch, steps={"*": 2_000},
                 xla_steps=2_000)
     t_sec = time.perf_counter()
     children = []
     for i in range(cfg.batch_processes):
         rep.say(f"[native] batched: process {i + 1} of {cfg.batch_processes}")
         children.append(run_child(_CHILD_NATIVE, spec, timeout=1800.0)[0])
-    for name, method, _ in NATIVE_CASES:
-        for B in batch.get(name, ()):
+    for name, method, nb_name in NATIVE_CASES:
+        for B in batch.get(nb_name, ()):
             label = f"{LABELS[name]} {method} B={B}"
             with rep.case(sec, label):
-                rows = [c[f"{name} B={B}"] for c in children]
+                rows = [c[f"{nb_name} B={B}"] for c in children]
                 if any(r["failed"] or r["param_failed"] or r["backend"] != "native" or r["param_backend"] != "native"
                        for r in rows):
                     raise RuntimeError("members failed, or the native backend did not run")
@@ -342,12 +362,13 @@ def native_targets(results: dict, how_far, labels, g, mrate) -> list[list[str]]:
     for name, r in results.get("native", {}).items():
         sim = r["simulate_us"] / r["hand_us"]  # issue 35: measured in simulate, the number users get
         met, far = how_far(sim, TARGET_RATIO, False)
-        rows.append([f"native step in simulate ≤ {TARGET_RATIO:g}× the hand-written Numba step: {labels[name]}",
+        label = r.get("label") or labels[name]  # keyed by numba_gni's case: "<case> <method>"
+        rows.append([f"native step in simulate ≤ {TARGET_RATIO:g}× the hand-written Numba step: {label}",
                      f"{g(sim)}× ({g(r['simulate_us'])} vs {g(r['hand_us'])} µs/step; the loop alone "
                      f"{g(r['ratio'])}×)", met, far])
         if "call_us" in r:
             met, far = how_far(r["call_us"], TARGET_CALL_US, False)
-            rows.append([f"native simulate call ≤ {TARGET_CALL_US / 1000:g} ms (repeated, warm): {labels[name]}",
+            rows.append([f"native simulate call ≤ {TARGET_CALL_US / 1000:g} ms (repeated, warm): {label}",
                          f"{g(r['call_us'])} µs", met, far])
     for name, r in results.get("native_batched", {}).items():
         target = NATIVE_BATCH_TARGETS[name]

@@ -3,7 +3,10 @@
 This module is the *upper bound* of the per-step benchmark, not a baseline to beat by a large
 factor: the same three GNI steps as :mod:`benchmarks.numpy_gni` (and thus as gnipy's GNI), ported
 by hand to scalar, allocation-free Numba code the way a performance-minded researcher would write
-them for one model. Issue 16's target for gnipy's native backend is to come within 2× of these
+them for one model, and two more cases that numpy_gni does not have (issue 35, point 2: "on the
+three cases and on two more, a group model with unequal moments, a composition"): gnipy's
+composition `"yoshida4-gni-trapezoid"` on the rolling ball ex. 2 and gnipy's `"sgni-trapezoid"` on
+Suslov's problem (below, "The two added cases"). Issue 16's target for gnipy's native backend is to come within 2× of these
 timings (µs/step of one trajectory, trajectory-steps/s of a batch). gnipy itself never imports or
 uses this module; it exists only for the benchmark and its tests
 (`tests/test_benchmark_numba.py`, which checks it against numpy_gni and gnipy).
@@ -30,6 +33,18 @@ interleaved in one process, noisy to ~5%; in parentheses the mean iterations per
     rolling-ball-ex2     0.135 (2.97)    0.056 (2.00)  0.055 (2.26)  0.051 (1.00)   case: predicted-newton
     contact-oscillator   0.087 (2.76)    0.040 (2.00)  0.037 (2.00)  0.038 (1.00)   case: chord
     chaplygin-sphere     0.137 (3.00)    0.069 (2.02)  0.075 (3.00)  0.079 (1.93)   case: newton
+
+and the two added cases (the same machine, a later session: minimum of 30 runs interleaved in one
+process, over three processes, while a CI job used both cores: noisy, ~5-10%; in the same processes
+the rolling ball and the Chaplygin sphere above took 0.049-0.052 and 0.065-0.070, close to the
+table; the composition over 2,000 steps as its base case, its iterations summed over its three
+substeps; Suslov over 100,000):
+
+    case                       first version   newton        chord         predicted-newton
+    rolling-ball-ex2-yoshida4  —               0.183 (6.00)  0.181 (7.73)  0.162 (3.00)   case: predicted-newton
+    suslov                     —               0.069 (2.00)  0.062 (2.00)  0.069 (1.00)   case: chord
+
+(the composition: three ball steps and two impulse rescalings, ~3.2 times the rolling ball's step.)
 
 The C port of the rolling ball takes 0.046 µs/step (timed inside C; `cc -O3 -march=native
 -fno-fast-math -ffp-contract=off`, GCC 12). Where the gain comes from (rolling ball; the others
@@ -120,10 +135,54 @@ failure is never silent. All three solvers and the first version agree to ≤ 7e
 version: ~4e-15); over 20,000 steps all of them, the first version included, drift from it alike
 (the rolling ball's trajectory amplifies round-off to ~1e-11, the others stay below ~3e-14).
 
+The two added cases (issue 35, point 2). Neither has a first version (`LEGACY_CASES` lacks them,
+`get_case(name, legacy=True)` is None) nor a numpy_gni version; both are transcribed from gnipy's
+own implementation and checked against gnipy's `simulate` (tests/test_benchmark_numba.py).
+
+- **"rolling-ball-ex2-yoshida4"**, gnipy's `"yoshida4-gni-trapezoid"` on the rolling ball ex. 2
+  (`gnipy.integrators.composition.Composition`): the substeps γ₁h, γ₂h, γ₁h of Yoshida's triple
+  jump (`YOSHIDA4`, γ₁ = 1/(2 − 2^{1/3}), γ₂ = −2^{1/3}γ₁: the middle substep goes back in time) are
+  the rolling ball's `_ball_step` itself (any solver), and between two substeps the hidden impulse
+  is rescaled to the new step as gnipy's `GNI.change_step` does, $p^+ \\leftarrow \\bar p +
+  (\\gamma_i h/\\gamma_{i-1}h)(p^+ - \\bar p)$, the ratio signed and computed from the rounded
+  substeps as gnipy computes it, $p^+ - \\bar p = \\mu^T\\lambda$ in the closed form of the ball's
+  projector (`_ex2_rescale`). The start is gnipy's consistent one for the first substep (a
+  composition of a GNI always starts so), $p^+_0 = \\mathbb{G}v_0 - \\tfrac{\\gamma_1 h}{2}\\mu^T
+  \\lambda_0$, with the continuous multiplier λ₀ in closed form
+  (:func:`rolling_ball_ex2_consistent_start`; `Case.initial_state(h)`: it depends on h). The three
+  substeps run in a loop over one inlined copy of the step (three copies compile 3× longer, ~9 s,
+  and run no faster). Its solver: predicted-newton, one Newton iteration per substep.
+- **"suslov"**, gnipy's `"sgni-trapezoid"` (`gnipy.integrators.gni_variants.SymmetricImpulseGNI`)
+  on gnipy's `"suslov"` (SO(3), body angular velocity, a full symmetric inertia tensor with unequal
+  moments, one constraint ⟨a, Ω⟩ = 0, a = e₃; `SUSLOV_PARAMS`). The GNI itself (`gni-trapezoid`)
+  is qualitatively wrong on Suslov (its hidden momentum leaves its band at t ≈ 27: gnipy's
+  `sol.healthy` is False over 10⁵ steps; the methods guide says the same of every `gni-*`), and
+  gnipy's default method there is
+  the discrete gradient, not a GNI step; sgni-trapezoid is healthy over 10⁵ steps on gnipy's
+  native backend. Its state is (R, p̄), p̄ on the constraint; gnipy solves one Newton system in (σ, α), α
+  the impulse acting at both ends of the step. The constraint row is linear in α, so α is
+  eliminated in closed form and the step is 3 equations in the mean velocity ξ = σ/h with an
+  oblique projector P (derivation above `_suslov_consts`); the Jacobian $I + \\tfrac h2
+  P(\\hat\\xi I - \\widehat{I\\xi}) + \\tfrac{h^2}{4}((\\xi\\cdot I\\xi)E + 2\\xi(I\\xi)^T)$ is solved by
+  Cramer's rule, R advances by the Chaplygin sphere's closed-form body-frame Cayley update, and
+  $\\bar p_{k+1} = (\\bar p - c_0e) - hP(\\xi\\times I\\xi)$ has no division by h ($c_0 = a^TI^{-1}\\bar
+  p$, zero up to round-off, kept as gnipy keeps it: the constraint is restored at every node). I is
+  not diagonal, so the gyroscopic term is not in Euler's two-product form; I⁻¹ (for the first
+  guess ξ₀ = v̄ = I⁻¹p̄ and the predictor), k = I⁻¹a and e = a/(aᵀk) are loop invariants. Its
+  solver: the chord (2.0 iterations, each a residual and a 3×3 product, cheaper than Newton's two
+  Jacobians).
+
+Over 1000 steps at h = 0.01 the added cases agree with gnipy's `simulate` (XLA) to 6.5e-15
+(composition) and 4.3e-15 (Suslov) relative (every solver ≤ 7.4e-15; gnipy's native backend ≤
+9.4e-15); their solvers agree among themselves to ≤ 9e-16 (≤ 1.4e-14 over 20,000 steps of Suslov).
+They were not checked against a long-double run as the first three were.
+
 States (flat float64 vectors, the integrator state, not the reported node):
 
-- balls ("rolling-ball-ex2", "chaplygin-sphere"): 16 numbers `(x, y, R (3×3, row-major), p⁺ (5))`;
-- "contact-oscillator" (gni-midpoint): 6 numbers `(q (3), p⁺ (3))`.
+- balls ("rolling-ball-ex2", "chaplygin-sphere", "rolling-ball-ex2-yoshida4"): 16 numbers
+  `(x, y, R (3×3, row-major), p⁺ (5))`;
+- "contact-oscillator" (gni-midpoint): 6 numbers `(q (3), p⁺ (3))`;
+- "suslov" (sgni-trapezoid): 12 numbers `(R (3×3, row-major), p̄ (3))`.
 
 API:
 
@@ -134,20 +193,27 @@ API:
   over the trajectories (`parallel=True`, all cores);
 - the general kernels `run_ball(state0, h, steps, params, chaplygin, solver=-1)` /
   `run_ball_batch(...)` (params `(m, r, I1, I2, I3, Omega)`; solver: a value of `SOLVERS`, by
-  default the case's) and `run_oscillator(state0, h, steps, eps, solver=OSC_SOLVER)` /
-  `run_oscillator_batch(...)`;
+  default the case's), `run_oscillator(state0, h, steps, eps, solver=OSC_SOLVER)` /
+  `run_oscillator_batch(...)`, `run_ball_yoshida4(state0, h, steps, params, solver=-1)` /
+  `run_ball_yoshida4_batch(...)` (the rolling ball's composition: constant μ) and
+  `run_suslov_general(state0, h, steps, params, solver=-1)` / `run_suslov_general_batch(...)`
+  (params as `SUSLOV_PARAMS`); the added cases' own `run_rolling_ball_ex2_yoshida4` and
+  `run_suslov` (and their `_batch`);
 - `CASES[name]` (names as gnipy's models: "rolling-ball-ex2", "contact-oscillator",
-  "chaplygin-sphere") -> a :class:`Case` with `initial_state()`, `run(state0, h, steps)`,
-  `run_batch(states0, h, steps)`, `observe(state)` (`dict(q, v, p, R)` as numpy_gni's observe:
-  the reported node $\\bar v$, $\\bar p$), and `numpy_case`/`method` (numpy_gni's name and method);
-  `LEGACY_CASES[name]`: the same with the first version's kernels;
+  "chaplygin-sphere", "suslov"; and "rolling-ball-ex2-yoshida4") -> a :class:`Case` with
+  `initial_state(h=0.01)`, `run(state0, h, steps)`, `run_batch(states0, h, steps)`,
+  `observe(state)` (`dict(q, v, p, R)` as numpy_gni's observe: the reported node $\\bar v$,
+  $\\bar p$; Suslov's q is empty), and `numpy_case`/`method` (numpy_gni's name, None for the added
+  cases, and gnipy's method); `LEGACY_CASES[name]`: the same with the first version's kernels (the
+  first three cases only);
 - `count_iterations(name, h, steps, solver=None, legacy=False)` -> (the mean number of Newton or
   chord iterations per step, the final state).
 
-Parameters and initial conditions are copied from numpy_gni (so from gnipy's models). All
-functions are compiled with `@numba.njit(cache=True, fastmath=False, error_model="numpy")`.
-Over 1000 steps at h = 0.01 the final nodes agree with gnipy's to ≤ 2e-14 and with numpy_gni's to
-≤ 9e-13 (numpy_gni's own round-off: SciPy's `root` stops at a relative tolerance of 1e-12).
+Parameters and initial conditions are copied from numpy_gni (so from gnipy's models; Suslov's from
+gnipy's model file). All functions are compiled with `@numba.njit(cache=True, fastmath=False,
+error_model="numpy")`. Over 1000 steps at h = 0.01 the final nodes agree with gnipy's to ≤ 2e-14
+and with numpy_gni's to ≤ 9e-13 (numpy_gni's own round-off: SciPy's `root` stops at a relative
+tolerance of 1e-12).
 """
 
 from __future__ import annotations
@@ -165,6 +231,7 @@ __all__ = [
     "CHORD_TOL",
     "EX2_PARAMS",
     "EX2_SOLVER",
+    "EX2_YOSHIDA4_SOLVER",
     "LEGACY_CASES",
     "NEWTON_MAXITER",
     "NEWTON_TOL",
@@ -173,13 +240,20 @@ __all__ = [
     "OSC_SOLVER",
     "PREDICTOR_SWEEPS",
     "SOLVERS",
+    "START_H",
+    "SUSLOV_PARAMS",
+    "SUSLOV_SOLVER",
+    "YOSHIDA4",
     "Case",
     "count_iterations",
     "get_case",
+    "rolling_ball_ex2_consistent_start",
     "run_ball",
     "run_ball_batch",
     "run_ball_batch_v1",
     "run_ball_v1",
+    "run_ball_yoshida4",
+    "run_ball_yoshida4_batch",
     "run_chaplygin_sphere",
     "run_chaplygin_sphere_batch",
     "run_chaplygin_sphere_batch_v1",
@@ -196,6 +270,13 @@ __all__ = [
     "run_rolling_ball_ex2_batch",
     "run_rolling_ball_ex2_batch_v1",
     "run_rolling_ball_ex2_v1",
+    "run_rolling_ball_ex2_yoshida4",
+    "run_rolling_ball_ex2_yoshida4_batch",
+    "run_suslov",
+    "run_suslov_batch",
+    "run_suslov_general",
+    "run_suslov_general_batch",
+    "suslov_observe",
 ]
 
 #: Newton (both variants) stops when max|δ| <= NEWTON_TOL * max(1, max|z|) (z = ξ or v)
@@ -215,13 +296,23 @@ PREDICTOR_SWEEPS = (2, 2)
 EX2_SOLVER = PREDICTED
 CHAPLYGIN_SOLVER = NEWTON
 OSC_SOLVER = CHORD
+EX2_YOSHIDA4_SOLVER = PREDICTED
+SUSLOV_SOLVER = CHORD
 
 #: (m, r, I1, I2, I3, Omega): numpy_gni.RollingBallEx2.PARAMS (gnipy's rolling_ball.example_2())
 EX2_PARAMS = (3.0, 1.0, 1.0, 1.1, 1.2, 0.2)
 #: (m, r, I1, I2, I3, Omega): numpy_gni.ChaplyginSphere.PARAMS (gnipy's "chaplygin-sphere")
 CHAPLYGIN_PARAMS = (1.0, 1.0, 0.3, 0.4, 0.5, 0.0)
+#: the step for which `Case.initial_state()` gives the composition's consistent start by default
+START_H = 0.01
 #: epsilon of numpy_gni.ContactOscillator (gnipy's "contact-oscillator")
 OSCILLATOR_EPS = 0.3
+#: (I11, I22, I33, I12, I13, I23, a1, a2, a3): gnipy's "suslov" defaults (src/gnipy/models/suslov.py)
+SUSLOV_PARAMS = (2.0, 3.0, 4.0, 0.3, 0.6, -0.5, 0.0, 0.0, 1.0)
+#: the rolling ball ex. 2's (q0, v0) (numpy_gni.RollingBallEx2.Q0, V0; gnipy's rolling_ball.example_2())
+_EX2_Q0, _EX2_V0 = (1.0, 0.0), (0.0, 0.4, -0.2, 0.0, 0.4)
+#: Suslov's Ω0 (gnipy's default: w − ⟨a, w⟩a/|a|², w = (1, 0.5, 0.3), a = e3)
+_SUSLOV_V0 = (1.0, 0.5, 0.0)
 
 _JIT = {"cache": True, "fastmath": False, "error_model": "numpy"}
 #: the step's pieces are inlined by Numba itself: LLVM's inliner leaves a function as big as a step
@@ -230,6 +321,7 @@ _JIT = {"cache": True, "fastmath": False, "error_model": "numpy"}
 _JIT_INLINE = {**_JIT, "inline": "always"}
 _NAN16 = (math.nan,) * 16
 _NAN6 = (math.nan,) * 6
+_NAN12 = (math.nan,) * 12
 _BALL_SWEEPS, _OSC_SWEEPS = PREDICTOR_SWEEPS
 
 
@@ -687,6 +779,435 @@ def run_contact_oscillator_batch(states0, h, steps):
     return out
 
 
+# ---------------------------------------------------------------------------------------------
+# A composition: Yoshida's triple jump of the rolling ball's step (yoshida4-gni-trapezoid)
+# ---------------------------------------------------------------------------------------------
+#
+# gnipy's Composition (src/gnipy/integrators/composition.py) of a GNI is not just three steps of
+# γ_i h: the state (b, p⁺) carries the hidden impulse p⁺ − p̄ = μᵀλ ≈ −(h/2)μᵀλ_cont of the step
+# that produced it, so before substep i (i > 1) it is rescaled to the new step,
+#
+#     p⁺ ← p̄ + (γ_i h / γ_{i−1} h)(p⁺ − p̄)      (GNI.change_step, the ratio signed),
+#
+# and the run starts consistently for the first substep, p⁺₀ = p̄₀ − (γ₁h/2)μᵀλ₀ (λ₀ the continuous
+# multiplier; :func:`rolling_ball_ex2_consistent_start`). The substeps are `_ball_step` itself.
+
+
+def _triple_jump_coefficients():
+    """(γ₁, γ₂, γ₁) of Yoshida's triple jump, computed as gnipy's composition._triple_jump(2)."""
+    r = 2.0 ** (1.0 / 3.0)
+    g1, g2 = 1.0 / (2.0 - r), -r / (2.0 - r)
+    return (g1, g2, g1)
+
+
+#: the substep fractions of "yoshida4" (gnipy.integrators.composition.COMPOSITIONS["yoshida4"])
+YOSHIDA4 = _triple_jump_coefficients()
+_Y1, _Y2 = YOSHIDA4[0], YOSHIDA4[1]
+
+
+@numba.njit(**_JIT_INLINE)
+def _ex2_rescale(s, rho, params):
+    """The rolling ball's p⁺ ← p̄ + ρ(p⁺ − p̄), p⁺ − p̄ = μᵀλ in the closed form of `_ball_step`
+    (μ constant: λ_i is one quotient); μᵀλ = (λ0, λ1, rλ1, −rλ0, 0), so p⁺_4 is unchanged."""
+    m, r, I1, I2, _, W = params
+    x, y = s[0], s[1]
+    p0, p1, p2, p3 = s[11], s[12], s[13], s[14]
+    mW = m * W
+    mr = m * r
+    l0 = (I2 * (p0 + mW * y) - mr * p3) / (I2 + mr * r)
+    l1 = (I1 * (p1 - mW * x) + mr * p2) / (I1 + mr * r)
+    q2, q3 = r * l1, -r * l0
+    return (
+        s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8], s[9], s[10],
+        (p0 - l0) + rho * l0, (p1 - l1) + rho * l1, (p2 - q2) + rho * q2, (p3 - q3) + rho * q3, s[15],
+    )  # fmt: skip
+
+
+@numba.njit(**_JIT)
+def _yoshida4_loop(state0, h, steps, params, solver, out):
+    """`steps` triple-jump steps of the rolling ball from state0 (16,) into out (16,); returns the
+    total number of iterations (the three substeps' summed, as gnipy's Composition counts them)."""
+    s = (
+        state0[0], state0[1], state0[2], state0[3], state0[4], state0[5], state0[6], state0[7],
+        state0[8], state0[9], state0[10], state0[11], state0[12], state0[13], state0[14], state0[15],
+    )  # fmt: skip
+    h1, h2 = _Y1 * h, _Y2 * h
+    hs = (h1, h2, h1)
+    rhos = (1.0, h2 / h1, h1 / h2)  # gnipy's h_new / h_old, from the rounded substeps
+    n = 0
+    for _ in range(steps):
+        for i in range(3):  # one copy of the step's code (three inlined copies: 3x the compile time)
+            if i > 0:
+                s = _ex2_rescale(s, rhos[i], params)
+            s, its = _ball_step(s, hs[i], params, False, solver)
+            n += its
+    for i in range(16):
+        out[i] = s[i]
+    return n
+
+
+@numba.njit(**_JIT)
+def run_ball_yoshida4(state0, h, steps, params, solver=-1):
+    """`steps` yoshida4-gni-trapezoid steps of the rolling ball (params as `run_ball`, constant μ)
+    from the flat state0 (16,); solver: one of `SOLVERS`' values (default `EX2_YOSHIDA4_SOLVER`)."""
+    if solver < 0:
+        solver = EX2_YOSHIDA4_SOLVER
+    out = np.empty(16)
+    _yoshida4_loop(state0, h, steps, params, solver, out)
+    return out
+
+
+@numba.njit(parallel=True, **_JIT)
+def run_ball_yoshida4_batch(states0, h, steps, params, solver=-1):
+    """:func:`run_ball_yoshida4` for each row of states0 (B, 16), in parallel over the rows."""
+    if solver < 0:
+        solver = EX2_YOSHIDA4_SOLVER
+    B = states0.shape[0]
+    out = np.empty((B, 16))
+    for b in numba.prange(B):
+        _yoshida4_loop(states0[b], h, steps, params, solver, out[b])
+    return out
+
+
+@numba.njit(**_JIT)
+def _yoshida4_count(state0, h, steps, params, solver):
+    out = np.empty(16)
+    return _yoshida4_loop(state0, h, steps, params, solver, out), out
+
+
+@numba.njit(**_JIT)
+def run_rolling_ball_ex2_yoshida4(state0, h, steps):
+    """The rolling ball, example 2, yoshida4-gni-trapezoid: final state (16,) after `steps` steps
+    (from a consistent start for h, :func:`rolling_ball_ex2_consistent_start`)."""
+    out = np.empty(16)
+    _yoshida4_loop(state0, h, steps, EX2_PARAMS, EX2_YOSHIDA4_SOLVER, out)
+    return out
+
+
+@numba.njit(parallel=True, **_JIT)
+def run_rolling_ball_ex2_yoshida4_batch(states0, h, steps):
+    """The rolling ball, example 2, yoshida4-gni-trapezoid: final states (B, 16), in parallel."""
+    B = states0.shape[0]
+    out = np.empty((B, 16))
+    for b in numba.prange(B):
+        _yoshida4_loop(states0[b], h, steps, EX2_PARAMS, EX2_YOSHIDA4_SOLVER, out[b])
+    return out
+
+
+def rolling_ball_ex2_consistent_start(h, q0=None, v0=None, params=EX2_PARAMS, gamma=_Y1):
+    """The composition's start (gnipy's `start="consistent"` for the first substep γ₁h): the flat
+    state (16,) `(x, y, R₀ = E, p⁺₀)` with p⁺₀ = G v₀ − (γ₁h/2)μᵀλ₀.
+
+    λ₀ is the continuous multiplier at (q₀, v₀) (gnipy.equations.lagrange_dalembert_acceleration),
+    in closed form: m ẍ = λ0, m ÿ = λ1, I ω̇ = Iω×ω + aλ0 + cλ1 (a = (0, −r, 0), c = (r, 0, 0)) and
+    the derivative of the constraints, ẍ − r ω̇₂ + Ω ẏ = 0, ÿ + r ω̇₁ − Ω ẋ = 0 (1-based ω indices),
+    give λ0 (I2 + mr²) = mr(I3 − I1)ω1ω3 − mI2Ω ẏ and λ1 (I1 + mr²) = mI1Ω ẋ − mr(I2 − I3)ω2ω3;
+    μᵀλ = (λ0, λ1, rλ1, −rλ0, 0). Agrees with gnipy's `Composition.init` to ≤ 3e-19 (absolute;
+    tests/test_benchmark_numba.py). Default (q₀, v₀): the example's, as `CASES["rolling-ball-ex2"]`.
+    """
+    m, r, I1, I2, I3, W = params
+    x, y = _EX2_Q0 if q0 is None else q0
+    xd, yd, w0, w1, w2 = _EX2_V0 if v0 is None else v0
+    l0 = (m * r * (I3 - I1) * w0 * w2 - m * I2 * W * yd) / (I2 + m * r * r)
+    l1 = (m * I1 * W * xd - m * r * (I2 - I3) * w1 * w2) / (I1 + m * r * r)
+    c = 0.5 * gamma * h
+    p = np.array([m * xd, m * yd, I1 * w0, I2 * w1, I3 * w2]) - c * np.array([l0, l1, r * l1, -r * l0, 0.0])
+    return np.concatenate([np.array([x, y], dtype=float), np.eye(3).ravel(), p])
+
+
+# ---------------------------------------------------------------------------------------------
+# Suslov's problem on SO(3), trapezoid l_d, one impulse at both ends of the step (sgni-trapezoid)
+# ---------------------------------------------------------------------------------------------
+#
+# gnipy's SymmetricImpulseGNI (src/gnipy/integrators/gni_variants.py) on gnipy's "suslov": l = ½ΩᵀIΩ
+# with a full symmetric I, one constraint ⟨a, Ω⟩ = 0 (μ = aᵀ constant, Y = 0), Ω the body angular
+# velocity (R_{k+1} = R_k cay(σ)). The state is (R, p̄), p̄ on the constraint. With σ = hξ and
+# M = Iσ/h = Iξ, the trapezoid l_d = σᵀIσ/(2h) gives FL⁻ = dcay⁻¹_σᵀM = Iξ + (h/2)ξ×Iξ + (h²/4)ξ(ξ·Iξ)
+# and the jump FL⁺ − FL⁻ = ad_σᵀM = −hξ×Iξ (gnipy.spaces.GroupSpace, ∇ᴸ_R l_d = 0). gnipy solves
+# for (σ, α):
+#
+#     FL⁻(σ) = p̄ + (h/2)aα,   p̄_{k+1} = p̄ + h aα − h ξ×Iξ,   aᵀI⁻¹p̄_{k+1} = 0.
+#
+# The constraint is linear in α: with k = I⁻¹a, s = aᵀk, e = a/s and c0 = kᵀp̄ (zero up to
+# round-off: gnipy keeps it, and so does this step), α = (k·w)/s − c0/(hs), w = ξ×Iξ. Eliminated,
+# with the oblique projector Pw = w − e(k·w) (kᵀP = 0), the step is 3 equations in ξ:
+#
+#     F(ξ) = (Iξ − p̄) + (h/2)Pw + (h²/4)ξ(ξ·Iξ) + (c0/2)e = 0,
+#     J = I + (h/2)P(ξ̂I − (Iξ)^) + (h²/4)((ξ·Iξ)E + 2ξ(Iξ)ᵀ),
+#     p̄_{k+1} = (p̄ − c0 e) − h Pw        (kᵀp̄_{k+1} = 0: the constraint restored every step).
+#
+# The same solution as gnipy's 4×4 Newton on (σ, α) (in exact arithmetic); a Newton error e of ξ
+# enters p̄_{k+1} as O(h|ξ|e), no division by h.
+
+
+@numba.njit(**_JIT)
+def _suslov_consts(params):
+    """Loop invariants from params (I11, I22, I33, I12, I13, I23, a1, a2, a3): the 6 entries of I,
+    the 6 of I⁻¹ (first guess and predictor only), k = I⁻¹a and e = a/(aᵀk) (21 numbers)."""
+    A00, A11, A22, A01, A02, A12, a0, a1, a2 = params
+    C00 = A11 * A22 - A12 * A12
+    C01 = A02 * A12 - A01 * A22
+    C02 = A01 * A12 - A02 * A11
+    C11 = A00 * A22 - A02 * A02
+    C12 = A01 * A02 - A00 * A12
+    C22 = A00 * A11 - A01 * A01
+    det = A00 * C00 + A01 * C01 + A02 * C02
+    B00, B01, B02, B11, B12, B22 = C00 / det, C01 / det, C02 / det, C11 / det, C12 / det, C22 / det
+    k0 = B00 * a0 + B01 * a1 + B02 * a2
+    k1 = B01 * a0 + B11 * a1 + B12 * a2
+    k2 = B02 * a0 + B12 * a1 + B22 * a2
+    s = a0 * k0 + a1 * k1 + a2 * k2
+    return (
+        A00, A01, A02, A11, A12, A22,
+        B00, B01, B02, B11, B12, B22,
+        k0, k1, k2, a0 / s, a1 / s, a2 / s,
+    )  # fmt: skip
+
+
+@numba.njit(**_JIT_INLINE)
+def _suslov_f(x0, x1, x2, t0, t1, t2, hh, c2, C):
+    """F(ξ) alone (chord iterations): t = p̄ − (c0/2)e."""
+    A00, A01, A02, A11, A12, A22 = C[0], C[1], C[2], C[3], C[4], C[5]
+    k0, k1, k2, e0, e1, e2 = C[12], C[13], C[14], C[15], C[16], C[17]
+    u0 = A00 * x0 + A01 * x1 + A02 * x2
+    u1 = A01 * x0 + A11 * x1 + A12 * x2
+    u2 = A02 * x0 + A12 * x1 + A22 * x2
+    w0, w1, w2 = x1 * u2 - x2 * u1, x2 * u0 - x0 * u2, x0 * u1 - x1 * u0
+    kw = k0 * w0 + k1 * w1 + k2 * w2
+    q = c2 * (x0 * u0 + x1 * u1 + x2 * u2)
+    return (
+        (u0 - t0) + hh * (w0 - e0 * kw) + x0 * q,
+        (u1 - t1) + hh * (w1 - e1 * kw) + x1 * q,
+        (u2 - t2) + hh * (w2 - e2 * kw) + x2 * q,
+    )
+
+
+@numba.njit(**_JIT_INLINE)
+def _suslov_fj(x0, x1, x2, t0, t1, t2, hh, c2, C):
+    """F(ξ) and J(ξ), fused (they share Iξ, ξ×Iξ, ξ·Iξ): (F0, F1, F2, J00, ..., J22)."""
+    A00, A01, A02, A11, A12, A22 = C[0], C[1], C[2], C[3], C[4], C[5]
+    k0, k1, k2, e0, e1, e2 = C[12], C[13], C[14], C[15], C[16], C[17]
+    u0 = A00 * x0 + A01 * x1 + A02 * x2
+    u1 = A01 * x0 + A11 * x1 + A12 * x2
+    u2 = A02 * x0 + A12 * x1 + A22 * x2
+    w0, w1, w2 = x1 * u2 - x2 * u1, x2 * u0 - x0 * u2, x0 * u1 - x1 * u0
+    kw = k0 * w0 + k1 * w1 + k2 * w2
+    sq = c2 * (x0 * u0 + x1 * u1 + x2 * u2)
+    # W = ξ̂I − (Iξ)^, row by row
+    W00 = x1 * A02 - x2 * A01
+    W01 = (x1 * A12 - x2 * A11) + u2
+    W02 = (x1 * A22 - x2 * A12) - u1
+    W10 = (x2 * A00 - x0 * A02) - u2
+    W11 = x2 * A01 - x0 * A12
+    W12 = (x2 * A02 - x0 * A22) + u0
+    W20 = (x0 * A01 - x1 * A00) + u1
+    W21 = (x0 * A11 - x1 * A01) - u0
+    W22 = x0 * A12 - x1 * A02
+    # kᵀW, then (h/2)PW = (h/2)(W − e kᵀW)
+    r0 = k0 * W00 + k1 * W10 + k2 * W20
+    r1 = k0 * W01 + k1 * W11 + k2 * W21
+    r2 = k0 * W02 + k1 * W12 + k2 * W22
+    v0, v1, v2 = 2.0 * c2 * x0, 2.0 * c2 * x1, 2.0 * c2 * x2
+    return (
+        (u0 - t0) + hh * (w0 - e0 * kw) + x0 * sq,
+        (u1 - t1) + hh * (w1 - e1 * kw) + x1 * sq,
+        (u2 - t2) + hh * (w2 - e2 * kw) + x2 * sq,
+        (A00 + sq) + hh * (W00 - e0 * r0) + v0 * u0,
+        A01 + hh * (W01 - e0 * r1) + v0 * u1,
+        A02 + hh * (W02 - e0 * r2) + v0 * u2,
+        A01 + hh * (W10 - e1 * r0) + v1 * u0,
+        (A11 + sq) + hh * (W11 - e1 * r1) + v1 * u1,
+        A12 + hh * (W12 - e1 * r2) + v1 * u2,
+        A02 + hh * (W20 - e2 * r0) + v2 * u0,
+        A12 + hh * (W21 - e2 * r1) + v2 * u1,
+        (A22 + sq) + hh * (W22 - e2 * r2) + v2 * u2,
+    )
+
+
+@numba.njit(**_JIT_INLINE)
+def _suslov_solve(t0, t1, t2, x0, x1, x2, h, C, solver):
+    """Solve F(ξ) = 0 from the guess ξ (gnipy's: v̄ = I⁻¹p̄): (ξ0, ξ1, ξ2, iterations, ok)."""
+    hh = 0.5 * h
+    c2 = 0.25 * h * h
+    if solver == PREDICTED:
+        A00, A01, A02, A11, A12, A22 = C[0], C[1], C[2], C[3], C[4], C[5]
+        B00, B01, B02, B11, B12, B22 = C[6], C[7], C[8], C[9], C[10], C[11]
+        k0, k1, k2, e0, e1, e2 = C[12], C[13], C[14], C[15], C[16], C[17]
+        for _ in range(_BALL_SWEEPS):  # ξ ← I⁻¹(t − (h/2)Pw − (h²/4)ξ(ξ·Iξ))
+            u0 = A00 * x0 + A01 * x1 + A02 * x2
+            u1 = A01 * x0 + A11 * x1 + A12 * x2
+            u2 = A02 * x0 + A12 * x1 + A22 * x2
+            w0, w1, w2 = x1 * u2 - x2 * u1, x2 * u0 - x0 * u2, x0 * u1 - x1 * u0
+            kw = k0 * w0 + k1 * w1 + k2 * w2
+            q = c2 * (x0 * u0 + x1 * u1 + x2 * u2)
+            g0 = t0 - hh * (w0 - e0 * kw) - x0 * q
+            g1 = t1 - hh * (w1 - e1 * kw) - x1 * q
+            g2 = t2 - hh * (w2 - e2 * kw) - x2 * q
+            x0 = B00 * g0 + B01 * g1 + B02 * g2
+            x1 = B01 * g0 + B11 * g1 + B12 * g2
+            x2 = B02 * g0 + B12 * g1 + B22 * g2
+    if solver == CHORD:
+        F0, F1, F2, J00, J01, J02, J10, J11, J12, J20, J21, J22 = _suslov_fj(x0, x1, x2, t0, t1, t2, hh, c2, C)
+        C00 = J11 * J22 - J12 * J21
+        C01 = J12 * J20 - J10 * J22
+        C02 = J10 * J21 - J11 * J20
+        nid = -1.0 / (J00 * C00 + J01 * C01 + J02 * C02)
+        N00, N01, N02 = C00 * nid, (J02 * J21 - J01 * J22) * nid, (J01 * J12 - J02 * J11) * nid
+        N10, N11, N12 = C01 * nid, (J00 * J22 - J02 * J20) * nid, (J02 * J10 - J00 * J12) * nid
+        N20, N21, N22 = C02 * nid, (J01 * J20 - J00 * J21) * nid, (J00 * J11 - J01 * J10) * nid
+        prev = math.inf
+        for it in range(1, NEWTON_MAXITER + 1):
+            if it > 1:
+                F0, F1, F2 = _suslov_f(x0, x1, x2, t0, t1, t2, hh, c2, C)
+            d0 = N00 * F0 + N01 * F1 + N02 * F2
+            d1 = N10 * F0 + N11 * F1 + N12 * F2
+            d2 = N20 * F0 + N21 * F1 + N22 * F2
+            x0 += d0
+            x1 += d1
+            x2 += d2
+            size = max(abs(d0), abs(d1), abs(d2))
+            th = size / prev
+            if size == 0.0 or (
+                it > 1 and th < 0.5 and th * size <= CHORD_TOL * (1.0 - th) * max(1.0, abs(x0), abs(x1), abs(x2))
+            ):
+                return x0, x1, x2, it, True
+            prev = size
+        return x0, x1, x2, NEWTON_MAXITER, False
+    for it in range(1, NEWTON_MAXITER + 1):
+        F0, F1, F2, J00, J01, J02, J10, J11, J12, J20, J21, J22 = _suslov_fj(x0, x1, x2, t0, t1, t2, hh, c2, C)
+        d0, d1, d2 = _newton_update3(F0, F1, F2, J00, J01, J02, J10, J11, J12, J20, J21, J22)
+        x0 += d0
+        x1 += d1
+        x2 += d2
+        if max(abs(d0), abs(d1), abs(d2)) <= NEWTON_TOL * max(1.0, abs(x0), abs(x1), abs(x2)):
+            return x0, x1, x2, it, True
+    return x0, x1, x2, NEWTON_MAXITER, False
+
+
+@numba.njit(**_JIT_INLINE)
+def _suslov_step(s, h, C, solver):
+    """One sgni-trapezoid step of Suslov's problem: (12-tuple (R (9), p̄ (3)), iterations); NaNs if
+    Newton fails. C: :func:`_suslov_consts`."""
+    A00, A01, A02, A11, A12, A22 = C[0], C[1], C[2], C[3], C[4], C[5]
+    B00, B01, B02, B11, B12, B22 = C[6], C[7], C[8], C[9], C[10], C[11]
+    k0, k1, k2, e0, e1, e2 = C[12], C[13], C[14], C[15], C[16], C[17]
+    p0, p1, p2 = s[9], s[10], s[11]
+    c0 = k0 * p0 + k1 * p1 + k2 * p2  # aᵀI⁻¹p̄: zero up to round-off
+    ch = 0.5 * c0
+    t0, t1, t2 = p0 - ch * e0, p1 - ch * e1, p2 - ch * e2
+    # gnipy's first guess ξ = v̄ = I⁻¹p̄ (the reciprocal entries of I⁻¹: Newton corrects their rounding)
+    g0 = B00 * p0 + B01 * p1 + B02 * p2
+    g1 = B01 * p0 + B11 * p1 + B12 * p2
+    g2 = B02 * p0 + B12 * p1 + B22 * p2
+    x0, x1, x2, its, ok = _suslov_solve(t0, t1, t2, g0, g1, g2, h, C, solver)
+    if not ok:
+        return _NAN12, its
+    # p̄_{k+1} = (p̄ − c0 e) − h P(ξ×Iξ)
+    u0 = A00 * x0 + A01 * x1 + A02 * x2
+    u1 = A01 * x0 + A11 * x1 + A12 * x2
+    u2 = A02 * x0 + A12 * x1 + A22 * x2
+    w0, w1, w2 = x1 * u2 - x2 * u1, x2 * u0 - x0 * u2, x0 * u1 - x1 * u0
+    kw = k0 * w0 + k1 * w1 + k2 * w2
+    # R_{k+1} = R cay(σ), σ = hξ: row i += α(A + A×σ/2), A = R_i×σ (as the Chaplygin sphere's)
+    s0, s1, s2 = h * x0, h * x1, h * x2
+    al = 4.0 / (4.0 + (s0 * s0 + s1 * s1 + s2 * s2))
+    z0, z1, z2 = 0.5 * s0, 0.5 * s1, 0.5 * s2
+    R00, R01, R02, R10, R11, R12, R20, R21, R22 = s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7], s[8]
+    A0, A1, A2 = R01 * s2 - R02 * s1, R02 * s0 - R00 * s2, R00 * s1 - R01 * s0
+    D0, D1, D2 = R11 * s2 - R12 * s1, R12 * s0 - R10 * s2, R10 * s1 - R11 * s0
+    E0, E1, E2 = R21 * s2 - R22 * s1, R22 * s0 - R20 * s2, R20 * s1 - R21 * s0
+    return (
+        R00 + al * (A0 + (A1 * z2 - A2 * z1)),
+        R01 + al * (A1 + (A2 * z0 - A0 * z2)),
+        R02 + al * (A2 + (A0 * z1 - A1 * z0)),
+        R10 + al * (D0 + (D1 * z2 - D2 * z1)),
+        R11 + al * (D1 + (D2 * z0 - D0 * z2)),
+        R12 + al * (D2 + (D0 * z1 - D1 * z0)),
+        R20 + al * (E0 + (E1 * z2 - E2 * z1)),
+        R21 + al * (E1 + (E2 * z0 - E0 * z2)),
+        R22 + al * (E2 + (E0 * z1 - E1 * z0)),
+        (p0 - c0 * e0) - h * (w0 - e0 * kw),
+        (p1 - c0 * e1) - h * (w1 - e1 * kw),
+        (p2 - c0 * e2) - h * (w2 - e2 * kw),
+    ), its
+
+
+@numba.njit(**_JIT)
+def _suslov_loop(state0, h, steps, params, solver, out):
+    """`steps` steps from state0 (12,) into out (12,); returns the total number of iterations."""
+    C = _suslov_consts(params)
+    s = (
+        state0[0], state0[1], state0[2], state0[3], state0[4], state0[5],
+        state0[6], state0[7], state0[8], state0[9], state0[10], state0[11],
+    )  # fmt: skip
+    n = 0
+    for _ in range(steps):
+        s, its = _suslov_step(s, h, C, solver)
+        n += its
+    for i in range(12):
+        out[i] = s[i]
+    return n
+
+
+@numba.njit(**_JIT)
+def run_suslov_general(state0, h, steps, params, solver=-1):
+    """`steps` sgni-trapezoid steps of Suslov's problem from state0 = (R (9), p̄ (3)) (12,).
+
+    params = (I11, I22, I33, I12, I13, I23, a1, a2, a3) (gnipy's "suslov" parameters); solver: one
+    of `SOLVERS`' values (default `SUSLOV_SOLVER`)."""
+    if solver < 0:
+        solver = SUSLOV_SOLVER
+    out = np.empty(12)
+    _suslov_loop(state0, h, steps, params, solver, out)
+    return out
+
+
+@numba.njit(parallel=True, **_JIT)
+def run_suslov_general_batch(states0, h, steps, params, solver=-1):
+    """:func:`run_suslov_general` for each row of states0 (B, 12), in parallel over the rows."""
+    if solver < 0:
+        solver = SUSLOV_SOLVER
+    B = states0.shape[0]
+    out = np.empty((B, 12))
+    for b in numba.prange(B):
+        _suslov_loop(states0[b], h, steps, params, solver, out[b])
+    return out
+
+
+@numba.njit(**_JIT)
+def _suslov_count(state0, h, steps, params, solver):
+    out = np.empty(12)
+    return _suslov_loop(state0, h, steps, params, solver, out), out
+
+
+@numba.njit(**_JIT)
+def run_suslov(state0, h, steps):
+    """Suslov's problem (sgni-trapezoid, gnipy's default parameters): final state (12,)."""
+    out = np.empty(12)
+    _suslov_loop(state0, h, steps, SUSLOV_PARAMS, SUSLOV_SOLVER, out)
+    return out
+
+
+@numba.njit(parallel=True, **_JIT)
+def run_suslov_batch(states0, h, steps):
+    """Suslov's problem: final states (B, 12), in parallel over the trajectories."""
+    B = states0.shape[0]
+    out = np.empty((B, 12))
+    for b in numba.prange(B):
+        _suslov_loop(states0[b], h, steps, SUSLOV_PARAMS, SUSLOV_SOLVER, out[b])
+    return out
+
+
+def suslov_observe(state, params=SUSLOV_PARAMS):
+    """The reported node of a Suslov state: (q (0,), v̄ = I⁻¹p̄ (3), p̄ (3), R (3, 3))."""
+    A00, A11, A22, A01, A02, A12 = params[:6]
+    inertia = np.array([[A00, A01, A02], [A01, A11, A12], [A02, A12, A22]])
+    state = np.asarray(state, dtype=np.float64)
+    p = state[9:12].copy()
+    return np.zeros(0), np.linalg.solve(inertia, p), p, state[:9].copy().reshape(3, 3)
+
+
+
 # =============================================================================================
 # The first version (v1), kept unchanged as the benchmark's "old baseline" (issue 35)
 # =============================================================================================
@@ -1078,7 +1599,9 @@ class Case:
     """One benchmark case: its compiled runs, initial state and node report.
 
     Attributes:
-        name: gnipy's model name; numpy_case, method: numpy_gni's case name and the gnipy method.
+        name: the case's name (gnipy's model name, or "rolling-ball-ex2-yoshida4" for the
+            composition on the rolling ball); numpy_case, method: numpy_gni's case name (None: no
+            numpy_gni version) and the gnipy method.
         size: the length of the flat state.
         version: "v2" (the current kernels) or "v1" (the first version, `LEGACY_CASES`).
     """
@@ -1091,9 +1614,11 @@ class Case:
     def __repr__(self):
         return f"numba_gni.Case({self.name!r}, {self.method!r}, {self.version!r})"
 
-    def initial_state(self):
-        """The flat float64 start state (numpy_gni's initial_state(), flattened; p⁺₀ = G v₀)."""
-        return self._state0.copy()
+    def initial_state(self, h=START_H):
+        """The flat float64 start state: numpy_gni's initial_state(), flattened (p⁺₀ = G v₀, the
+        paper's start), Suslov's (R₀ = E, p̄₀ = I Ω₀, gnipy's sgni start), or for the composition
+        gnipy's consistent start, which depends on the step `h` (the other cases ignore it)."""
+        return self._state0(float(h)) if callable(self._state0) else self._state0.copy()
 
     def run(self, state0, h, steps):
         """The final state after `steps` steps of size h from `state0` (one trajectory)."""
@@ -1130,9 +1655,23 @@ def _osc_observe(state):
     return {"q": q, "v": v, "p": p, "R": None}
 
 
-_EX2_STATE0 = _ball_state0(EX2_PARAMS, (1.0, 0.0), (0.0, 0.4, -0.2, 0.0, 0.4))
+def _suslov_observe(state):
+    q, v, p, R = suslov_observe(state)
+    return {"q": q, "v": v, "p": p, "R": R}
+
+
+def _suslov_state0(params, v0):
+    """(R₀ = E, p̄₀ = I Ω₀): gnipy's sgni start projects I Ω₀ on the constraint, a no-op for
+    ⟨a, Ω₀⟩ = 0 (exactly 0 here: Ω₀ = (1, 0.5, 0), a = e3)."""
+    A00, A11, A22, A01, A02, A12 = params[:6]
+    inertia = np.array([[A00, A01, A02], [A01, A11, A12], [A02, A12, A22]])
+    return np.concatenate([np.eye(3).ravel(), inertia @ np.asarray(v0, dtype=float)])
+
+
+_EX2_STATE0 = _ball_state0(EX2_PARAMS, _EX2_Q0, _EX2_V0)
 _OSC_STATE0 = np.array([1.0, 1.0, 1.0, -1.0, 1.0, 1.0])  # (q0, p⁺0 = v0)
 _CHAPLYGIN_STATE0 = _ball_state0(CHAPLYGIN_PARAMS, (0.0, 0.0), (0.5, -1.0, 1.0, 0.5, 2.0))
+_SUSLOV_STATE0 = _suslov_state0(SUSLOV_PARAMS, _SUSLOV_V0)
 
 CASES = {
     "rolling-ball-ex2": Case(
@@ -1147,9 +1686,17 @@ CASES = {
         "chaplygin-sphere", "chaplygin_sphere", "gni-trapezoid", 16, _CHAPLYGIN_STATE0,
         run_chaplygin_sphere, run_chaplygin_sphere_batch, _ball_observer(CHAPLYGIN_PARAMS, True),
     ),
+    "rolling-ball-ex2-yoshida4": Case(
+        "rolling-ball-ex2-yoshida4", None, "yoshida4-gni-trapezoid", 16, rolling_ball_ex2_consistent_start,
+        run_rolling_ball_ex2_yoshida4, run_rolling_ball_ex2_yoshida4_batch, _ball_observer(EX2_PARAMS, False),
+    ),
+    "suslov": Case(
+        "suslov", None, "sgni-trapezoid", 12, _SUSLOV_STATE0, run_suslov, run_suslov_batch, _suslov_observe,
+    ),
 }  # fmt: skip
 
-#: The first version's kernels as cases (the "old baseline" of the benchmark's history).
+#: The first version's kernels as cases (the "old baseline" of the benchmark's history). The cases
+#: added after it (the composition, Suslov) have none: `get_case(name, legacy=True)` is None for them.
 LEGACY_CASES = {
     "rolling-ball-ex2": Case(
         "rolling-ball-ex2", "rolling_ball_ex2", "gni-trapezoid", 16, _EX2_STATE0,
@@ -1172,46 +1719,63 @@ CASE_SOLVER = {
         ("rolling-ball-ex2", EX2_SOLVER),
         ("contact-oscillator", OSC_SOLVER),
         ("chaplygin-sphere", CHAPLYGIN_SOLVER),
+        ("rolling-ball-ex2-yoshida4", EX2_YOSHIDA4_SOLVER),
+        ("suslov", SUSLOV_SOLVER),
     )
 }
 
+#: The model arguments of each case's general kernel (`_COUNTS`: run_ball, run_oscillator, ...).
 _MODEL_ARGS = {
     "rolling-ball-ex2": (EX2_PARAMS, False),
     "chaplygin-sphere": (CHAPLYGIN_PARAMS, True),
     "contact-oscillator": (OSCILLATOR_EPS,),
+    "rolling-ball-ex2-yoshida4": (EX2_PARAMS,),
+    "suslov": (SUSLOV_PARAMS,),
+}
+
+#: (the current kernel's iteration count, the first version's or None) of each case
+_COUNTS = {
+    "rolling-ball-ex2": (_ball_count, _ball_count_v1),
+    "chaplygin-sphere": (_ball_count, _ball_count_v1),
+    "contact-oscillator": (_osc_count, _osc_count_v1),
+    "rolling-ball-ex2-yoshida4": (_yoshida4_count, None),
+    "suslov": (_suslov_count, None),
 }
 
 
 def get_case(name, legacy=False):
     """The :class:`Case` called `name` (also accepts numpy_gni's names, e.g. "rolling_ball_ex2");
-    `legacy=True`: the first version's (`LEGACY_CASES`)."""
+    `legacy=True`: the first version's (`LEGACY_CASES`), None for a case that has none (the
+    composition and Suslov were added after it)."""
     key = name.replace("_", "-")
     if key not in CASES:
         raise ValueError(f"case: expected one of {tuple(CASES)}, got {name!r}")
-    return (LEGACY_CASES if legacy else CASES)[key]
+    return LEGACY_CASES.get(key) if legacy else CASES[key]
 
 
 def count_iterations(name, h=0.01, steps=1000, solver=None, legacy=False, state0=None):
     """The mean number of Newton (or chord) iterations per step of a case.
 
-    Runs `steps` steps of size h from the case's initial state (or `state0`) with the solver
+    Runs `steps` steps of size h from the case's initial state (for h; or `state0`) with the solver
     `solver` (a name of `SOLVERS`; default: the case's own, `CASE_SOLVER`), or with the first
-    version (`legacy=True`). Counted: Jacobian solves (Newton) or increments (chord), including the
-    last one that meets the stopping test; not the predictor's fixed-point sweeps
-    (`PREDICTOR_SWEEPS`, a fixed number per step). Returns `(mean_iterations, final_state)`.
+    version (`legacy=True`; ValueError for a case without one). Counted: Jacobian solves (Newton)
+    or increments (chord), including the last one that meets the stopping test, summed over the
+    composition's three substeps; not the predictor's fixed-point sweeps (`PREDICTOR_SWEEPS`, a
+    fixed number per step). Returns `(mean_iterations, final_state)`.
     """
     case = get_case(name)
-    s0 = case.initial_state() if state0 is None else np.ascontiguousarray(state0, dtype=np.float64)
+    s0 = case.initial_state(h) if state0 is None else np.ascontiguousarray(state0, dtype=np.float64)
     args = _MODEL_ARGS[case.name]
+    count, count_v1 = _COUNTS[case.name]
     if legacy:
+        if count_v1 is None:
+            raise ValueError(f"legacy: case {case.name!r} has no first version")
         if solver is not None:
             raise ValueError("solver: the first version has only its Newton iteration")
-        count = _ball_count_v1 if case.size == 16 else _osc_count_v1
-        n, out = count(s0, float(h), int(steps), *args)
+        n, out = count_v1(s0, float(h), int(steps), *args)
     else:
         solver = CASE_SOLVER[case.name] if solver is None else solver
         if solver not in SOLVERS:
             raise ValueError(f"solver: expected one of {tuple(SOLVERS)}, got {solver!r}")
-        count = _ball_count if case.size == 16 else _osc_count
         n, out = count(s0, float(h), int(steps), *args, SOLVERS[solver])
     return n / max(int(steps), 1), out
