@@ -943,7 +943,7 @@ def rolling_ball_ex2_consistent_start(h, q0=None, v0=None, params=EX2_PARAMS, ga
 @numba.njit(**_JIT)
 def _suslov_consts(params):
     """Loop invariants from params (I11, I22, I33, I12, I13, I23, a1, a2, a3): the 6 entries of I,
-    the 6 of I⁻¹ (first guess and predictor only), k = I⁻¹a and e = a/(aᵀk) (21 numbers)."""
+    the 6 of I⁻¹ (first guess and predictor only), k = I⁻¹a and e = a/(aᵀk) (18 numbers)."""
     A00, A11, A22, A01, A02, A12, a0, a1, a2 = params
     C00 = A11 * A22 - A12 * A12
     C01 = A02 * A12 - A01 * A22
@@ -1198,14 +1198,17 @@ def run_suslov_batch(states0, h, steps):
     return out
 
 
+def _suslov_inertia(params):
+    """The inertia tensor (3, 3) of Suslov's params (I11, I22, I33, I12, I13, I23, ...)."""
+    A00, A11, A22, A01, A02, A12 = params[:6]
+    return np.array([[A00, A01, A02], [A01, A11, A12], [A02, A12, A22]])
+
+
 def suslov_observe(state, params=SUSLOV_PARAMS):
     """The reported node of a Suslov state: (q (0,), v̄ = I⁻¹p̄ (3), p̄ (3), R (3, 3))."""
-    A00, A11, A22, A01, A02, A12 = params[:6]
-    inertia = np.array([[A00, A01, A02], [A01, A11, A12], [A02, A12, A22]])
     state = np.asarray(state, dtype=np.float64)
     p = state[9:12].copy()
-    return np.zeros(0), np.linalg.solve(inertia, p), p, state[:9].copy().reshape(3, 3)
-
+    return np.zeros(0), np.linalg.solve(_suslov_inertia(params), p), p, state[:9].copy().reshape(3, 3)
 
 
 # =============================================================================================
@@ -1663,9 +1666,7 @@ def _suslov_observe(state):
 def _suslov_state0(params, v0):
     """(R₀ = E, p̄₀ = I Ω₀): gnipy's sgni start projects I Ω₀ on the constraint, a no-op for
     ⟨a, Ω₀⟩ = 0 (exactly 0 here: Ω₀ = (1, 0.5, 0), a = e3)."""
-    A00, A11, A22, A01, A02, A12 = params[:6]
-    inertia = np.array([[A00, A01, A02], [A01, A11, A12], [A02, A12, A22]])
-    return np.concatenate([np.eye(3).ravel(), inertia @ np.asarray(v0, dtype=float)])
+    return np.concatenate([np.eye(3).ravel(), _suslov_inertia(params) @ np.asarray(v0, dtype=float)])
 
 
 _EX2_STATE0 = _ball_state0(EX2_PARAMS, _EX2_Q0, _EX2_V0)

@@ -19,6 +19,7 @@ once per shape (:func:`gnipy.compilation.traced_once`): a step solves with the m
 from __future__ import annotations
 
 import jax.numpy as jnp
+from jax import lax
 
 from .compilation import traced_once
 
@@ -161,8 +162,6 @@ def lu_solve(factors, b):
     Returns:
         x, (N,).
     """
-    import jax.lax as lax
-
     if len(factors) == 2:  # LAPACK's factors (N > LU_UNROLL_MAX)
         import jax.scipy.linalg as jsl
 
