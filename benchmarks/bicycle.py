@@ -23,7 +23,8 @@ two tools. Errors are the largest difference of the eight coordinates at the sav
 0.1 s) up to T; **PyDy at matched accuracy** is the loosest DOP853 tolerance (atol = rtol) whose
 error is at most gnipy's; times are the median of `reps` warm calls, per simulated second. The
 energy error is over a long run (T_long), where the constraint residual of the front contact is
-read too.
+read too. Issue 32's target, a step of at most 5 µs, is read on the native backend as the marginal
+cost of a step in `simulate`: :data:`STEP_S` steps against 1, only the final state saved.
 
     python -m benchmarks --sections bicycle     # this section (not in the default run: the [bench] extra)
     python -m benchmarks.bicycle                # its numbers, printed
@@ -198,6 +199,15 @@ def measure(reps: int = 3, long: bool = True) -> dict:
                                                backend="native").q.block_until_ready(), reps)
     out["native"] = {"first_s": first, "per_second": wall / T, "error": _error(np.asarray(sol.q), ref_q),
                      "healthy": bool(sol.healthy)}
+    # the marginal cost of a step (the target's measure): STEP_S steps and 1 step, only the final
+    # state saved, the same compiled loop; (median(STEP_S) - median(1)) / (STEP_S - 1), and the call
+    def native_run(steps):
+        return gnipy.simulate(bicycle, "dla", q0, v0, h=H, steps=steps, save_every=steps, backend="native")
+
+    many = _median_time(lambda: native_run(STEP_S).q.block_until_ready(), reps)
+    one = _median_time(lambda: native_run(1).q.block_until_ready(), reps)
+    out["native"].update(step_us=(many - one) / (STEP_S - 1) * 1e6, call_ms=one * 1e3,
+                         step_healthy=bool(native_run(STEP_S).healthy))
 
     # a batch: BATCH pushes spread around the nominal one (member 0), one vmapped program; the
     # time per trajectory is the batch's wall time over BATCH (the cost of an ensemble: Monte
@@ -272,6 +282,12 @@ def bench_bicycle(cfg, rep, results: dict, load) -> None:
                       f"first call {g(r['first_s'])} s (lowering and LLVM; its object code cached after); "
                       + ("healthy" if r["healthy"] else "flagged by its run-time verdicts")],
                 f"gnipy dla native: error {g(r['error'])}, {g(r['per_second'])} s per simulated s")
+        if "step_us" in r:
+            rep.note(sec, f"gnipy dla on the native backend, one step: {g(r['step_us'])} µs (the marginal cost in "
+                          f"`simulate` of {STEP_S:,} steps with only the final state saved, against 1 step; "
+                          f"{'healthy' if r['step_healthy'] else 'flagged by its run-time verdicts'}); a call "
+                          f"of 1 step: {g(r['call_ms'])} ms. The rows above include each call and the observation of "
+                          f"its {int(round(T / SAVE))} saved nodes.")
         r = m["batch"]
         rep.row(sec, [f"gnipy dla, h = {H:g}, a batch of {r['members']:,} pushes (per trajectory)", g(r["error"]),
                       g(r["per_second"]), "", "",
@@ -292,6 +308,8 @@ def bench_bicycle(cfg, rep, results: dict, load) -> None:
 
 #: issue 32's target: a bicycle step at most this many microseconds
 TARGET_STEP_US = 5.0
+#: the steps of the native run whose marginal cost per step is measured against it
+STEP_S = 2000
 
 
 def bicycle_targets(results: dict, how_far, g) -> list[list[str]]:
@@ -308,8 +326,13 @@ def bicycle_targets(results: dict, how_far, g) -> list[list[str]]:
     if "native" in r:
         us = r["native"]["per_second"] / (1.0 / H) * 1e6
         met, far = how_far(us, TARGET_STEP_US, False)
-        rows.append([f"Whipple bicycle step ≤ {TARGET_STEP_US:g} µs: dla (native, in simulate)", f"{g(us)} µs/step",
-                     met, far])
+        rows.append([f"Whipple bicycle step ≤ {TARGET_STEP_US:g} µs: dla (native, in simulate, with the call and "
+                     f"{int(round(T / SAVE))} saved nodes a call)", f"{g(us)} µs/step", met, far])
+        if "step_us" in r["native"]:
+            us = r["native"]["step_us"]
+            met, far = how_far(us, TARGET_STEP_US, False)
+            rows.append([f"Whipple bicycle step ≤ {TARGET_STEP_US:g} µs: dla (native, in simulate, the marginal "
+                         f"step over {STEP_S:,} steps)", f"{g(us)} µs/step", met, far])
     if "batch" in r:
         us = r["batch"]["per_second"] / (1.0 / H) * 1e6
         met, far = how_far(us, TARGET_STEP_US, False)

@@ -56,7 +56,8 @@ import jax.numpy as jnp
 from .errors import MethodError
 from .linalg import solve, solve_spd
 
-__all__ = ["HOLONOMIC_METHODS", "affine_part", "with_position_multiplier", "project_configuration",
+__all__ = ["HOLONOMIC_METHODS", "affine_part", "with_position_multiplier", "position_multiplier_columns",
+           "project_configuration",
            "project_state", "require_support", "phi_scale"]
 
 #: The methods that keep holonomic constraints $\varphi(q_k) = 0$ to round-off (and the continuous
@@ -121,6 +122,14 @@ def with_position_multiplier(system, b, residual, guess, floor_scale):
     scale = jnp.concatenate([jnp.broadcast_to(jnp.asarray(floor_scale, guess.dtype), (N,)),
                              jnp.full((r,), phi_scale(system, b, rows), dtype=guess.dtype)])
     return F, jnp.concatenate([guess, jnp.zeros(r, dtype=guess.dtype)]), scale, rows
+
+
+def position_multiplier_columns(rows):
+    r"""The Jacobian columns of Λ in the residual of :func:`with_position_multiplier`,
+    $(-d\varphi(b)^T;\ 0)$: constant over the step's iterations (`tail_columns` of
+    :func:`gnipy.integrators.base.newton`)."""
+    r = rows.shape[0]
+    return jnp.concatenate([-rows.T, jnp.zeros((r, r), dtype=rows.dtype)])
 
 
 #: The cap on Newton's iterations of the projection onto φ = 0 (from a drift of the solver's

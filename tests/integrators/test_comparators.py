@@ -173,6 +173,41 @@ def test_dla_second_order_with_position_dependent_metric(varmetric):
     assert abs(order - 2.0) <= 0.15, (order, errs)
 
 
+def test_dla_keeping_its_jacobian_is_the_same_map(varmetric):
+    """DLA keeping its Jacobian from step to step (`reuse_jacobian`; by default above 12 unknowns,
+    here asked for on 4) solves the same equations to the same round-off test as with a fresh
+    Jacobian and the velocity's guess at each step, so the runs agree to round-off over 400 steps
+    (a position-dependent metric, an affine constraint, h = 0.05); the kept solver, the last
+    solution and their step sizes travel in the state, and the discrete map's eigenvalues
+    (gnipy.analysis.discrete_linearization, which differentiates the step with respect to the
+    state) are those of the map without them."""
+    from gnipy.linalg import UNROLL_MAX
+
+    kept = gnipy.simulate(varmetric, DiscreteLagrangeDAlembert(reuse_jacobian=True), VM_Q0, VM_V0, h=0.05, steps=400,
+                          save_every=100)
+    fresh = gnipy.simulate(varmetric, DiscreteLagrangeDAlembert(reuse_jacobian=False), VM_Q0, VM_V0, h=0.05,
+                           steps=400, save_every=100)
+    assert kept.healthy and fresh.healthy
+    np.testing.assert_allclose(np.asarray(kept.q), np.asarray(fresh.q), rtol=0, atol=1e-13)
+    np.testing.assert_allclose(np.asarray(kept.p), np.asarray(fresh.p), rtol=0, atol=1e-13)
+    # fewer evaluations in all (the Jacobian, counted as one, formed at some steps only)
+    assert int(kept.iterations[0]) != int(fresh.iterations[0])
+    (inverse,), h_solver, w, h_w = kept.final_state.jacobian
+    assert inverse.shape == (4, 4) and 3 + 1 <= UNROLL_MAX and float(h_solver) in (0.0, 0.05) and float(h_w) == 0.05
+    assert DiscreteLagrangeDAlembert(reuse_jacobian=False).init(varmetric, VM_Q0, VM_V0, 0.05).jacobian is None
+    assert DiscreteLagrangeDAlembert().init(varmetric, VM_Q0, VM_V0, 0.05).jacobian is None  # 4 unknowns
+    assert DiscreteLagrangeDAlembert().memoryless().reuse_jacobian is False
+    # the map of the state alone, without the kept solver: on the Chaplygin sleigh sliding straight
+    # (a steady motion), dla's multipliers with and without it are the same, at most 9 of them
+    # (q, p and the compensated-summation error x_err, 3 each; the solver adds 17 entries)
+    sleigh = gnipy.make_system("chaplygin-sleigh").with_args(m=1.0, I=1.0, a=0.5)
+    q, v = np.zeros(3), np.array([1.0, 0.0, 0.0])
+    lin = gnipy.analysis.discrete_linearization(sleigh, "dla", q, v, 0.1)
+    plain = gnipy.analysis.discrete_linearization(sleigh, DiscreteLagrangeDAlembert(reuse_jacobian=False), q, v, 0.1)
+    np.testing.assert_allclose(np.sort_complex(lin.multipliers), np.sort_complex(plain.multipliers), rtol=1e-12)
+    assert len(lin.multipliers) <= 9
+
+
 # ---------------------------------------------------------------------------------------------
 # McLachlan–Perlmutter (4.18)
 # ---------------------------------------------------------------------------------------------

@@ -114,6 +114,15 @@ def test_reductions_argmax_sort_with_nan():
     _assert_native_equals_xla(lambda v: (jnp.max(v), jnp.argmax(v), jnp.sort(v), jnp.argsort(v)), y)
 
 
+def test_predicates_of_constants_fold_to_booleans():
+    """is_finite of an entry known at lowering time (a structural zero of a factor) folds to a
+    boolean that the logical reductions accept (it once folded to a double, and `all` of it failed)."""
+    x = np.array([1.0, np.inf, 2.0])
+    _assert_native_equals_xla(lambda v: (jnp.all(jnp.isfinite(jnp.concatenate([v[::2], jnp.zeros(2)]))),
+                                         jnp.all(jnp.isfinite(jnp.concatenate([v, jnp.zeros(2)]))),
+                                         jnp.isfinite(jnp.zeros(2)) & (v[:2] > 0)), x)
+
+
 def test_structure_ops():
     A = np.arange(24.0).reshape(2, 3, 4)
     _assert_native_equals_xla(lambda a: (a.T, a.reshape(6, 4), a[:, 1:, ::2], jnp.concatenate([a, a], axis=1), jnp.flip(a, 2),

@@ -340,7 +340,9 @@ def discrete_linearization(system, method, q, v, h: float, *, warmup: int = 1) -
     system, integrator = prepared_method(system, method, q)
     if isinstance(warmup, bool) or not isinstance(warmup, (int, np.integer)) or warmup < 0:
         raise InputError(f"warmup: expected a non-negative integer, got {warmup!r}")
-    jacobian = np.asarray(_map_jacobian(integrator, system, q, v, jnp.asarray(h, dtype=q.dtype), int(warmup)))
+    # the map of the state alone (not of what a method keeps to make steps cheaper)
+    jacobian = np.asarray(_map_jacobian(integrator.memoryless(), system, q, v, jnp.asarray(h, dtype=q.dtype),
+                                        int(warmup)))
     multipliers = np.linalg.eigvals(jacobian)
     multipliers = multipliers[np.abs(multipliers) > 1e-12]
     return DiscreteLinearization(method=integrator.name, h=float(h), multipliers=multipliers,

@@ -357,6 +357,7 @@ def modified_equations(system, method, order: int = 2, *, q=None, v=None, R=None
     b = system.initial_point(q, R)
     v = jnp.asarray(np.asarray(v, dtype=np.float64))
     system, integrator = prepared_method(system, method, b)
+    integrator = integrator.memoryless()  # the map of the state alone (not what makes steps cheaper)
     template = integrator.init(system, b, v, jnp.asarray(delta, dtype=v.dtype))
     fields = tuple(name for name, value in template._asdict().items()
                    if value is not None and not name.endswith("_err")

@@ -22,6 +22,7 @@ from ..linalg import UNROLL_MAX, lu_factor, lu_solve, solve_spd
 from ..errors import MethodError
 
 __all__ = ["Integrator", "StepInfo", "MethodError", "solve_step", "implicit_solve", "newton", "default_root_finder",
+           "chord_solver", "chord_apply", "REUSE_THETA_MAX",
            "momentum_constraint_scale", "all_finite", "explicit_step_info"]
 
 
@@ -58,8 +59,41 @@ def default_root_finder():
 #: correction test cannot be met (e.g. the multiplier λ of a step, whose correction is ~ε|v|/h).
 FLOOR_FACTOR = 64.0
 
+#: The chord iterations with a solver kept from an earlier solve (phase 0 of :func:`newton`,
+#: `reuse`) are given up, and J(guess) formed, once an iteration contracts the correction by less
+#: than this factor...
+REUSE_THETA_MAX = 0.25
+#: ... except on their first REUSE_TRANSIENT iterations: the multipliers' rows of the iteration
+#: matrix are large where its spectral radius is small (the SymBRiM bicycle's DLA step with the
+#: previous step's Jacobian: max-norm 50-95, spectral radius 0.005-0.01), so the first ratios of
+#: corrections say little about the contraction.
+REUSE_TRANSIENT = 2
+#: Where phase 0 took more evaluations of F than this, the kept solver has aged: it still serves
+#: this solve, and the caller is told to form a new one at the next (`keep` False). Chosen on the
+#: bicycle's native DLA step at h = 0.01 (µs a step, the loop with every node checked): 4.45 (4),
+#: 4.31 (5), 4.56 (6), 4.6-4.8 (7), 5.6 (8), 6.2 (never: the Jacobian kept ~30 steps, 11
+#: evaluations a step).
+REUSE_MAX_EVALUATIONS = 5
 
-def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_steps: int = 50, floor_scale=None):
+
+def chord_solver(J):
+    """What the chord iterations of :func:`newton` solve with, a tuple of arrays: for N ≤
+    :data:`gnipy.linalg.UNROLL_MAX` the inverse $J^{-1}$ (an iteration's product with it is
+    independent multiply-adds, where substitution with LU factors is a chain of dependent ones:
+    slower per iteration up to N = 12), above it the LU factors (:func:`gnipy.linalg.lu_factor`)."""
+    n = J.shape[0]
+    if n <= UNROLL_MAX:
+        return (solve_spd(J, jnp.eye(n, dtype=J.dtype)),)
+    return lu_factor(J)
+
+
+def chord_apply(solver, f):
+    """$J^{-1}f$ with the :func:`chord_solver` of J."""
+    return solver[0] @ f if f.shape[0] <= UNROLL_MAX else lu_solve(solver, f)
+
+
+def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_steps: int = 50, floor_scale=None,
+           tail_columns=None, reuse=None):
     r"""Solve a small system `F(z) = 0`: chord iterations with the Jacobian at the guess, then, if
     they do not converge quickly, Newton's method with fresh Jacobians from the guess.
 
@@ -80,6 +114,11 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
     (:func:`gnipy.linalg.lu_factor`, a third of the inverse's arithmetic) and each iteration
     substitutes (on the native backend, the Whipple bicycle's DLA step of 13 unknowns: 12.0 → 6.8
     µs, where LAPACK's pivoted factorization and 13 right-hand sides took half the step).
+    Phase 0 (with `reuse`, Hairer–Wanner IV.8's simplified Newton across steps): the chord
+    iterations first run with the solver of an earlier solve, where the caller says it is usable;
+    J(guess) is formed (phase 1) only where they do not converge or contract by less than
+    :data:`REUSE_THETA_MAX`, and where they took more than :data:`REUSE_MAX_EVALUATIONS`
+    evaluations the caller is told to form a new one next time.
     Phase 2 (fallback): when the chord iteration's contraction estimate
     $\theta_k = |\Delta_k|/|\Delta_{k-1}|$ exceeds 1/2, a value is not finite (e.g. a zero pivot
     in the saddle-point systems of methods with multipliers) or phase 1 runs out of iterations,
@@ -88,10 +127,14 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
     Stopping test (both phases, max norm): $|\Delta_k| \le \mathrm{atol} + \mathrm{rtol}\,|z_{k+1}|$,
     and the iteration has reached round-off: the error estimate of Hairer–Wanner (*Solving ODEs
     II*, IV.8) $\theta_k|\Delta_k|/(1-\theta_k) \le 0.01\,\varepsilon|z_{k+1}|$, or $\theta_k \ge 1/2$
-    (no more contraction: the round-off floor). Stopping at the tolerance alone, or a few ε above
-    the floor, leaves an error of the same sign step after step (the chord iteration approaches
-    from one side), which adds up to a drift far above round-off over $10^5$ steps (the
-    energy-theorem tests measure it).
+    (no more contraction: the round-off floor), or F at the iterate the correction came from was at
+    round-off row by row, $|F_i| \le \varepsilon\,s_i$ with $s_i$ the magnitude of its terms
+    (`floor_scale`): then the corrected iterate is as accurate as float64 allows (the SymBRiM
+    bicycle's DLA step, whose multipliers' corrections stay at ~1e-13 against a test at 0.01ε|z|
+    ≈ 7e-18, took 6.3 evaluations a step before this test, 5.5 after). Stopping at the tolerance
+    alone, or a few ε above the floor, leaves an error of the same sign step after step (the chord
+    iteration approaches from one side), which adds up to a drift far above round-off over $10^5$
+    steps (the energy-theorem tests measure it).
 
     Round-off floor: the correction test compares $|\Delta|$ with $|z|$, but the attainable
     accuracy of $z$ can be far coarser: for the multiplier $\lambda$ of a step, $F$ is a velocity
@@ -108,19 +151,32 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
         max_steps: the iteration cap of each phase.
         floor_scale: the magnitude of the terms of which F is the difference (a scalar, or one per
             component), e.g. $|p^-|$ for $FL^-(z) - p^-$. Default: $|J(z_0)||z_0| + |F(z_0)|$.
+        tail_columns: where the last k unknowns enter F affinely with coefficients that depend on
+            nothing the iteration changes (the multipliers of DLA, $\mu(q_k)^T\lambda$, and the
+            position multipliers $d\varphi(q_k)^T\Lambda$), their columns of the Jacobian, an
+            (N, k) array: the forward-mode Jacobian then pushes N − k tangents through F instead
+            of N (the SymBRiM bicycle's DLA step: 8 instead of 13; measured on the native
+            backend, its Jacobian 3.2 → 3.1 µs and the loop 7.2 → 7.0 µs a step: the
+            multipliers' tangents were already cheap).
+        reuse: `(solver, usable)`, the solver (the inverse or the factors of a Jacobian) that an
+            earlier solve returned, and whether it may be tried (e.g. it was formed with the same
+            step size). Where usable, the chord iterations first run with it (phase 0) and J(guess)
+            is formed only where they do not converge, or contract by less than
+            :data:`REUSE_THETA_MAX` per iteration (on the Whipple bicycle's DLA step, the
+            Jacobian is most of the step's cost). Needs `floor_scale`.
 
     Returns:
-        `(z, StepInfo)`: `ok` is False when phase 2 does not converge in `max_steps` iterations
-        (and its residual is above the floor) or a value is not finite; `iterations` counts
-        evaluations of F in both phases; `residual` is $\max|F|$ at the last iterate from which a
-        correction was computed.
+        `(z, StepInfo)`, or with `reuse`, `(z, (StepInfo, solver))` with the solver to keep. `ok`
+        is False when phase 2 does not converge in `max_steps` iterations (and its residual is
+        above the floor) or a value is not finite; `iterations` counts evaluations of F in all
+        phases; `residual` is $\max|F|$ at the last iterate from which a correction was computed.
     """
     dtype = guess.dtype
     eps = jnp.finfo(dtype).eps
     inf = jnp.asarray(jnp.inf, dtype)
     k0 = jnp.asarray(0, jnp.int32)
 
-    def test(dz, z1, prev):
+    def test(dz, z1, prev, f):
         size = jnp.max(jnp.abs(dz))
         scale = jnp.max(jnp.abs(z1))
         theta = size / prev
@@ -129,7 +185,11 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
         # remaining error of a few eps would have the same sign step after step (a linearly
         # converging iteration approaches from one side) and add up to a drift.
         floor = (theta >= 0.5) | (theta / (1.0 - theta) * size <= 0.01 * eps * scale)
-        done = (size <= atol + rtol * scale) & floor
+        # or F(z) itself was at round-off, row by row (each |F_i| within ε of the magnitude of its
+        # terms), so z1 = z − Δ is as accurate as float64 allows: the multipliers, whose
+        # corrections stay at their floor ~ε|v|/h far above 0.01ε|z|, no longer wait for θ ≥ 1/2
+        quiet = jnp.all(jnp.abs(f) <= eps * row_scale)
+        done = (size <= atol + rtol * scale) & (floor | quiet)
         return size, theta, done & jnp.isfinite(size)
 
     # phase 1: chord iterations with J(guess) (no pivoting) inverted or factored. The forward-mode
@@ -138,50 +198,92 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
         f = F(z)
         return f, f
 
-    J0, f0 = jax.jacfwd(value_twice, has_aux=True)(guess)
-    if floor_scale is None:
-        floor_scale = jnp.abs(J0) @ jnp.abs(guess) + jnp.abs(f0)
-    floor = FLOOR_FACTOR * eps * jnp.max(jnp.broadcast_to(jnp.abs(floor_scale), f0.shape))
+    def jacobian_and_value(z):
+        if tail_columns is None:
+            return jax.jacfwd(value_twice, has_aux=True)(z)
+        k = tail_columns.shape[1]
+        tail = z[z.shape[0] - k:]
+        J, f = jax.jacfwd(lambda lead: value_twice(jnp.concatenate([lead, tail])), has_aux=True)(z[:z.shape[0] - k])
+        return jnp.concatenate([J, tail_columns.astype(J.dtype)], axis=1), f
+
+    n_unknowns = guess.shape[0]
+    make_solver, apply = chord_solver, chord_apply
+
+    def chord(solver, z, j, done, prev, residual, stop, theta_max, j_min):
+        # chord iterations from z (F(z) not yet evaluated) with a fixed solver
+        def cond(c):
+            _, j, done, _, _, stop = c
+            return (~done) & (~stop) & (j < max_steps)
+
+        def body(c):
+            z, j, _, prev, _, _ = c
+            f = F(z)
+            dz = apply(solver, f)
+            z1 = z - dz
+            size, theta, done = test(dz, z1, prev, f)
+            stop = ~done & (~jnp.isfinite(size) | ((j >= j_min) & (theta > theta_max)))
+            return z1, j + 1, done, size, jnp.max(jnp.abs(f)), stop
+
+        return jax.lax.while_loop(cond, body, (z, j, done, prev, residual, stop))
+
+    def fresh_chord(J0, f0, k):
+        # phase 1 from J(guess) and F(guess) (the forward-mode Jacobian computes F(guess) on the
+        # way: the first iteration uses it instead of evaluating F again)
+        solver = make_solver(J0)
+        dz0 = apply(solver, f0)
+        z1 = guess - dz0
+        size0, _, done0 = test(dz0, z1, inf, f0)
+        z, k, done, size, residual, _ = chord(solver, z1, k + 1, done0, size0, jnp.max(jnp.abs(f0)),
+                                              ~done0 & ~jnp.isfinite(size0), 0.5, 1)
+        return z, k, done, size, residual, solver
+
+    if reuse is None:
+        J0, f0 = jacobian_and_value(guess)
+        if floor_scale is None:
+            floor_scale = jnp.abs(J0) @ jnp.abs(guess) + jnp.abs(f0)
+    elif floor_scale is None:
+        raise ValueError("newton: reuse= needs floor_scale= (the default is computed from J(guess))")
+    row_scale = jnp.broadcast_to(jnp.abs(jnp.asarray(floor_scale, dtype)), (n_unknowns,))
+    floor = FLOOR_FACTOR * eps * jnp.max(row_scale)
 
     def at_floor(residual):
         return residual <= floor
 
-    if guess.shape[0] <= UNROLL_MAX:
-        # J(z0)⁻¹ formed once: an iteration's product with it is independent multiply-adds, where
-        # substitution with LU factors is a chain of dependent ones (slower per iteration up to N = 12)
-        Jinv = solve_spd(J0, jnp.eye(guess.shape[0], dtype=dtype))
+    def accepted(done, size, residual, z):
+        # stopped without meeting the correction test, but at the round-off floor: accepted
+        return done | (at_floor(residual) & jnp.isfinite(size) & jnp.all(jnp.isfinite(z)))
 
-        def chord_solve(f):
-            return Jinv @ f
+    if reuse is None:
+        z, k1, done, size, residual, solver = fresh_chord(J0, f0, k0)
     else:
-        lu = lu_factor(J0)
+        # phase 0: chord iterations with the solver of an earlier solve, where the caller says it
+        # is usable (Hairer–Wanner IV.8: simplified Newton keeps its Jacobian over steps while it
+        # contracts fast); given up once it contracts by less than REUSE_THETA_MAX
+        old, usable = reuse
+        usable = jnp.asarray(usable, dtype=bool)
+        z, k1, done, size, residual, _ = chord(old, guess, k0, jnp.asarray(False), inf, inf, ~usable,
+                                               REUSE_THETA_MAX, REUSE_TRANSIENT)
+        done = accepted(done, size, residual, z)
+        # the Jacobian has aged: where phase 0 took more evaluations than that, the caller forms
+        # a new one at the next solve (one evaluation of the Jacobian costs about as much as ten of F)
+        aging = usable & done & (k1 > REUSE_MAX_EVALUATIONS)
 
-        def chord_solve(f):
-            return lu_solve(lu, f)
+        def refresh(c):
+            k = c[1]
+            J0, f0 = jacobian_and_value(guess)
+            z, k, done, size, residual, solver = fresh_chord(J0, f0, k)
+            # a solver with a zero pivot (the pivoted phase 2 then solves) is not kept: zeros instead,
+            # so that the state stays finite (checked here, at the solves that form one, not every step)
+            finite = all_finite(*solver)
+            solver = jax.tree_util.tree_map(lambda a: jnp.where(finite, a, jnp.zeros_like(a)), solver)
+            return z, k, done, size, residual, solver, finite, jnp.asarray(False)
 
-    dz0 = chord_solve(f0)
-    z1 = guess - dz0
-    size0, _, done0 = test(dz0, z1, inf)
-    stop0 = ~done0 & ~jnp.isfinite(size0)
-
-    def chord_cond(c):
-        _, j, done, _, _, stop = c
-        return (~done) & (~stop) & (j < max_steps)
-
-    def chord_body(c):
-        z, j, _, prev, _, _ = c
-        f = F(z)
-        dz = chord_solve(f)
-        z1 = z - dz
-        size, theta, done = test(dz, z1, prev)
-        stop = ~done & (~jnp.isfinite(size) | ((j > 0) & (theta > 0.5)))
-        return z1, j + 1, done, size, jnp.max(jnp.abs(f)), stop
-
-    z, k1, done, size, residual, _ = jax.lax.while_loop(
-        chord_cond, chord_body, (z1, k0 + 1, done0, size0, jnp.max(jnp.abs(f0)), stop0)
-    )
-    # stopped without meeting the correction test, but at the round-off floor: accepted
-    done = done | (at_floor(residual) & jnp.isfinite(size) & jnp.all(jnp.isfinite(z)))
+        # phase 1 at most once, and only where phase 0 failed (a loop rather than a cond: under
+        # vmap a cond computes both branches, a loop only while some member needs it)
+        z, k1, done, size, residual, solver, finite, _ = jax.lax.while_loop(
+            lambda c: c[-1], refresh, (z, k1, done, size, residual, old, jnp.asarray(True), ~done))
+        aging = aging | ~finite
+    done = accepted(done, size, residual, z)
 
     # phase 2 (only where phase 1 failed): Newton with pivoting, fresh Jacobians, from the guess
     def newton_cond(c):
@@ -190,10 +292,10 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
 
     def newton_body(c):
         z, j, _, prev, _ = c
-        J, f = jax.jacfwd(value_twice, has_aux=True)(z)
+        J, f = jacobian_and_value(z)
         dz = jnp.linalg.solve(J, f)  # LAPACK: a rare fallback, cheaper to compile
         z1 = z - dz
-        size, _, done = test(dz, z1, prev)
+        size, _, done = test(dz, z1, prev, f)
         return z1, j + 1, done | ~jnp.isfinite(size), size, jnp.max(jnp.abs(f))
 
     done1 = done
@@ -204,7 +306,9 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
     k = k1 + k2
     done = done | at_floor(residual)
     ok = done & jnp.isfinite(size) & jnp.all(jnp.isfinite(z))
-    return z, StepInfo(ok, k, residual)
+    if reuse is None:
+        return z, StepInfo(ok, k, residual)
+    return z, (StepInfo(ok, k, residual), (solver, ~aging))
 
 
 def momentum_constraint_scale(n: int, p, mu, v, Y):
@@ -260,7 +364,8 @@ def _root_jvp(F_closed, solve, n_args, primals, tangents):
     return (z, info), (dz, jax.tree_util.tree_map(zero, info))
 
 
-def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: int = 50, floor_scale=None):
+def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: int = 50, floor_scale=None,
+               tail_columns=None, reuse=None):
     """Solve `F(z) = 0` for the step unknowns.
 
     Arguments:
@@ -272,9 +377,13 @@ def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: in
             :func:`newton`, tolerance 1e-12).
         max_steps: iteration cap of the implicit case.
         floor_scale: the magnitude of the terms of F, for the round-off floor of :func:`newton`.
+        tail_columns: the constant Jacobian columns of the last unknowns where F is affine in them
+            (:func:`newton`; ignored by an optimistix `solver`).
+        reuse: `(solver, usable)` from an earlier solve (:func:`newton`); with an optimistix
+            `solver` it is returned unchanged.
 
     Returns:
-        `(z, StepInfo)`.
+        `(z, StepInfo)`, or with `reuse`, `(z, StepInfo, solver)`: the solver to keep.
     """
     if explicit:
         J = jax.jacfwd(F)(guess)
@@ -282,11 +391,14 @@ def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: in
         ok = jnp.all(jnp.isfinite(z))
         return z, StepInfo(ok, jnp.asarray(1, dtype=jnp.int32), jnp.asarray(0.0, dtype=z.dtype))
     if solver is None:
-        if floor_scale is None:
-            return implicit_solve(F, guess, lambda f, z0: newton(f, z0, max_steps=max_steps))
-        return implicit_solve(
-            F, guess, lambda f, z0, scale: newton(f, z0, max_steps=max_steps, floor_scale=scale), floor_scale
+        # traced values reach newton as arguments of implicit_solve, never by closure
+        args = {k: v for k, v in (("floor_scale", floor_scale), ("tail_columns", tail_columns), ("reuse", reuse))
+                if v is not None}
+        names = tuple(args)
+        z, aux = implicit_solve(
+            F, guess, lambda f, z0, *a: newton(f, z0, max_steps=max_steps, **dict(zip(names, a))), *args.values()
         )
+        return (z, aux) if reuse is None else (z, *aux)
     # The Cauchy test of optx.Newton asks |F| < atol absolutely, but F has a round-off floor of
     # about eps·|dF/dz|·|z| (e.g. G(z - q)/h), which passes atol once |z|/h is large, and the solve
     # then never terminates. Dividing F by that scale leaves the Newton iterates unchanged and
@@ -300,7 +412,8 @@ def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: in
     z = sol.value
     residual = jnp.max(jnp.abs(F(z)))
     ok = (sol.result == optx.RESULTS.successful) & jnp.all(jnp.isfinite(z)) & jnp.isfinite(residual)
-    return z, StepInfo(ok, jnp.asarray(sol.stats["num_steps"], dtype=jnp.int32), residual)
+    info = StepInfo(ok, jnp.asarray(sol.stats["num_steps"], dtype=jnp.int32), residual)
+    return (z, info) if reuse is None else (z, info, reuse)
 
 
 class Integrator(eqx.Module):
@@ -422,6 +535,13 @@ class Integrator(eqx.Module):
         if not self.can_change_step:
             raise NotImplementedError(f"{self.name}: the step size cannot change during a run")
         return state
+
+    def memoryless(self):
+        """The same step map with nothing in its state that serves only to make steps cheaper
+        (DLA's kept Jacobian, :class:`~gnipy.integrators.comparators.DiscreteLagrangeDAlembert`):
+        what differentiates the step map with respect to its state (the discrete map's
+        eigenvalues, :func:`gnipy.linearize`) uses. By default the method itself."""
+        return self
 
     def hidden_momentum(self, system, state, h):
         """The GNI family's hidden momentum $p^+_k - \\bar p_k = Q^*(p^+_k - \\Pi)$ at the node that

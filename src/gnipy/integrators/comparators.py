@@ -18,29 +18,35 @@ reported by :func:`~gnipy.simulate` like any other method's.
 
 from __future__ import annotations
 
+import dataclasses
 from typing import Any, ClassVar, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ..linalg import solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
+from ..linalg import LU_UNROLL_MAX, UNROLL_MAX, solve_spd  # the metric and the C = μG⁻¹μᵀ are SPD
 from ..discrete_lagrangians import DiscreteLagrangian, Midpoint
 from ..forcing import discrete_forces
 from ..holonomic import phi_scale
 from ..spaces import compensated_add
-from .base import Integrator, momentum_constraint_scale, require_constant_metric, solve_step
+from .base import Integrator, chord_solver, momentum_constraint_scale, require_constant_metric, solve_step
 
 __all__ = ["DiscreteLagrangeDAlembert", "DLAState", "McLachlanPerlmutter", "MPState"]
 
 
 class DLAState(NamedTuple):
-    """DLA state at node k: the configuration $q_k$, the post-momentum $p^+_k$ and the rounding
-    error of the Euclidean coordinates (compensated summation)."""
+    """DLA state at node k: the configuration $q_k$, the post-momentum $p^+_k$, the rounding
+    error of the Euclidean coordinates (compensated summation), and where the step keeps its
+    Jacobian (`reuse_jacobian`), `jacobian = (solver, h_solver, w, h_w)`: the chord solver of a
+    Jacobian (:func:`~gnipy.integrators.base.chord_solver`) and the step size it serves (0: form a
+    new one at the next step), the last step's solution $w = (\\Delta q, \\lambda)$ and the step
+    size it was made with (0 before the first step); None otherwise."""
 
     b: jax.Array
     p_plus: jax.Array
     x_err: jax.Array
+    jacobian: Any = None
 
 
 class DiscreteLagrangeDAlembert(Integrator):
@@ -93,15 +99,34 @@ class DiscreteLagrangeDAlembert(Integrator):
 
     Works for position-dependent metrics and affine constraints (the Newton solve is always used).
 
+    With more than :data:`gnipy.linalg.UNROLL_MAX` unknowns (and up to
+    :data:`gnipy.linalg.LU_UNROLL_MAX`) the step keeps its Jacobian: the LU factors of the Newton
+    matrix travel in the state, the next step's chord iterations start with them from the last
+    step's solution (the guess, in place of $h\\,\\mathbb{G}^{-1}p^+$), and the Jacobian is formed
+    again only where they do not converge, contract too slowly, or took more than
+    :data:`~gnipy.integrators.base.REUSE_MAX_EVALUATIONS` evaluations of the residual (then at the
+    next step; :func:`~gnipy.integrators.base.newton`, `reuse`). The steps solve the same
+    equations to the same round-off test either way, so the runs agree to round-off. There the
+    forward-mode Jacobian is most of a step: on the native backend (2-core Intel Xeon, h = 0.01)
+    the SymBRiM bicycle's step takes 4.3 µs instead of 6.7, `gnipy.models.whipple_bicycle`'s
+    6.7 µs instead of 14.7 (BENCHMARKS.md, section 10). For smaller systems the Jacobian is cheap
+    and a fresh one converges in fewer evaluations: keeping it made the Chaplygin sleigh's step
+    0.127 → 0.159 µs and the rolling ball's 0.325 → 0.356 µs, Suslov's 0.257 → 0.186 µs, so
+    by default they form it at every step (`reuse_jacobian=True` keeps it for them too).
+
     Arguments:
         discrete_lagrangian: the $l_d$ (default :class:`~gnipy.Midpoint`).
         root_finder: optimistix root finder (default Newton, tolerances 1e-12).
         max_steps: Newton iteration cap.
+        reuse_jacobian: keep the Jacobian from step to step: None (default) above
+            :data:`gnipy.linalg.UNROLL_MAX` unknowns, True always, False never (ignored with a
+            `root_finder`, and above :data:`gnipy.linalg.LU_UNROLL_MAX` unknowns).
     """
 
     discrete_lagrangian: DiscreteLagrangian = Midpoint()
     root_finder: Any = None
     max_steps: int = eqx.field(static=True, default=50)
+    reuse_jacobian: bool | None = eqx.field(static=True, default=None)
     name: ClassVar[str] = "dla"
     #: keeps holonomic constraints with a position multiplier (:mod:`gnipy.holonomic`)
     holonomic: ClassVar[bool] = True
@@ -114,12 +139,25 @@ class DiscreteLagrangeDAlembert(Integrator):
         return self.discrete_lagrangian.order
 
     def init(self, system, q0, v0, h):
-        """$(q_0, p^+_0 = \\mathbb{G}(q_0)v_0)$."""
-        return DLAState(q0, system.momentum(q0, v0), jnp.zeros_like(system.space.coordinates(q0)))
+        """$(q_0, p^+_0 = \\mathbb{G}(q_0)v_0)$, and no Jacobian to reuse yet."""
+        p0 = system.momentum(q0, v0)
+        jacobian = None
+        N = p0.shape[0] + system.mu(q0).shape[0]  # the unknowns (q_{k+1}, λ_k)
+        reuse = N > UNROLL_MAX if self.reuse_jacobian is None else self.reuse_jacobian
+        if reuse and self.root_finder is None and N <= LU_UNROLL_MAX:
+            shapes = jax.eval_shape(chord_solver, jax.ShapeDtypeStruct((N, N), p0.dtype))
+            zero = jnp.zeros((), p0.dtype)
+            jacobian = (jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes), zero,
+                        jnp.zeros(N, p0.dtype), zero)
+        return DLAState(q0, p0, jnp.zeros_like(system.space.coordinates(q0)), jacobian)
+
+    def memoryless(self):
+        """DLA without the kept Jacobian: the same step map (:meth:`Integrator.memoryless`)."""
+        return dataclasses.replace(self, reuse_jacobian=False)
 
     def step(self, system, state, h):
         """One DLA step: Newton on $(q_{k+1}, \\lambda_k)$; returns `(DLAState, StepInfo)`."""
-        b, p_plus, x_err = state
+        b, p_plus, x_err, kept = state
         space = system.space
         mu_k = system.mu(b)
         m = mu_k.shape[0]
@@ -146,25 +184,43 @@ class DiscreteLagrangeDAlembert(Integrator):
             constraint = system.nonholonomic_mu(b_mid) @ (vel - system.Y(b_mid))
             return jnp.concatenate([momentum, constraint, system.phi(space.advance(b, z))])
 
-        v = system.velocity(b, p_plus)
-        guess = jnp.concatenate([space.initial_guess(b, v, h), jnp.zeros(m, dtype=p_plus.dtype)])
+        def from_velocity(_):
+            v = system.velocity(b, p_plus)
+            return jnp.concatenate([space.initial_guess(b, v, h), jnp.zeros(m, dtype=p_plus.dtype)])
+
+        if kept is None:
+            guess = from_velocity(None)
+        else:  # the previous step's solution, where it was made with this step size
+            guess = jax.lax.cond(kept[3] == h, lambda _: kept[2], from_velocity, None)
+        v = guess[:n] / h  # the velocity (h v: the guess), or the previous step's
         scale = momentum_constraint_scale(n, p_plus, mu_k, v, system.Y(b))
         if system.holonomic is not None:  # the φ rows: terms of the size |dφ||q|
             r = system.phi(b).shape[0]
             scale = scale.at[n + m - r:].set(phi_scale(system, b, system.holonomic_mu(b)))
-        w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
-                             floor_scale=scale)
+        # λ enters only the momentum rows, through μ(q_k)ᵀλ: constant Jacobian columns (newton)
+        tail = jnp.concatenate([mu_k.T, jnp.zeros((m, m), dtype=mu_k.dtype)])
+        if kept is None:
+            w, info = solve_step(residual, guess, explicit=False, solver=self.root_finder,
+                                 max_steps=self.max_steps, floor_scale=scale, tail_columns=tail)
+        else:  # the last step's Jacobian, where it was formed for this step size
+            w, info, (solver, keep) = solve_step(residual, guess, explicit=False, solver=self.root_finder,
+                                                 max_steps=self.max_steps, floor_scale=scale, tail_columns=tail,
+                                                 reuse=(kept[0], kept[1] == h))
+            # the step size it serves, or 0 where it has aged (formed again at the next step) or is not
+            # finite (a zero pivot: the step was solved by the pivoted fallback; zeros kept instead)
+            hh = jnp.asarray(h, dtype=p_plus.dtype)
+            kept = (solver, jnp.where(keep, hh, jnp.zeros_like(kept[1])), w, hh + jnp.zeros_like(kept[3]))
         z, lam = w[:n], w[n:]
         b1, x_err = space.advance_compensated(b, x_err, z)
         p1 = p_plus - mu_k.T @ lam + space.legendre_jump(ld, b, z)  # FL⁺ = p⁻ + (FL⁺ − FL⁻)
         if forced:  # p⁺_{k+1} = FL⁺ + f⁺ = p⁻ + f⁻ + (FL⁺ − FL⁻) + f⁺
             f_minus, f_plus = discrete_forces(system, b, z, h, rule)
             p1 = p1 + (f_minus + f_plus)
-        return DLAState(b1, p1, x_err), info
+        return DLAState(b1, p1, x_err, kept), info
 
     def observe(self, system, state, h):
         """$(q_k,\\ \\mathbb{G}^{-1}p^+_k,\\ p^+_k)$ (see the class docstring on the velocity)."""
-        b, p_plus, _ = state
+        b, p_plus = state.b, state.p_plus
         return b, system.velocity(b, p_plus), p_plus
 
 

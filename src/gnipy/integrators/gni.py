@@ -24,7 +24,7 @@ import jax.numpy as jnp
 
 from ..discrete_lagrangians import CustomDiscreteLagrangian, DiscreteLagrangian, Trapezoid
 from ..forcing import discrete_forces
-from ..holonomic import with_position_multiplier
+from ..holonomic import position_multiplier_columns, with_position_multiplier
 from ..projectors import reflect_and_report
 from .base import Integrator, solve_step
 
@@ -154,7 +154,7 @@ class GNI(Integrator):
         if system.holonomic is not None:  # FL⁻ = p⁻ + dφᵀΛ, φ(b_{k+1}) = 0 (gnipy.holonomic)
             F, w0, scale, rows = with_position_multiplier(system, b, residual, guess, jnp.max(jnp.abs(p_minus)))
             w, info = solve_step(F, w0, explicit=False, solver=self.root_finder, max_steps=self.max_steps,
-                                 floor_scale=scale)
+                                 floor_scale=scale, tail_columns=position_multiplier_columns(rows))
             z = w[:guess.shape[0]]
             departure = p_minus + rows.T @ w[guess.shape[0]:]  # FL⁻ at the solution
         else:

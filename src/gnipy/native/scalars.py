@@ -377,6 +377,8 @@ class Function:
                 return self.binary("sub", pos, neg)
             raise Unsupported(f"{fn} of {a.ty}")
         if isinstance(a, Const):
+            if fn == "is_finite":  # a predicate: an i1, as the instruction below gives
+                return Const(bool(np.isfinite(a.value)), "i1")
             with np.errstate(all="ignore"):
                 return Const(_fold1(fn, a.value), "double")
         if fn == "rsqrt":
