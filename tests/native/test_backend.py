@@ -182,8 +182,9 @@ def _chain_mu(q):
 
 def test_a_step_with_more_unknowns_than_the_unrolled_inverse_equals_xla():
     """DLA on 8 coordinates with 5 constraints solves for 13 unknowns, above
-    gnipy.linalg.UNROLL_MAX: the chord iteration factors its Jacobian (gnipy.linalg.lu_factor) and
-    substitutes at each iteration (the Whipple bicycle's path); native and XLA agree."""
+    gnipy.linalg.UNROLL_MAX: the chord iteration factors its Jacobian (gnipy.linalg.lu_factor),
+    substitutes at each iteration and keeps the factors from step to step (the Whipple bicycle's
+    path); native and XLA agree."""
     from gnipy.linalg import LU_UNROLL_MAX, UNROLL_MAX
 
     assert UNROLL_MAX < 8 + 5 <= LU_UNROLL_MAX
@@ -193,6 +194,18 @@ def test_a_step_with_more_unknowns_than_the_unrolled_inverse_equals_xla():
     a, b = _pair(s, "dla", q0=q0, v0=v0, project_v0=True, h=0.01, steps=2000, save_every=500)
     _assert_agree(a, b)
     assert a.healthy and b.healthy
+    # above 12 unknowns DLA keeps its Jacobian's factors and last solution in its state: a run
+    # continued from a final state equals the run made at once, bit for bit, on both backends
+    solver, h_solver, w, h_w = b.final_state.jacobian
+    assert len(solver) == 3 and w.shape == (13,) and float(h_w) == 0.01
+    for backend in ("native", "xla"):
+        first = gnipy.simulate(s, "dla", q0=q0, v0=v0, project_v0=True, h=0.01, steps=1500, save_every=500,
+                               backend=backend)
+        rest = gnipy.simulate(s, "dla", h=0.01, steps=500, save_every=500, state0=first.final_state, t0=15.0,
+                              backend=backend)
+        whole = a if backend == "xla" else b
+        np.testing.assert_array_equal(np.asarray(rest.q[-1]), np.asarray(whole.q[-1]))
+        np.testing.assert_array_equal(np.asarray(rest.p[-1]), np.asarray(whole.p[-1]))
 
 
 @pytest.mark.slow
