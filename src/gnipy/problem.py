@@ -232,6 +232,8 @@ def _concrete(system, systems, method, q0, v0, R0, h, steps, t_final, t0, state0
     plan = schedule(saveat, n, partial, h=h, t0=t0)
     if state0 is not None and (q0 is not None or v0 is not None or R0 is not None):
         raise InputError("state0: give either state0 or the initial condition q0/v0/R0, not both")
+    if state0 is not None and hasattr(method, "continue_from"):
+        state0 = method.continue_from(system, state0)  # e.g. a batch member's state (no kept Jacobian)
     if state0 is None:
         q0, v0, R0 = default_initial_condition(systems if systems and len(systems) > 1 else system, q0, v0, R0)
     batched = systems is not None or (state0 is None and is_batch(system, q0, v0, R0))

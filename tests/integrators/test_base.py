@@ -147,3 +147,32 @@ def test_chord_apply_solves_with_either_kind_of_solver():
         b = rng.standard_normal(N)
         np.testing.assert_allclose(chord_apply(chord_solver(jnp.asarray(A)), jnp.asarray(b)),
                                    np.linalg.solve(A, b), rtol=1e-12)
+
+
+def test_a_degenerate_kept_solver_is_not_trusted():
+    """A kept solver that corrects nothing (zeros) gives corrections of 0: nothing is accepted from
+    them (no contraction measured), their ratio 0/0 stops phase 0, and J(guess) solves."""
+    n, m = 3, 2
+    F, _, scale = saddle_problem(n, m, seed=5)
+    guess = jnp.zeros(n + m)
+    zeros = jax.tree_util.tree_map(jnp.zeros_like, chord_solver(jax.jacfwd(F)(guess)))
+    z, (info, (solver, keep)) = newton(F, guess, floor_scale=scale, reuse=(zeros, True))
+    assert bool(info.ok) and at_round_off(F, z)
+    np.testing.assert_allclose(solver[0], chord_solver(jax.jacfwd(F)(guess))[0], rtol=1e-12)
+
+
+def test_a_kept_solver_that_amplifies_at_first_is_not_accepted_on_its_first_correction():
+    """A kept solver whose iteration matrix E = I − J_old⁻¹J is nilpotent with a large entry (as the
+    multipliers' rows make it: max-norm 50–95 at spectral radius 0.005–0.01 on the bicycle): from
+    a guess 1e-14 off, its first correction is small but off by 50 times the error; the root is
+    accepted only after the contraction has been measured, to round-off."""
+    n, m = 3, 2
+    F, _, scale = saddle_problem(n, m, seed=6)
+    root, _ = newton(F, jnp.zeros(n + m), floor_scale=scale)
+    J = jax.jacfwd(F)(root)
+    E = jnp.zeros((n + m, n + m)).at[n, 0].set(50.0)  # E² = 0
+    old = chord_solver(J @ (jnp.eye(n + m) + E))  # J_old⁻¹ = (I − E) J⁻¹
+    guess = root + 1e-14 * jnp.max(jnp.abs(root)) * jnp.cos(jnp.arange(n + m))
+    z, (info, _) = newton(F, guess, floor_scale=scale, reuse=(old, True))
+    assert bool(info.ok) and int(info.iterations) >= 3
+    np.testing.assert_allclose(z, root, rtol=0, atol=20 * EPS * float(jnp.max(jnp.abs(root))))

@@ -197,6 +197,16 @@ def test_dla_keeping_its_jacobian_is_the_same_map(varmetric):
     assert DiscreteLagrangeDAlembert(reuse_jacobian=False).init(varmetric, VM_Q0, VM_V0, 0.05).jacobian is None
     assert DiscreteLagrangeDAlembert().init(varmetric, VM_Q0, VM_V0, 0.05).jacobian is None  # 4 unknowns
     assert DiscreteLagrangeDAlembert().memoryless().reuse_jacobian is False
+    # a batch runs without the kept Jacobian (Integrator.memoryless); a member's final state, which
+    # has none, continues a run of the method that keeps it (continue_from), as one run does
+    method = DiscreteLagrangeDAlembert(reuse_jacobian=True)
+    q2 = np.stack([VM_Q0, VM_Q0])
+    v2 = np.stack([VM_V0, VM_V0])
+    batch = gnipy.simulate(varmetric, method, q2, v2, h=0.05, steps=200, save_every=200)
+    member = jax.tree_util.tree_map(lambda a: a[0], batch.final_state)
+    assert member.jacobian is None
+    rest = gnipy.simulate(varmetric, method, h=0.05, steps=200, save_every=200, state0=member, t0=10.0)
+    np.testing.assert_allclose(np.asarray(rest.q[-1]), np.asarray(kept.q[-1]), rtol=0, atol=1e-13)
     # the map of the state alone, without the kept solver: on the Chaplygin sleigh sliding straight
     # (a steady motion), dla's multipliers with and without it are the same, at most 9 of them
     # (q, p and the compensated-summation error x_err, 3 each; the solver adds 17 entries)

@@ -166,7 +166,8 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
             Jacobian is most of the step's cost). Needs `floor_scale`.
 
     Returns:
-        `(z, StepInfo)`, or with `reuse`, `(z, (StepInfo, solver))` with the solver to keep. `ok`
+        `(z, StepInfo)`, or with `reuse`, `(z, (StepInfo, (solver, keep)))`: the solver to keep and
+        whether it may serve the next solve (False: it has aged or is not finite). `ok`
         is False when phase 2 does not converge in `max_steps` iterations (and its residual is
         above the floor) or a value is not finite; `iterations` counts evaluations of F in all
         phases; `residual` is $\max|F|$ at the last iterate from which a correction was computed.
@@ -209,11 +210,15 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
     n_unknowns = guess.shape[0]
     make_solver, apply = chord_solver, chord_apply
 
-    def chord(solver, z, j, done, prev, residual, stop, theta_max, j_min):
-        # chord iterations from z (F(z) not yet evaluated) with a fixed solver
+    def chord(solver, z, j, done, prev, residual, stop, theta_max, j_min, cap, kept=False):
+        # chord iterations from z (F(z) not yet evaluated) with a fixed solver, up to `cap`
+        # evaluations in all. With a kept solver (phase 0) nothing is accepted before a contraction
+        # has been measured over j_min iterations (a first correction that is small says nothing
+        # about a stale solver: it may be degenerate, or amplify), and a ratio of corrections that
+        # is not a number (0/0) stops it
         def cond(c):
             _, j, done, _, _, stop = c
-            return (~done) & (~stop) & (j < max_steps)
+            return (~done) & (~stop) & (j < cap)
 
         def body(c):
             z, j, _, prev, _, _ = c
@@ -221,8 +226,11 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
             dz = apply(solver, f)
             z1 = z - dz
             size, theta, done = test(dz, z1, prev, f)
-            stop = ~done & (~jnp.isfinite(size) | ((j >= j_min) & (theta > theta_max)))
-            return z1, j + 1, done, size, jnp.max(jnp.abs(f)), stop
+            stop = ~jnp.isfinite(size) | ((j >= j_min) & (theta > theta_max))
+            if kept:
+                done = done & (j >= j_min)
+                stop = stop | ~jnp.isfinite(theta)
+            return z1, j + 1, done, size, jnp.max(jnp.abs(f)), ~done & stop
 
         return jax.lax.while_loop(cond, body, (z, j, done, prev, residual, stop))
 
@@ -234,7 +242,7 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
         z1 = guess - dz0
         size0, _, done0 = test(dz0, z1, inf, f0)
         z, k, done, size, residual, _ = chord(solver, z1, k + 1, done0, size0, jnp.max(jnp.abs(f0)),
-                                              ~done0 & ~jnp.isfinite(size0), 0.5, 1)
+                                              ~done0 & ~jnp.isfinite(size0), 0.5, 1, k + max_steps)
         return z, k, done, size, residual, solver
 
     if reuse is None:
@@ -262,8 +270,9 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
         old, usable = reuse
         usable = jnp.asarray(usable, dtype=bool)
         z, k1, done, size, residual, _ = chord(old, guess, k0, jnp.asarray(False), inf, inf, ~usable,
-                                               REUSE_THETA_MAX, REUSE_TRANSIENT)
-        done = accepted(done, size, residual, z)
+                                               REUSE_THETA_MAX, REUSE_TRANSIENT, max_steps, kept=True)
+        # (no acceptance at the round-off floor here: where phase 0 stopped without converging,
+        # phase 1 solves from the guess)
         # the Jacobian has aged: where phase 0 took more evaluations than that, the caller forms
         # a new one at the next solve (one evaluation of the Jacobian costs about as much as ten of F)
         aging = usable & done & (k1 > REUSE_MAX_EVALUATIONS)
@@ -383,7 +392,7 @@ def solve_step(F: Callable, guess, *, explicit: bool, solver=None, max_steps: in
             `solver` it is returned unchanged.
 
     Returns:
-        `(z, StepInfo)`, or with `reuse`, `(z, StepInfo, solver)`: the solver to keep.
+        `(z, StepInfo)`, or with `reuse`, `(z, StepInfo, (solver, keep))` (:func:`newton`).
     """
     if explicit:
         J = jax.jacfwd(F)(guess)
@@ -542,6 +551,13 @@ class Integrator(eqx.Module):
         what differentiates the step map with respect to its state (the discrete map's
         eigenvalues, :func:`gnipy.linearize`) uses. By default the method itself."""
         return self
+
+    def continue_from(self, system, state):
+        """The state a run continued from `state` (`simulate(state0=...)`) starts with: `state`
+        itself, or for a method that keeps something to make steps cheaper (:meth:`memoryless`),
+        a state of the memoryless method (a batch member's) with that part empty. By default
+        `state` unchanged."""
+        return state
 
     def hidden_momentum(self, system, state, h):
         """The GNI family's hidden momentum $p^+_k - \\bar p_k = Q^*(p^+_k - \\Pi)$ at the node that

@@ -111,8 +111,9 @@ class DiscreteLagrangeDAlembert(Integrator):
     the SymBRiM bicycle's step takes 4.3 µs instead of 6.7, `gnipy.models.whipple_bicycle`'s
     6.7 µs instead of 14.7 (BENCHMARKS.md, section 10). For smaller systems the Jacobian is cheap
     and a fresh one converges in fewer evaluations: keeping it made the Chaplygin sleigh's step
-    0.127 → 0.159 µs and the rolling ball's 0.325 → 0.356 µs, Suslov's 0.257 → 0.186 µs, so
-    by default they form it at every step (`reuse_jacobian=True` keeps it for them too).
+    slower (0.127 → 0.159 µs) and the rolling ball's (0.325 → 0.356 µs), Suslov's faster (0.257 →
+    0.186 µs); with no gain to count on there, DLA forms it at every step by default up to 12
+    unknowns (`reuse_jacobian=True` keeps it for them too).
 
     Arguments:
         discrete_lagrangian: the $l_d$ (default :class:`~gnipy.Midpoint`).
@@ -141,15 +142,25 @@ class DiscreteLagrangeDAlembert(Integrator):
     def init(self, system, q0, v0, h):
         """$(q_0, p^+_0 = \\mathbb{G}(q_0)v_0)$, and no Jacobian to reuse yet."""
         p0 = system.momentum(q0, v0)
-        jacobian = None
-        N = p0.shape[0] + system.mu(q0).shape[0]  # the unknowns (q_{k+1}, λ_k)
+        return DLAState(q0, p0, jnp.zeros_like(system.space.coordinates(q0)), self._no_jacobian_yet(system, q0, p0))
+
+    def _no_jacobian_yet(self, system, b, p):
+        """The `jacobian` field of a state from which no step was taken with this method: zeros
+        with step sizes 0 (nothing to reuse), or None where the method keeps no Jacobian."""
+        N = p.shape[0] + system.mu(b).shape[0]  # the unknowns (q_{k+1}, λ_k)
         reuse = N > UNROLL_MAX if self.reuse_jacobian is None else self.reuse_jacobian
-        if reuse and self.root_finder is None and N <= LU_UNROLL_MAX:
-            shapes = jax.eval_shape(chord_solver, jax.ShapeDtypeStruct((N, N), p0.dtype))
-            zero = jnp.zeros((), p0.dtype)
-            jacobian = (jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes), zero,
-                        jnp.zeros(N, p0.dtype), zero)
-        return DLAState(q0, p0, jnp.zeros_like(system.space.coordinates(q0)), jacobian)
+        if not (reuse and self.root_finder is None and N <= LU_UNROLL_MAX):
+            return None
+        shapes = jax.eval_shape(chord_solver, jax.ShapeDtypeStruct((N, N), p.dtype))
+        zero = jnp.zeros((), p.dtype)
+        return (jax.tree_util.tree_map(lambda a: jnp.zeros(a.shape, a.dtype), shapes), zero, jnp.zeros(N, p.dtype), zero)
+
+    def continue_from(self, system, state):
+        """A state without the kept Jacobian (a batch member's, :meth:`memoryless`) gets an empty
+        one, so that a run continues from it (:meth:`Integrator.continue_from`)."""
+        if isinstance(state, DLAState) and state.jacobian is None:
+            return state._replace(jacobian=self._no_jacobian_yet(system, state.b, state.p_plus))
+        return state
 
     def memoryless(self):
         """DLA without the kept Jacobian: the same step map (:meth:`Integrator.memoryless`)."""

@@ -162,6 +162,12 @@ class Composition(Integrator):
     def prepare(self, system, q0):
         return dataclasses.replace(self, base=self._base().prepare(system, q0))
 
+    def memoryless(self):
+        return dataclasses.replace(self, base=self.base.memoryless())
+
+    def continue_from(self, system, state):
+        return self.base.continue_from(system, state)
+
     @property
     def start_label(self) -> str:
         """The base method's start (for the GNI, always the consistent one, :meth:`init`)."""

@@ -57,6 +57,12 @@ class _Wrapped(Integrator):
     def prepare(self, system, q0):
         return dataclasses.replace(self, method=self.method.prepare(system, q0))
 
+    def memoryless(self):
+        return dataclasses.replace(self, method=self.method.memoryless())
+
+    def continue_from(self, system, state):
+        return self.method.continue_from(system, state)
+
     @property
     def start_label(self) -> str:
         return self.method.start_label
