@@ -108,7 +108,7 @@ class DiscreteLagrangeDAlembert(Integrator):
     next step; :func:`~gnipy.integrators.base.newton`, `reuse`). The steps solve the same
     equations to the same round-off test either way, so the runs agree to round-off. There the
     forward-mode Jacobian is most of a step: on the native backend (2-core Intel Xeon, h = 0.01)
-    the SymBRiM bicycle's step takes 4.3 µs instead of 6.7, `gnipy.models.whipple_bicycle`'s
+    the SymBRiM bicycle's step takes 4.4 µs instead of 6.7, `gnipy.models.whipple_bicycle`'s
     6.7 µs instead of 14.7 (BENCHMARKS.md, section 10). For smaller systems the Jacobian is cheap
     and a fresh one converges in fewer evaluations: keeping it made the Chaplygin sleigh's step
     slower (0.127 → 0.159 µs) and the rolling ball's (0.325 → 0.356 µs), Suslov's faster (0.257 →
