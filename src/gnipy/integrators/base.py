@@ -257,10 +257,6 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
     def at_floor(residual):
         return residual <= floor
 
-    def accepted(done, size, residual, z):
-        # stopped without meeting the correction test, but at the round-off floor: accepted
-        return done | (at_floor(residual) & jnp.isfinite(size) & jnp.all(jnp.isfinite(z)))
-
     if reuse is None:
         z, k1, done, size, residual, solver = fresh_chord(J0, f0, k0)
     else:
@@ -292,7 +288,8 @@ def newton(F: Callable, guess, *, rtol: float = 1e-12, atol: float = 1e-12, max_
         z, k1, done, size, residual, solver, finite, _ = jax.lax.while_loop(
             lambda c: c[-1], refresh, (z, k1, done, size, residual, old, jnp.asarray(True), ~done))
         aging = aging | ~finite
-    done = accepted(done, size, residual, z)
+    # stopped without meeting the correction test, but at the round-off floor: accepted
+    done = done | (at_floor(residual) & jnp.isfinite(size) & jnp.all(jnp.isfinite(z)))
 
     # phase 2 (only where phase 1 failed): Newton with pivoting, fresh Jacobians, from the guess
     def newton_cond(c):
