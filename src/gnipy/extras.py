@@ -11,6 +11,7 @@ reference, gradients, fits and optimal control, on JAX's XLA backend. The rest i
 | `sweeps` | `gnipy.run_sweep`, `gnipy.open_sweep`, `gni sweep` | dask[distributed], rich (and `files`) |
 | `native` | the native CPU backend (`backend="native"`; `"auto"` uses it when it is installed) | llvmlite |
 | `sympy` | `gnipy.from_sympy`: systems from SymPy expressions and `sympy.physics.mechanics` | sympy, sympy2jax |
+| `ipopt` | IPOPT as the optimizer of optimal control (`optimizer="ipopt"`) | cyipopt-wheels (cyipopt with IPOPT built in) |
 | `all` | everything above | |
 
 The library imports an optional package only where it is used, through :func:`require`: without
@@ -36,6 +37,7 @@ EXTRAS: dict[str, str] = {
     "sweeps": "sweep runner",
     "native": "native backend",
     "sympy": "SymPy models (gnipy.from_sympy)",
+    "ipopt": "IPOPT optimizer",
 }
 
 

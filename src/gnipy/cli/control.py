@@ -53,6 +53,7 @@ CONTROL_OPTIONS = {
     "max_iterations": "solver.max_iterations",
     "segments": "solver.segments",
     "starts": "solver.starts (or --starts)",
+    "optimizer": "solver.optimizer (or --optimizer)",
     "controls0": "warm_start",
     "controls": "warm_start",
 }
@@ -97,6 +98,10 @@ def control(
         "functions; returns the best and lists the distinct local optima (default: the file's solver.starts, or 1).",
         show_default=False, min=1, max=1000,
     ),
+    optimizer: str | None = typer.Option(
+        None, "--optimizer", help="slsqp (SciPy's SLSQP) or ipopt (IPOPT with the exact Hessian; the ipopt extra) "
+        "(default: the file's solver.optimizer, or slsqp).", show_default=False,
+    ),
 ):
     """Solve an optimal-control problem on the GNI's steps and write the controlled run.
 
@@ -119,7 +124,7 @@ def control(
             text = source if isinstance(source, str) else problem_text(source)
             typer.echo(text, nl=not text.endswith("\n"))
             return
-        _solve(source, example, out=out, plot=plot, overwrite=overwrite, yes=yes, starts=starts)
+        _solve(source, example, out=out, plot=plot, overwrite=overwrite, yes=yes, starts=starts, optimizer=optimizer)
 
     guarded(go, method_option="solver.method", options=CONTROL_OPTIONS, keywords=CONTROL_KEYWORDS,
             out_of_memory="out of memory: use fewer steps (horizon.steps) or inputs")
@@ -142,7 +147,7 @@ def _problem_source(problem: Path | None, example: str | None):
 
 
 def _solve(source, example: str | None, *, out: Path | None, plot: Path | None, overwrite: bool, yes: bool,
-           starts: int | None = None) -> None:
+           starts: int | None = None, optimizer: str | None = None) -> None:
     """Solve the problem `source` (the text of `example`, or a file) and write --out (and --plot),
     within gnipy's bounds on memory and file size unless `yes`; then report."""
     from gnipy.control.problems import load_problem, write_control_result
@@ -158,9 +163,12 @@ def _solve(source, example: str | None, *, out: Path | None, plot: Path | None, 
     start = time.perf_counter()
     if starts is not None:  # --starts over the file's solver.starts
         prob = dataclasses.replace(prob, starts=starts)
+    if optimizer is not None:  # --optimizer over the file's solver.optimizer (checked by the solve)
+        prob = dataclasses.replace(prob, optimizer=optimizer)
     with Progress("control", prob.max_iterations * prob.starts, "iterations",
                   description=f"{prob.name}: compiling and iterating") as progress:
-        # the total grows when SLSQP fails and the fallback (trust-constr, then SLSQP) starts
+        # the total grows when the optimizer fails and its fallback starts (SLSQP: trust-constr, then SLSQP;
+        # IPOPT: the SLSQP chain)
         def report(i, cost, miss, total):
             progress.update(i, total=total, description=f"{prob.name}: cost {cost:.6g}, target miss {miss:.1e}")
 

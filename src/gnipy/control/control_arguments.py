@@ -22,12 +22,16 @@ from ..simulate import MAX_TOTAL_STEPS, MIN_STEP_SIZE
 from ..system import System
 
 __all__ = ["ControlArguments", "control_arguments", "terminal_residual", "TerminalResidual", "TargetSubset",
-           "target_size", "warm_start", "control_bounds", "control_reporter", "MAX_ITERATIONS"]
+           "target_size", "warm_start", "control_bounds", "control_reporter", "MAX_ITERATIONS", "OPTIMIZERS"]
 
 
 #: The largest `max_iterations` accepted: SciPy's solvers count iterations in 32-bit integers, and an
 #: SQP that has not converged after a million iterations on these problems will not.
 MAX_ITERATIONS = 10**6
+
+#: The optimizers of a solve: SciPy's SLSQP (:mod:`gnipy.control.sqp`, the default) and IPOPT with
+#: the exact Hessian (:mod:`gnipy.control.ipopt`, the `ipopt` extra).
+OPTIMIZERS = ("slsqp", "ipopt")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -36,7 +40,7 @@ class ControlArguments:
     of inputs, and `h`, `effort`, `smoothness`, `t0`, `target_tol`, `kkt_tol`, `segments`,
     `max_iterations` and `input_names` (None or a tuple of m names) as given; `lo`, `hi`: the
     inputs' bounds, (m,) each; `report`: the `(iteration, cost, miss, total)` callable of
-    `progress`, or None."""
+    `progress`, or None; `optimizer`: one of :data:`OPTIMIZERS`."""
 
     K: int
     m: int
@@ -52,14 +56,16 @@ class ControlArguments:
     hi: np.ndarray
     report: Callable | None
     input_names: tuple[str, ...] | None
+    optimizer: str = "slsqp"
 
 
 def control_arguments(system, *, steps, h, effort, smoothness, t0, target_tol, kkt_tol, running_cost, segments,
-                      max_iterations, check_continuous, project_v0, bounds, progress, input_names) -> ControlArguments:
+                      max_iterations, check_continuous, project_v0, bounds, progress, input_names,
+                      optimizer="slsqp") -> ControlArguments:
     """The arguments of a solve (by the names of
     :func:`~gnipy.control.optimal_control.solve_optimal_control`), checked in this order: a forced
-    System with inputs, the numbers, `running_cost`, the flags, `bounds`, `progress` and
-    `input_names`."""
+    System with inputs, the numbers, `running_cost`, the flags, `bounds`, `progress`,
+    `input_names` and `optimizer` (IPOPT's package installed)."""
     if not isinstance(system, System):
         raise InputError(f"system: expected a gnipy.System, got {type(system).__name__}")
     if not system.is_forced or system.inputs == 0:
@@ -83,9 +89,14 @@ def control_arguments(system, *, steps, h, effort, smoothness, t0, target_tol, k
             raise InputError(f"{flag_name}: expected True or False, got {value!r}")
     lo, hi = control_bounds(bounds, m)
     report = control_reporter(progress)
+    names = _input_names(input_names, m)
+    if not isinstance(optimizer, str) or optimizer not in OPTIMIZERS:
+        raise InputError(f"optimizer: expected one of {', '.join(map(repr, OPTIMIZERS))}, got {optimizer!r}")
+    if optimizer == "ipopt":  # before anything is compiled: the missing package named with its extra
+        require("cyipopt", extra="ipopt", what="IPOPT optimizer (optimizer='ipopt')")
     return ControlArguments(K=K, m=m, h=h, effort=effort, smoothness=smoothness, t0=t0, target_tol=target_tol,
                             kkt_tol=kkt_tol, segments=segments, max_iterations=max_iterations, lo=lo, hi=hi,
-                            report=report, input_names=_input_names(input_names, m))
+                            report=report, input_names=names, optimizer=optimizer)
 
 
 def _input_names(input_names, m: int):

@@ -72,6 +72,8 @@ class ControlResult:
             reached, `((cost, number of starts), ...)` by increasing cost (the first is returned);
             empty for one start.
         starts: the number of starts (1: no multistart).
+        optimizer: the optimizer asked for, `"slsqp"` or `"ipopt"` (the message says which stages
+            ran: a fallback's too).
     """
 
     controls: np.ndarray
@@ -97,6 +99,7 @@ class ControlResult:
     redundant_components: tuple[str, ...] = ()
     local_optima: tuple = ()
     starts: int = 1
+    optimizer: str = "slsqp"
 
     @property
     def redundant_target(self) -> bool:

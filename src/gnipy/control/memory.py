@@ -26,6 +26,12 @@ _SQP_BYTES_PER_UNKNOWN2 = 8 * 46
 #: numbers a step on the sleigh (s = 6) and 1.0 s² on the rolling ball (s = 16); 2 s² is the estimate.
 _REVERSE_NUMBERS_PER_STATE2 = 2
 
+#: Numbers per unknown and step, per state size s, that IPOPT's exact Hessian keeps (forward mode over
+#: reverse mode: a tangent per unknown through the reverse pass). Measured (peak RSS of the ball-plate
+#: problem solved with IPOPT against SLSQP, 120 and 240 steps, 240 and 480 unknowns): the difference grew
+#: by 20 MB, about 29 numbers per unknown and step on the ball (s = 16); 2 s is the estimate.
+_HESSIAN_NUMBERS_PER_UNKNOWN_STEP_STATE = 2
+
 #: The copies of the controlled run's nodes held at once: the device arrays, their host copies, the
 #: dataset written.
 _NODE_COPIES = 3
@@ -44,7 +50,8 @@ def memory_limit(max_bytes, name: str = "max_bytes") -> int | None:
     return int(min(float(max_bytes), 2.0**62))
 
 
-def control_memory(system: System, steps: int, *, target_size: int = 1, segments: int = 1) -> dict[str, int]:
+def control_memory(system: System, steps: int, *, target_size: int = 1, segments: int = 1,
+                   optimizer: str = "slsqp") -> dict[str, int]:
     """The memory :func:`solve_optimal_control` is estimated to need, in bytes, by part (before
     anything is compiled; what `max_bytes` bounds).
 
@@ -53,13 +60,18 @@ def control_memory(system: System, steps: int, *, target_size: int = 1, segments
         steps: the number K of steps.
         target_size: the number d of the target's components.
         segments: the number S of shooting segments.
+        optimizer: `"slsqp"` or `"ipopt"` (whose exact Hessian adds the `"hessian"` part).
 
     Returns:
-        `{"sqp": ..., "jacobian": ..., "reverse": ..., "nodes": ..., "total": ...}`: the SQP's dense
-        matrices, O(n²) in the n = K·m (+ the multiple-shooting states) unknowns (the largest part:
-        SciPy's SLSQP and trust-constr hold dense n x n matrices); the constraints' Jacobian
-        (d + the defects) x n, in a few copies; what reverse mode keeps per step to differentiate
-        through the steps, O(K s²) for the state size s; the controlled run's nodes, O(K).
+        `{"sqp": ..., "jacobian": ..., "reverse": ..., "hessian": ..., "nodes": ..., "total": ...}`:
+        the SQP's dense matrices, O(n²) in the n = K·m (+ the multiple-shooting states) unknowns
+        (SciPy's SLSQP and trust-constr hold dense n x n matrices; IPOPT's fallback runs them
+        too); the constraints' Jacobian (d + the defects) x n, in a few copies; what reverse mode
+        keeps per step to differentiate through the steps, O(K s²) for the state size s; with
+        IPOPT, the Hessian of the Lagrangian: forward mode over reverse mode carries a tangent per
+        unknown through the steps, O(K s n), and the dense Hessian in four copies (JAX's,
+        NumPy's, its lower triangle, IPOPT's factorization), 0 with SLSQP; the controlled run's
+        nodes, O(K).
     """
     k = system.group.matrix_size if system.group is not None else 0
     group_dim = system.group.dim if system.group is not None else 0
@@ -70,6 +82,8 @@ def control_memory(system: System, steps: int, *, target_size: int = 1, segments
         "sqp": _SQP_BYTES_PER_UNKNOWN2 * unknowns**2,
         "jacobian": 3 * 8 * (target_size + shooting) * unknowns,  # JAX's, its NumPy copy, SciPy's
         "reverse": 8 * _REVERSE_NUMBERS_PER_STATE2 * state**2 * steps,
+        "hessian": (8 * (_HESSIAN_NUMBERS_PER_UNKNOWN_STEP_STATE * state * steps * unknowns + 4 * unknowns**2)
+                    if optimizer == "ipopt" else 0),
         "nodes": _NODE_COPIES * (steps + 1) * node_bytes(system),
     }
     parts["total"] = sum(parts.values())
@@ -77,20 +91,22 @@ def control_memory(system: System, steps: int, *, target_size: int = 1, segments
 
 
 def check_control_memory(system: System, steps: int, target_size: int, segments: int, max_bytes,
-                         key: str = "steps") -> None:
+                         key: str = "steps", optimizer: str = "slsqp") -> None:
     """Refuse (`InputError` naming `key`) a problem whose :func:`control_memory` exceeds the bound
     of `max_bytes` (:func:`memory_limit`)."""
     bound = memory_limit(max_bytes)
     if bound is None:
         return
-    need = control_memory(system, steps, target_size=target_size, segments=segments)
+    need = control_memory(system, steps, target_size=target_size, segments=segments, optimizer=optimizer)
     if need["total"] > bound:
         n = steps * system.inputs
         raise InputError(
             f"{key}: {steps:,} steps x {system.inputs} input{'s' if system.inputs > 1 else ''} = {n:,} controls "
             f"would need about {format_bytes(need['total'])} of memory (the SQP's dense matrices, which grow as the "
             f"square of the unknowns, {format_bytes(need['sqp'])}; differentiating through the steps "
-            f"{format_bytes(need['reverse'])}; the run's nodes {format_bytes(need['nodes'])}): more than the bound of "
+            f"{format_bytes(need['reverse'])}"
+            + (f"; IPOPT's exact Hessian {format_bytes(need['hessian'])}" if need["hessian"] else "")
+            + f"; the run's nodes {format_bytes(need['nodes'])}): more than the bound of "
             f"{format_bytes(bound)}; use fewer steps (a larger h over the same horizon) or fewer inputs, or pass "
             "max_bytes=None to solve it anyway")
 

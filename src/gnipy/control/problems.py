@@ -11,7 +11,8 @@ A control problem file (:func:`load_problem`) has the sections
 - `[horizon]`: `h` and `steps`;
 - `[target]`: coordinate and velocity names with their values, and `R` (a matrix);
 - `[solver]` (optional): `method`, `bounds = [lower, upper]`, `effort`, `smoothness`,
-  `max_iterations`, `segments`, `starts` (the arguments of :func:`gnipy.control.solve_optimal_control`);
+  `max_iterations`, `segments`, `starts`, `optimizer` (`"slsqp"` or `"ipopt"`) (the arguments of
+  :func:`gnipy.control.solve_optimal_control`);
 - `[warm_start]` (optional): $u_j(t) = a_j\\sin(2\\pi\\,\\mathrm{periods}\\,t/T + \\phi_j)$ from
   `amplitude`, `phase` and `periods`, or `file = "earlier.nc"`, the inputs of an earlier `gni
   control` result (a path relative to the problem file; the inputs' names must match, and on
@@ -158,7 +159,8 @@ class ControlProblem:
         target: the target mapping (:func:`gnipy.control.terminal_residual`).
         q0, v0, R0: the start; `project_v0`: project v0 onto the constraints.
         h, steps: the horizon.
-        method, bounds, effort, smoothness, max_iterations, segments, starts: the solver's options.
+        method, bounds, effort, smoothness, max_iterations, segments, starts, optimizer: the
+            solver's options.
         controls0: the warm start (K, m).
         source: the file's text (kept in the result file's attributes).
     """
@@ -183,6 +185,7 @@ class ControlProblem:
     source: str
     project_v0: bool = False
     starts: int = 1
+    optimizer: str = "slsqp"
 
     def solve(self, progress=False, check_continuous: bool = True, max_bytes="auto"):
         """:func:`gnipy.control.solve_optimal_control` on this problem (`max_bytes` as there)."""
@@ -194,7 +197,7 @@ class ControlProblem:
             smoothness=self.smoothness, segments=self.segments,
             max_iterations=self.max_iterations, progress=progress, input_names=self.input_names,
             check_continuous=check_continuous, project_v0=self.project_v0, max_bytes=max_bytes,
-            starts=self.starts)
+            starts=self.starts, optimizer=self.optimizer)
 
 
 def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlProblem:
@@ -218,6 +221,7 @@ def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlP
     from ..forcing import input_force
     from ..simulate import MAX_TOTAL_STEPS, MIN_STEP_SIZE
     from .memory import check_control_memory
+    from .control_arguments import OPTIMIZERS
     from .optimal_control import MAX_ITERATIONS, MAX_STARTS
 
     if isinstance(source, str) and source in WORKED_PROBLEMS:
@@ -247,7 +251,7 @@ def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlP
     target = _target(entry_table(data, "target"), system)
     solver = entry_table(data, "solver", required=False)
     refuse_unknown_keys(solver, "solver", {"method", "bounds", "effort", "smoothness", "max_iterations", "segments",
-                                           "starts"})
+                                           "starts", "optimizer"})
     method = entry_method("solver.method", solver.get("method", "gni-trapezoid"))
     bounds = _bounds(solver.get("bounds"), m)
     effort = entry_number("solver.effort", solver.get("effort", 1.0), nonnegative=True)
@@ -257,19 +261,22 @@ def load_problem(source, *, name: str = "problem", max_bytes="auto") -> ControlP
     starts = entry_integer("solver.starts", solver.get("starts", 1), 1, MAX_STARTS)
     if starts > 1 and segments > 1:
         raise InputError("solver.starts: a multistart is for single shooting (solver.segments = 1)")
+    optimizer = entry_text("solver.optimizer", solver.get("optimizer", "slsqp"))
+    if optimizer not in OPTIMIZERS:
+        raise InputError(f"solver.optimizer: expected one of {', '.join(map(repr, OPTIMIZERS))}, got {optimizer!r}")
     size = sum(system.group.dim if k == "R" else 1 for k in target)
     if size > steps * m:
         raise InputError(f"horizon.steps: the target's {size} conditions need at least as many controls; "
                          f"{steps} steps x {m} inputs are {steps * m}")
     # refused before the warm start (K x m numbers) is built or anything is compiled
-    check_control_memory(system, steps, size, segments, max_bytes, key="horizon.steps")
+    check_control_memory(system, steps, size, segments, max_bytes, key="horizon.steps", optimizer=optimizer)
     warm = entry_table(data, "warm_start", required=False)
     controls0 = _warm_start(warm, steps, m, h, folder, input_names)
     return ControlProblem(
         name=title, description=description, system=system, input_names=input_names, target=target, q0=q0, v0=v0,
         R0=R0, h=h, steps=steps, method=method, bounds=bounds, effort=effort, smoothness=smoothness,
         max_iterations=max_iterations, segments=segments, controls0=controls0, source=text, project_v0=project_v0,
-        starts=starts)
+        starts=starts, optimizer=optimizer)
 
 
 def _target(table: Mapping, system: System) -> dict:
@@ -402,6 +409,7 @@ def write_control_result(result, problem: ControlProblem | None, path, *, overwr
         "control_continuous_miss": float(result.continuous_miss),
         "control_redundant_components": ",".join(result.redundant_components),
         "control_starts": int(result.starts),
+        "control_optimizer": str(result.optimizer),
         "control_local_optima": ", ".join(f"{c!r} ({n})" for c, n in result.local_optima),
         "control_transcription": "direct shooting on the method's steps (gnipy.control)",
     }

@@ -16,18 +16,22 @@ import numpy as np
 from ..compilation import jit
 from ..errors import SolverFailure
 
-__all__ = ["Functions", "SQPProblem", "StageResult", "solve_sqp"]
+__all__ = ["Functions", "SQPProblem", "StageResult", "solve_sqp", "finish_stage"]
 
 
 @dataclasses.dataclass(frozen=True)
 class Functions:
     """A shooting problem's functions of its unknowns (flattened), compiled: the cost's value and
-    gradient, the constraints' value and Jacobian (reverse mode through the steps)."""
+    gradient, the constraints' value and Jacobian (reverse mode through the steps), and the
+    Hessian of the Lagrangian `hessian(x, lam, sigma)` of $\\sigma J + \\lambda\\cdot g$ (forward
+    over reverse mode; compiled on its first call: only IPOPT asks for it,
+    :mod:`gnipy.control.ipopt`)."""
 
     cost: Callable
     cost_gradient: Callable
     constraints: Callable
     constraints_jacobian: Callable
+    hessian: Callable
 
     @classmethod
     def of(cls, problem) -> "Functions":
@@ -42,7 +46,7 @@ class Functions:
         cost = _AtPoint(lambda x: _cost_and_gradient(problem, x), "cost and its gradient")
         constraints = _AtPoint(lambda x: _constraints_and_jacobian(problem, x), "constraints and their Jacobian")
         return cls(cost=cost.first, cost_gradient=cost.second, constraints=constraints.first,
-                   constraints_jacobian=constraints.second)
+                   constraints_jacobian=constraints.second, hessian=_Hessian(problem))
 
 
 class _AtPoint:
@@ -74,6 +78,30 @@ class _AtPoint:
 
     def second(self, x):
         return self._at(x)[1]
+
+
+class _Hessian:
+    """The Hessian of the Lagrangian of `problem` at a point, a NumPy array; a value that is not
+    finite stops the solve with a :class:`~gnipy.SolverFailure` (as :class:`_AtPoint`)."""
+
+    def __init__(self, problem):
+        self.problem = problem
+
+    def __call__(self, x, lam, sigma):
+        H = np.asarray(_lagrangian_hessian(self.problem, jnp.asarray(x, jnp.float64), jnp.asarray(lam, jnp.float64),
+                                           jnp.asarray(sigma, jnp.float64)))
+        if not np.all(np.isfinite(H)):
+            raise SolverFailure("control: the Hessian of the Lagrangian is not finite at an iterate of the optimizer: "
+                                "a step of the run failed or the cost or target is not twice differentiable there",
+                                step=-1, time=float("nan"), residual=float("nan"))
+        return H
+
+
+@jit
+def _lagrangian_hessian(problem, x, lam, sigma):
+    """$\\nabla^2(\\sigma J + \\lambda\\cdot g)$ at `x`: forward mode over the reverse-mode
+    gradient, one tangent per unknown (compiled once per problem structure)."""
+    return jax.hessian(lambda y: sigma * problem.cost(y) + lam @ problem.constraints(y))(x)
 
 
 @jit
@@ -194,7 +222,7 @@ def solve_sqp(problem: SQPProblem, *, max_iterations: int, target_tol: float, kk
     constraint_fns = (lambda x: np.asarray(F.constraints(x)), lambda x: np.asarray(F.constraints_jacobian(x)))
 
     res = _slsqp(objective, constraint_fns, problem.x0, x_lo, x_hi, max_iterations, counter)
-    out = _finish(problem, res, "SLSQP", target_tol, kkt_tol)
+    out = finish_stage(problem, res, "SLSQP", target_tol, kkt_tol)
     if not out.ok:
         # SLSQP's active set can stall (measured: the sleigh at h = 0.1 with |tau| <= 1.5, all 40
         # controls at a bound and a miss of 0.9); an interior-point method (trust-constr) from the
@@ -204,7 +232,7 @@ def solve_sqp(problem: SQPProblem, *, max_iterations: int, target_tol: float, kk
                               hessian=problem.hessian)
         counter.cap = counter.count + max_iterations
         res = _slsqp(objective, constraint_fns, np.clip(first.x, x_lo, x_hi), x_lo, x_hi, max_iterations, counter)
-        retry = _finish(problem, res, f"SLSQP failed ({out.res.message}); trust-constr ({first.nit} iterations), "
+        retry = finish_stage(problem, res, f"SLSQP failed ({out.res.message}); trust-constr ({first.nit} iterations), "
                         "then SLSQP", target_tol, kkt_tol)
         if (retry.ok, -retry.kkt - retry.miss) > (out.ok, -out.kkt - out.miss):
             out = retry
@@ -213,7 +241,7 @@ def solve_sqp(problem: SQPProblem, *, max_iterations: int, target_tol: float, kk
     return out, counter.count
 
 
-def _finish(problem: SQPProblem, res, stages: str, target_tol: float, kkt_tol: float) -> StageResult:
+def finish_stage(problem: SQPProblem, res, stages: str, target_tol: float, kkt_tol: float) -> StageResult:
     """A stage's result: the controls, checked and polished by single shooting (what a
     re-simulation gives)."""
     f = problem.controls
