@@ -18,7 +18,7 @@ from .solution import Solution
 from .stepping import run_nodes_checkpointed
 from .system import project_velocity
 
-__all__ = ["simulate_traced"]
+__all__ = ["simulate_traced", "traced_point"]
 
 
 def _concrete_tree(tree):
@@ -83,7 +83,7 @@ def simulate_traced(problem) -> Solution:
     hj = jnp.asarray(problem.h, jnp.float64)
     b0 = None
     if state0 is None:
-        b0 = _traced_point(system, q0, R0)
+        b0 = traced_point(system, q0, R0)
         v0 = jnp.asarray(v0, jnp.float64)
         if v0.shape != (system.dim,):
             raise InputError(f"v0: expected {system.dim} components, got shape {v0.shape}")
@@ -113,7 +113,9 @@ def _sentences(system, prep, method) -> dict:
     return dict(prep.cache[key])
 
 
-def _traced_point(system, q0, R0):
+def traced_point(system, q0, R0):
+    """The base point of a traced run's start: the coordinates `q0` and, on R^n x G, `R0` (the
+    identity when None); InputError naming `q0` for the wrong number of coordinates."""
     from .spaces import Point
 
     x = jnp.asarray(q0, jnp.float64).reshape(-1) if system.n else jnp.zeros(0)

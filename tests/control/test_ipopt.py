@@ -63,9 +63,9 @@ def test_ipopt_finds_the_lower_ball_plate_optimum_that_casadi_found():
 
 
 def test_the_hessian_of_the_lagrangian_is_the_derivative_of_its_gradient(small):
-    """The Hessian IPOPT is given (forward over reverse mode through the implicit steps) against
-    central differences of the Lagrangian's gradient (reverse mode, the SQP's own), at the optimum
-    with its multipliers."""
+    """The Hessian IPOPT is given (single shooting's second-order adjoint through the implicit steps)
+    against central differences of the Lagrangian's gradient (reverse mode, the SQP's own), at the
+    optimum with its multipliers."""
     from gnipy.control.optimal_control import SingleShooting, sqp_problem
     from gnipy.control.control_arguments import control_arguments, terminal_residual
 
@@ -91,7 +91,9 @@ def test_the_hessian_of_the_lagrangian_is_the_derivative_of_its_gradient(small):
 
 def test_a_failed_evaluation_is_an_evaluation_error_to_ipopt():
     """A step that fails at a trial point (a SolverFailure from the functions) is IPOPT's evaluation
-    error, after which it shortens its step; any other error is not swallowed."""
+    error, after which it shortens its step; any other error is not swallowed (cyipopt ends some
+    callbacks' errors as IPOPT's "unrecoverable error": the error is kept and raised after the
+    solve)."""
     import cyipopt
 
     from gnipy.control.ipopt import _NLP
@@ -110,6 +112,7 @@ def test_a_failed_evaluation_is_an_evaluation_error_to_ipopt():
             call()
     with pytest.raises(ValueError, match="a bug"):
         nlp.gradient(np.zeros(2))
+    assert isinstance(nlp.error, ValueError)  # kept: raised after the solve, whatever cyipopt made of it
     rows, cols = nlp.hessianstructure()
     assert np.all(rows >= cols) and rows.size == 3  # the lower triangle of a 2 x 2 Hessian
 

@@ -3,15 +3,15 @@
 filter line-search algorithm for large-scale nonlinear programming*, Math. Program. 2006) through
 cyipopt, on the exact derivatives of the shooting problem: the cost's gradient and the
 constraints' Jacobian by reverse mode through the steps, and the exact Hessian of the Lagrangian
-$\\nabla^2(\\sigma J + \\lambda\\cdot g)$ by forward over reverse mode
-(:class:`gnipy.control.sqp.Functions`), compiled once per problem structure like the rest.
+$\\nabla^2(\\sigma J + \\lambda\\cdot g)$ by single shooting's second-order adjoint
+(:mod:`gnipy.control.second_order`; forward over reverse mode where that does not apply,
+:class:`gnipy.control.sqp.Functions`), compiled once per problem structure like the rest.
 
 Why beside SLSQP: SLSQP builds its Hessian by quasi-Newton updates and solves a dense QP per
 iteration; on the ball-plate problem it took 121 iterations (60 steps) and 372 (120 steps), and
 at 60 steps stopped at a local optimum 41 % above the one IPOPT finds from the same warm start in
-13. With the exact Hessian IPOPT's iterations are few, but each costs a Hessian: one forward
-tangent per control through the whole run, $O(K^2)$, so on long horizons with a cheap step (the
-sleigh at 320 steps) SLSQP is faster. The control guide's table has the times (BENCHMARKS.md
+13. With the exact Hessian IPOPT's iterations are few, but each costs a dense Hessian, $O(K^2)$,
+so on long horizons with a cheap step (the sleigh at 320 steps) SLSQP is faster. The control guide's table has the times (BENCHMARKS.md
 section 11).
 
 The bounds are kept exactly (`bound_relax_factor = 0`): a control at its bound is at it, as the
@@ -46,13 +46,16 @@ class _NLP:
         self.ipopt, self.F, self.report, self.count = cyipopt, functions, report, count
         self.rows, self.cols = np.tril_indices(n)
         self.jac_structure = np.nonzero(np.ones((d, n), dtype=bool))
-        self.problem = None  # the cyipopt.Problem (its current iterate, for the progress report)
+        self.error = None  # an error of gnipy's functions in a callback, raised after the solve
 
     def _call(self, fn, *args):
         try:
             return fn(*args)
         except SolverFailure:  # a failed step at a trial point: IPOPT shortens its step
             raise self.ipopt.CyIpoptEvaluationError() from None
+        except Exception as e:  # noqa: BLE001 (kept and raised after the solve: see solve_ipopt)
+            self.error = e
+            raise
 
     def objective(self, x):
         return float(self._call(self.F.cost, x))
@@ -116,6 +119,8 @@ def solve_ipopt(problem: SQPProblem, *, max_iterations: int, target_tol: float, 
                        ("bound_relax_factor", 0.0)):
         solver.add_option(key, value)
     x, info = solver.solve(x0)
+    if nlp.error is not None:  # cyipopt ends some callbacks' errors as IPOPT's "unrecoverable error": raised here
+        raise nlp.error
     out = finish_stage(problem, _Outcome(np.clip(x, problem.x_lo, problem.x_hi), info), "IPOPT", target_tol, kkt_tol)
     if not out.ok:
         # the SLSQP chain from the warm start (its own fallback included), counted on

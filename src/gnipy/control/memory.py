@@ -26,10 +26,12 @@ _SQP_BYTES_PER_UNKNOWN2 = 8 * 46
 #: numbers a step on the sleigh (s = 6) and 1.0 s² on the rolling ball (s = 16); 2 s² is the estimate.
 _REVERSE_NUMBERS_PER_STATE2 = 2
 
-#: Numbers per unknown and step, per state size s, that IPOPT's exact Hessian keeps (forward mode over
-#: reverse mode: a tangent per unknown through the reverse pass). Measured (peak RSS of the ball-plate
-#: problem solved with IPOPT against SLSQP, 120 and 240 steps, 240 and 480 unknowns): the difference grew
-#: by 20 MB, about 29 numbers per unknown and step on the ball (s = 16); 2 s is the estimate.
+#: Numbers per unknown and step, per state size s, that IPOPT's exact Hessian may keep: with a running
+#: cost it is forward mode over reverse mode through the run (a tangent per unknown through every step),
+#: measured (peak RSS of the ball-plate problem with IPOPT through that path against SLSQP, 120 and 240
+#: steps, 240 and 480 unknowns) to grow by 20 MB, about 29 numbers per unknown and step on the ball
+#: (s = 16): 2 s is the estimate. Without one, the second-order adjoint (gnipy.control.second_order)
+#: keeps O(n²) (its rows of the Hessian, counted with the Hessian's copies) and O(K s²).
 _HESSIAN_NUMBERS_PER_UNKNOWN_STEP_STATE = 2
 
 #: The copies of the controlled run's nodes held at once: the device arrays, their host copies, the
@@ -69,9 +71,9 @@ def control_memory(system: System, steps: int, *, target_size: int = 1, segments
         too); the constraints' Jacobian (d + the defects) x n, in a few copies; what reverse mode
         keeps per step to differentiate through the steps, O(K s²) for the state size s; with
         IPOPT, the Hessian of the Lagrangian: forward mode over reverse mode carries a tangent per
-        unknown through the steps, O(K s n), and the dense Hessian in four copies (JAX's,
-        NumPy's, its lower triangle, IPOPT's factorization), 0 with SLSQP; the controlled run's
-        nodes, O(K).
+        unknown through the steps (with a running cost), O(K s n), and the dense Hessian in five
+        copies (the second-order adjoint's rows, JAX's, NumPy's, its lower triangle, IPOPT's
+        factorization), 0 with SLSQP; the controlled run's nodes, O(K).
     """
     k = system.group.matrix_size if system.group is not None else 0
     group_dim = system.group.dim if system.group is not None else 0
@@ -82,7 +84,7 @@ def control_memory(system: System, steps: int, *, target_size: int = 1, segments
         "sqp": _SQP_BYTES_PER_UNKNOWN2 * unknowns**2,
         "jacobian": 3 * 8 * (target_size + shooting) * unknowns,  # JAX's, its NumPy copy, SciPy's
         "reverse": 8 * _REVERSE_NUMBERS_PER_STATE2 * state**2 * steps,
-        "hessian": (8 * (_HESSIAN_NUMBERS_PER_UNKNOWN_STEP_STATE * state * steps * unknowns + 4 * unknowns**2)
+        "hessian": (8 * (_HESSIAN_NUMBERS_PER_UNKNOWN_STEP_STATE * state * steps * unknowns + 5 * unknowns**2)
                     if optimizer == "ipopt" else 0),
         "nodes": _NODE_COPIES * (steps + 1) * node_bytes(system),
     }

@@ -20,6 +20,7 @@ from ..errors import InputError
 from ..saveat import SaveAt
 from ..simulate import simulate
 from .control_arguments import ControlArguments
+from .second_order import adjoint_hessian
 from .sqp import Functions, SQPProblem
 
 __all__ = ["SingleShooting", "MultipleShooting", "ControlsProblem", "sqp_problem", "final_point"]
@@ -123,6 +124,14 @@ class ControlsProblem(eqx.Module):
 
     def constraints(self, u):
         return self.single.constraint(u.reshape(self.shape))
+
+    def lagrangian_hessian(self, u, lam, sigma):
+        """$\\nabla^2(\\sigma J + \\lambda\\cdot g)$ by the second-order adjoint
+        (:func:`gnipy.control.second_order.adjoint_hessian`), or None where it does not apply (a
+        running cost; a method state that is not all floats): forward over reverse mode then."""
+        if self.single.running_cost is not None:
+            return None
+        return adjoint_hessian(self.single, u.reshape(self.shape), lam, sigma)
 
 
 def sqp_problem(single: SingleShooting, a: ControlArguments, U0, running_cost, n_target: int) -> SQPProblem:

@@ -23,8 +23,8 @@ __all__ = ["Functions", "SQPProblem", "StageResult", "solve_sqp", "finish_stage"
 class Functions:
     """A shooting problem's functions of its unknowns (flattened), compiled: the cost's value and
     gradient, the constraints' value and Jacobian (reverse mode through the steps), and the
-    Hessian of the Lagrangian `hessian(x, lam, sigma)` of $\\sigma J + \\lambda\\cdot g$ (forward
-    over reverse mode; compiled on its first call: only IPOPT asks for it,
+    Hessian of the Lagrangian `hessian(x, lam, sigma)` of $\\sigma J + \\lambda\\cdot g$
+    (:func:`_lagrangian_hessian`; compiled on its first call: only IPOPT asks for it,
     :mod:`gnipy.control.ipopt`)."""
 
     cost: Callable
@@ -99,9 +99,15 @@ class _Hessian:
 
 @jit
 def _lagrangian_hessian(problem, x, lam, sigma):
-    """$\\nabla^2(\\sigma J + \\lambda\\cdot g)$ at `x`: forward mode over the reverse-mode
-    gradient, one tangent per unknown (compiled once per problem structure)."""
-    return jax.hessian(lambda y: sigma * problem.cost(y) + lam @ problem.constraints(y))(x)
+    """$\\nabla^2(\\sigma J + \\lambda\\cdot g)$ at `x` (compiled once per problem structure): the
+    problem's own (`lagrangian_hessian`: single shooting's second-order adjoint,
+    :mod:`gnipy.control.second_order`) where it has one, else forward mode over the reverse-mode
+    gradient, one tangent per unknown."""
+    own = getattr(problem, "lagrangian_hessian", None)
+    H = None if own is None else own(x, lam, sigma)
+    if H is None:
+        H = jax.hessian(lambda y: sigma * problem.cost(y) + lam @ problem.constraints(y))(x)
+    return H
 
 
 @jit
