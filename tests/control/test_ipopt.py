@@ -117,6 +117,30 @@ def test_a_failed_evaluation_is_an_evaluation_error_to_ipopt():
     assert np.all(rows >= cols) and rows.size == 3  # the lower triangle of a 2 x 2 Hessian
 
 
+def test_an_error_in_the_hessian_stops_ipopt_and_is_raised():
+    """cyipopt drops an error raised in its Hessian callback (IPOPT would go on with whatever its
+    buffer holds); gnipy keeps it, stops IPOPT at its next iteration and raises it after the solve,
+    in a real IPOPT solve of a small problem."""
+    from gnipy.control.ipopt import solve_ipopt
+    from gnipy.control.sqp import Functions, SQPProblem
+
+    calls = []
+
+    def hessian(x, lam, sigma):
+        calls.append(1)
+        raise ZeroDivisionError("a bug in the Hessian")
+
+    F = Functions(cost=lambda x: float(x @ x), cost_gradient=lambda x: 2 * x,
+                  constraints=lambda x: np.array([x[0] + x[1] - 1.0]), constraints_jacobian=lambda x: np.ones((1, 2)),
+                  hessian=hessian)
+    problem = SQPProblem(controls=F, unknowns=F, single=True, x0=np.zeros(2), x_lo=np.full(2, -np.inf),
+                         x_hi=np.full(2, np.inf), lo=np.full(2, -np.inf), hi=np.full(2, np.inf), n_target=1, scale=1.0,
+                         hessian=None)
+    with pytest.raises(ZeroDivisionError, match="a bug in the Hessian"):
+        solve_ipopt(problem, max_iterations=50, target_tol=1e-10, kkt_tol=1e-6, report=None)
+    assert len(calls) <= 2  # stopped at the next iteration, not after 50
+
+
 def test_when_ipopt_fails_the_slsqp_chain_runs_and_the_count_goes_on(small):
     """IPOPT stopped at an iteration cap of 2 is no success: the SLSQP chain runs from the warm start
     (its own fallback included), the message says so, and the progress count goes on from IPOPT's
@@ -127,8 +151,8 @@ def test_when_ipopt_fails_the_slsqp_chain_runs_and_the_count_goes_on(small):
                                    v0=problem.v0, controls0=problem.controls0, bounds=problem.bounds, max_iterations=2,
                                    check_continuous=False, optimizer="ipopt",
                                    progress=lambda i, cost, miss, total: calls.append((i, total)))
-    assert "IPOPT failed (IPOPT: Maximum number of iterations exceeded" in result.message
-    assert "; then SLSQP" in result.message
+    assert ("IPOPT failed (IPOPT: Maximum number of iterations exceeded" in result.message
+            and "; then SLSQP" in result.message) or "the SLSQP chain from the warm start did no better" in result.message
     assert [i for i, _ in calls] == list(range(1, len(calls) + 1)) and len(calls) == result.iterations > 2
     assert all(i <= total for i, total in calls), calls
 
@@ -167,9 +191,9 @@ def test_gni_control_takes_the_optimizer_and_records_it(tmp_path, small):
 
 
 def test_ipopts_hessian_counts_in_the_memory_bound():
-    """The exact Hessian's memory (forward mode over reverse mode: the reverse pass's memory once per
-    unknown) is part of the estimate with IPOPT, and a problem beyond the bound is refused before
-    anything is compiled, naming it."""
+    """The exact Hessian's memory (its dense copies; with a running cost, forward mode over reverse
+    mode's tangent per unknown through the steps too) is part of the estimate with IPOPT, and a
+    problem beyond the bound is refused before anything is compiled, naming it."""
     from gnipy.control.memory import control_memory
 
     p = load_problem(SMALL)
@@ -177,6 +201,7 @@ def test_ipopts_hessian_counts_in_the_memory_bound():
     ipopt = control_memory(p.system, 4000, target_size=3, optimizer="ipopt")
     assert slsqp["hessian"] == 0 and ipopt["hessian"] > 0
     assert ipopt["total"] == slsqp["total"] + ipopt["hessian"]
+    assert control_memory(p.system, 4000, target_size=3, optimizer="ipopt", running_cost=True)["hessian"] > ipopt["hessian"]
     with pytest.raises(gnipy.InputError, match="^steps: 4,000 steps x 1 input.*IPOPT's exact Hessian"):
         solve_optimal_control(p.system, p.target, h=0.001, steps=4000, q0=p.q0, v0=p.v0, optimizer="ipopt",
                               max_bytes=slsqp["total"])

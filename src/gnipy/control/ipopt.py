@@ -18,8 +18,11 @@ The bounds are kept exactly (`bound_relax_factor = 0`): a control at its bound i
 KKT check (:func:`gnipy.control.sqp._kkt`) reads it. A step that fails at a trial point (NaN nodes)
 is an evaluation error to IPOPT, which shortens its step; at the warm start it ends the solve with
 a :class:`~gnipy.SolverFailure`. IPOPT's result is polished and checked as SLSQP's is
-(:func:`gnipy.control.sqp.finish_stage`); where it is not a KKT point meeting the target, the SLSQP chain
-runs from the warm start and the better outcome is kept.
+(:func:`gnipy.control.sqp.finish_stage`); where it is not a KKT point meeting the target (or a run of
+the polish from its point fails), the SLSQP chain runs from the warm start and the better outcome is
+kept, the message saying so either way. An error in gnipy's functions (or Ctrl-C) inside a callback
+stops IPOPT at its next iteration and is raised after the solve: cyipopt itself drops errors raised
+in its Hessian callback.
 """
 
 from __future__ import annotations
@@ -53,7 +56,9 @@ class _NLP:
             return fn(*args)
         except SolverFailure:  # a failed step at a trial point: IPOPT shortens its step
             raise self.ipopt.CyIpoptEvaluationError() from None
-        except Exception as e:  # noqa: BLE001 (kept and raised after the solve: see solve_ipopt)
+        except BaseException as e:  # noqa: BLE001 (a bug, or Ctrl-C: kept, IPOPT stopped, raised after the solve)
+            # cyipopt drops an error raised in its Hessian callback (IPOPT then goes on with whatever
+            # the values' buffer holds) and turns some others into an "unrecoverable error"
             self.error = e
             raise
 
@@ -79,6 +84,8 @@ class _NLP:
         return self._call(self.F.hessian, x, lam, sigma)[self.rows, self.cols]
 
     def intermediate(self, alg_mod, iter_count, obj_value, inf_pr, *rest):
+        if self.error is not None:  # an error in a callback: IPOPT stops here (User_Requested_Stop)
+            return False
         if iter_count > 0:  # IPOPT reports its starting point as iteration 0
             self.count[0] += 1
             if self.report is not None:
@@ -108,9 +115,8 @@ def solve_ipopt(problem: SQPProblem, *, max_iterations: int, target_tol: float, 
     x0 = np.asarray(problem.x0, dtype=np.float64)
     n, d = x0.size, np.asarray(F.constraints(x0)).size  # (a failed run at the warm start raises here)
     count = [0]
-    cap = [max_iterations]
     nlp = _NLP(cyipopt, F, n, d, None if report is None else
-               (lambda i, cost, miss: report(i, cost, miss, max(cap[0], i))), count)
+               (lambda i, cost, miss: report(i, cost, miss, max(max_iterations, i))), count)
     # IPOPT's bounds: +-1e20 is "none" (its nlp_lower/upper_bound_inf)
     lo = np.where(np.isfinite(problem.x_lo), problem.x_lo, -1e20)
     hi = np.where(np.isfinite(problem.x_hi), problem.x_hi, 1e20)
@@ -119,19 +125,26 @@ def solve_ipopt(problem: SQPProblem, *, max_iterations: int, target_tol: float, 
                        ("bound_relax_factor", 0.0)):
         solver.add_option(key, value)
     x, info = solver.solve(x0)
-    if nlp.error is not None:  # cyipopt ends some callbacks' errors as IPOPT's "unrecoverable error": raised here
+    del solver  # IPOPT's memory, before the fallback
+    if nlp.error is not None:
         raise nlp.error
-    out = finish_stage(problem, _Outcome(np.clip(x, problem.x_lo, problem.x_hi), info), "IPOPT", target_tol, kkt_tol)
-    if not out.ok:
+    outcome = _Outcome(np.clip(x, problem.x_lo, problem.x_hi), info)
+    try:
+        out = finish_stage(problem, outcome, "IPOPT", target_tol, kkt_tol)
+        failed = None if out.ok else out.message(target_tol, kkt_tol)
+    except SolverFailure as e:  # a run of the polish from IPOPT's point failed: not an outcome
+        out, failed = None, f"IPOPT: {outcome.message}; its point could not be polished: {e}"
+    if failed is not None:
         # the SLSQP chain from the warm start (its own fallback included), counted on
-        cap[0] = count[0] + 3 * max_iterations
         retry, more = solve_sqp(problem, max_iterations=max_iterations, target_tol=target_tol, kkt_tol=kkt_tol,
                                 report=None if report is None else
                                 (lambda i, cost, miss, total, k=count[0]: report(k + i, cost, miss, k + total)))
         count[0] += more
-        retry = _with_stages(retry, f"IPOPT failed ({out.message(target_tol, kkt_tol)}); then {retry.stages}")
-        if (retry.ok, -retry.kkt - retry.miss) > (out.ok, -out.kkt - out.miss):
-            out = retry
+        if out is None or (retry.ok, -retry.kkt - retry.miss) > (out.ok, -out.kkt - out.miss):
+            out = _with_stages(retry, f"IPOPT failed ({failed}); then {retry.stages}")
+        else:  # the message says that the fallback ran (its iterations are counted)
+            out = _with_stages(out, f"IPOPT; the SLSQP chain from the warm start did no better ({retry.stages}: "
+                                    f"{retry.res.message})")
     return out, count[0]
 
 

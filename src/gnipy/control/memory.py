@@ -53,7 +53,7 @@ def memory_limit(max_bytes, name: str = "max_bytes") -> int | None:
 
 
 def control_memory(system: System, steps: int, *, target_size: int = 1, segments: int = 1,
-                   optimizer: str = "slsqp") -> dict[str, int]:
+                   optimizer: str = "slsqp", running_cost: bool = False) -> dict[str, int]:
     """The memory :func:`solve_optimal_control` is estimated to need, in bytes, by part (before
     anything is compiled; what `max_bytes` bounds).
 
@@ -63,6 +63,8 @@ def control_memory(system: System, steps: int, *, target_size: int = 1, segments
         target_size: the number d of the target's components.
         segments: the number S of shooting segments.
         optimizer: `"slsqp"` or `"ipopt"` (whose exact Hessian adds the `"hessian"` part).
+        running_cost: whether the cost has a running cost (IPOPT's Hessian is then forward mode
+            over reverse mode through the run, as with several segments).
 
     Returns:
         `{"sqp": ..., "jacobian": ..., "reverse": ..., "hessian": ..., "nodes": ..., "total": ...}`:
@@ -70,10 +72,10 @@ def control_memory(system: System, steps: int, *, target_size: int = 1, segments
         (SciPy's SLSQP and trust-constr hold dense n x n matrices; IPOPT's fallback runs them
         too); the constraints' Jacobian (d + the defects) x n, in a few copies; what reverse mode
         keeps per step to differentiate through the steps, O(K s²) for the state size s; with
-        IPOPT, the Hessian of the Lagrangian: forward mode over reverse mode carries a tangent per
-        unknown through the steps (with a running cost), O(K s n), and the dense Hessian in five
-        copies (the second-order adjoint's rows, JAX's, NumPy's, its lower triangle, IPOPT's
-        factorization), 0 with SLSQP; the controlled run's nodes, O(K).
+        IPOPT, the Hessian of the Lagrangian: the dense Hessian in five copies (the second-order
+        adjoint's rows, JAX's, NumPy's, its lower triangle, IPOPT's factorization) and, where
+        forward mode over reverse mode computes it (a running cost, several segments), a tangent
+        per unknown through the steps, O(K s n); 0 with SLSQP; the controlled run's nodes, O(K).
     """
     k = system.group.matrix_size if system.group is not None else 0
     group_dim = system.group.dim if system.group is not None else 0
@@ -84,8 +86,8 @@ def control_memory(system: System, steps: int, *, target_size: int = 1, segments
         "sqp": _SQP_BYTES_PER_UNKNOWN2 * unknowns**2,
         "jacobian": 3 * 8 * (target_size + shooting) * unknowns,  # JAX's, its NumPy copy, SciPy's
         "reverse": 8 * _REVERSE_NUMBERS_PER_STATE2 * state**2 * steps,
-        "hessian": (8 * (_HESSIAN_NUMBERS_PER_UNKNOWN_STEP_STATE * state * steps * unknowns + 5 * unknowns**2)
-                    if optimizer == "ipopt" else 0),
+        "hessian": (8 * (_HESSIAN_NUMBERS_PER_UNKNOWN_STEP_STATE * state * steps * unknowns
+                         * (running_cost or segments > 1) + 5 * unknowns**2) if optimizer == "ipopt" else 0),
         "nodes": _NODE_COPIES * (steps + 1) * node_bytes(system),
     }
     parts["total"] = sum(parts.values())
@@ -93,13 +95,14 @@ def control_memory(system: System, steps: int, *, target_size: int = 1, segments
 
 
 def check_control_memory(system: System, steps: int, target_size: int, segments: int, max_bytes,
-                         key: str = "steps", optimizer: str = "slsqp") -> None:
+                         key: str = "steps", optimizer: str = "slsqp", running_cost: bool = False) -> None:
     """Refuse (`InputError` naming `key`) a problem whose :func:`control_memory` exceeds the bound
     of `max_bytes` (:func:`memory_limit`)."""
     bound = memory_limit(max_bytes)
     if bound is None:
         return
-    need = control_memory(system, steps, target_size=target_size, segments=segments, optimizer=optimizer)
+    need = control_memory(system, steps, target_size=target_size, segments=segments, optimizer=optimizer,
+                          running_cost=running_cost)
     if need["total"] > bound:
         n = steps * system.inputs
         raise InputError(

@@ -170,7 +170,7 @@ def solve_optimal_control(
             `"ipopt"` (IPOPT with the exact Hessian of the Lagrangian, the SLSQP chain as its
             fallback; needs the `ipopt` extra). Measured on the control guide's worked problems,
             IPOPT is the faster on the ball-plate problem and finds its lower optimum, SLSQP on
-            the sleigh at 320 steps (:mod:`gnipy.control.ipopt`).
+            the sleigh (:mod:`gnipy.control.ipopt`).
 
     Returns:
         A :class:`ControlResult`.
@@ -193,7 +193,8 @@ def solve_optimal_control(
     g = terminal_residual(system, target)
     d = target_size(system, target, a.K * a.m)
     # refused before anything is compiled or allocated (the SQP's matrices grow as (K·m)²)
-    check_control_memory(system, a.K, d, a.segments, max_bytes, optimizer=a.optimizer)
+    check_control_memory(system, a.K, d, a.segments, max_bytes, optimizer=a.optimizer,
+                         running_cost=running_cost is not None)
     q0, v0, R0 = default_initial_condition(system, q0, v0, R0)
     U0 = np.clip(warm_start(controls0, a.K, a.m), a.lo, a.hi)
     if project_v0:

@@ -13,7 +13,7 @@ $$\\nabla^2 L = \\sum_{k<K} M_k^T W_k M_k + E_0^T\\nabla^2_u(a_0\\cdot f_{init})
 
 with the sensitivities $S_0 = \\partial_u f_{init}E_0$, $S_{k+1} = A_kS_k + B_kE_k$ ($A_k$, $B_k$
 the step's Jacobians with respect to its state and its input, $E_k$ the selection of $u_k$),
-$M_k = [S_k; E_k]$, the adjoints $a_K = \\partial_s\\varphi$, $a_k = A_k^Ta_{k+1}$ of
+$M_k = [S_k; E_k]$ ($M_K = [S_K; E_0]$), the adjoints $a_K = \\partial_s\\varphi$, $a_k = A_k^Ta_{k+1}$ of
 $\\varphi = \\lambda\\cdot g$, and $W_k = \\nabla^2_{(s,u)}(a_{k+1}\\cdot f_k)$ at the run's nodes.
 Each step is differentiated on its own (its few state and input numbers as tangents, all steps at
 once by `vmap`). The sum is not formed from the sensitivities (K·n numbers per state number, and
