@@ -39,6 +39,8 @@ def test_ipopt_and_slsqp_meet_at_the_same_optimum(small):
     assert slsqp.success and ipopt.success, (slsqp.message, ipopt.message)
     assert ipopt.optimizer == "ipopt" and slsqp.optimizer == "slsqp"
     assert ipopt.message.startswith("IPOPT: ") and "IPOPT failed" not in ipopt.message
+    assert f"iterations: {ipopt.iterations} IPOPT + " in ipopt.summary()
+    assert f"iterations: {slsqp.iterations} SQP + " in slsqp.summary()
     assert abs(ipopt.cost - slsqp.cost) <= 1e-9 * slsqp.cost
     np.testing.assert_allclose(ipopt.controls, slsqp.controls, rtol=0, atol=1e-6)
     # the torque bound is active and kept exactly (no bound relaxation): IPOPT's point is at it

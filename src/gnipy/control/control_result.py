@@ -148,7 +148,8 @@ class ControlResult:
             f"  cost J = {self.cost:.12g}",
             f"  target residual max|g| = {self.target_residual:.3e}",
             self._kkt_line(),
-            f"  iterations: {self.iterations} SQP + {self.polish_iterations} polish; {self.wall_time:.2f} s",
+            f"  iterations: {self.iterations} {'IPOPT' if self.optimizer == 'ipopt' else 'SQP'} + "
+            f"{self.polish_iterations} polish; {self.wall_time:.2f} s",
         ] + self._rank_lines() + self._multistart_lines() + ([] if math.isnan(self.continuous_miss) else [
             f"  the continuous system (reference) with these inputs misses the target by {self.continuous_miss:.3e}"
             + (" (the discretization's error: a smaller h reduces it)" if self.success
