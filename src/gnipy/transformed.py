@@ -18,7 +18,7 @@ from .solution import Solution
 from .stepping import run_nodes_checkpointed
 from .system import project_velocity
 
-__all__ = ["simulate_traced", "traced_point"]
+__all__ = ["simulate_traced", "traced_point", "traced_method"]
 
 
 def _concrete_tree(tree):
@@ -74,12 +74,8 @@ def simulate_traced(problem) -> Solution:
             # every value known (jax.grad outside jit): not inside a jit trace, whose nested
             # compiled programs the sentences' checks could not call
             fields = _sentences(c_sys, prep, method)
-    else:  # inside jit: shapes only; the implicit path (the explicit one is an optimization)
-        import dataclasses
-
-        from .integrators.gni import GNI
-
-        prepared = dataclasses.replace(method, explicit=False) if isinstance(method, GNI) and method.explicit is None else method
+    else:  # inside jit: shapes only
+        prepared = traced_method(method)
     hj = jnp.asarray(problem.h, jnp.float64)
     b0 = None
     if state0 is None:
@@ -111,6 +107,17 @@ def _sentences(system, prep, method) -> dict:
                                             scheme=scheme),
             "energy_invariant": energy_is_invariant(system, prep.b0)}
     return dict(prep.cache[key])
+
+
+def traced_method(method):
+    """The method a run inside `jax.jit` takes, whose system is not known at trace time: a GNI that
+    decides between its explicit and implicit step from the system (`explicit=None`) takes the
+    implicit path (the explicit one is an optimization that needs the values)."""
+    import dataclasses
+
+    from .integrators.gni import GNI
+
+    return dataclasses.replace(method, explicit=False) if isinstance(method, GNI) and method.explicit is None else method
 
 
 def traced_point(system, q0, R0):

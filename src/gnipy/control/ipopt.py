@@ -11,8 +11,8 @@ Why beside SLSQP: SLSQP builds its Hessian by quasi-Newton updates and solves a 
 iteration; on the ball-plate problem it took 121 iterations (60 steps) and 372 (120 steps), and
 at 60 steps stopped at a local optimum 41 % above the one IPOPT finds from the same warm start in
 13. With the exact Hessian IPOPT's iterations are few, but each costs a dense Hessian, $O(K^2)$,
-so on long horizons with a cheap step (the sleigh at 320 steps) SLSQP is faster. The control guide's table has the times (BENCHMARKS.md
-section 11).
+and IPOPT factors it: on the sleigh, a cheap step over a long horizon, SLSQP is faster. The
+control guide's table has the times (BENCHMARKS.md section 11).
 
 The bounds are kept exactly (`bound_relax_factor = 0`): a control at its bound is at it, as the
 KKT check (:func:`gnipy.control.sqp._kkt`) reads it. A step that fails at a trial point (NaN nodes)
@@ -26,6 +26,8 @@ in its Hessian callback.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 
@@ -141,14 +143,9 @@ def solve_ipopt(problem: SQPProblem, *, max_iterations: int, target_tol: float, 
                                 (lambda i, cost, miss, total, k=count[0]: report(k + i, cost, miss, k + total)))
         count[0] += more
         if out is None or (retry.ok, -retry.kkt - retry.miss) > (out.ok, -out.kkt - out.miss):
-            out = _with_stages(retry, f"IPOPT failed ({failed}); then {retry.stages}")
+            out = dataclasses.replace(retry, stages=f"IPOPT failed ({failed}); then {retry.stages}")
         else:  # the message says that the fallback ran (its iterations are counted)
-            out = _with_stages(out, f"IPOPT; the SLSQP chain from the warm start did no better ({retry.stages}: "
-                                    f"{retry.res.message})")
+            out = dataclasses.replace(out, stages=f"IPOPT; the SLSQP chain from the warm start did no better "
+                                                  f"({retry.stages}: {retry.res.message})")
     return out, count[0]
 
-
-def _with_stages(out: StageResult, stages: str) -> StageResult:
-    import dataclasses
-
-    return dataclasses.replace(out, stages=stages)

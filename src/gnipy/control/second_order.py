@@ -30,8 +30,6 @@ guide). Written here because no JAX library computes a Hessian through a recurre
 
 from __future__ import annotations
 
-import dataclasses
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -46,17 +44,13 @@ def adjoint_hessian(single, U, lam, sigma):
     flattened (K·m, K·m) as the controls are; None where the method's state is not made of floats
     only (the caller then uses forward over reverse mode through the run)."""
     from ..forcing import drive
-    from ..integrators.gni import GNI
     from ..problem import resolve_method
-    from ..transformed import traced_point
+    from ..transformed import traced_method, traced_point
 
     K, m, h = single.K, single.m, single.h
-    # the method as the compiled run has it (gnipy.transformed: the implicit path inside jit), without the
-    # state that only makes steps cheaper (DLA's kept Jacobian), which the steps' derivatives must not see
-    method = resolve_method(single.system, single.method)
-    if isinstance(method, GNI) and method.explicit is None:
-        method = dataclasses.replace(method, explicit=False)
-    method = method.memoryless()
+    # the method as the compiled run has it, without the state that only makes steps cheaper (DLA's kept
+    # Jacobian), which the steps' derivatives must not see
+    method = traced_method(resolve_method(single.system, single.method)).memoryless()
     # the inputs enter through each step's held input (set below); the drive's table is the run's grid
     core = drive(single.system, jax.lax.stop_gradient(U), h, single.t0, K).without_metadata()
     b0 = traced_point(single.system, single.q0, single.R0)
