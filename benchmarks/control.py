@@ -4,7 +4,8 @@
 The worked problems of the control guide (`gni control --example NAME`), at two resolutions each
 (the same horizon): the sleigh steering at K = 80 and 320 steps, the ball-plate problem at K = 60
 and 120. For gnipy, each case runs with each optimizer (SLSQP, the default, and IPOPT with the
-exact Hessian, `optimizer="ipopt"`) in fresh processes (`solve(check_continuous=False)`: the
+exact Hessian, `optimizer="ipopt"`, on single shooting, and IPOPT with every step a segment,
+`segments = steps`: sparse derivatives) in fresh processes (`solve(check_continuous=False)`: the
 discrete problem only, as CasADi solves it; the continuous check a user gets by default is timed
 apart):
 
@@ -76,8 +77,12 @@ REPO = Path(__file__).resolve().parents[1]
 #: the cases: (problem, steps); the horizon is the worked problem's
 CASES = (("sleigh-steering", 80), ("sleigh-steering", 320), ("ball-plate", 60), ("ball-plate", 120))
 
-#: gnipy's optimizers, each measured on every case
-OPTIMIZERS = ("slsqp", "ipopt")
+#: gnipy's optimizers, each measured on every case: SLSQP and IPOPT on single shooting, and IPOPT
+#: with every step a segment (`segments = steps`, gnipy.control.step_shooting: sparse derivatives)
+OPTIMIZERS = ("slsqp", "ipopt", "ipopt-steps")
+
+#: the optimizers' names in the table
+OPTIMIZER_NAMES = {"slsqp": "SLSQP", "ipopt": "IPOPT", "ipopt-steps": "IPOPT, every step a segment"}
 
 #: issue 34's targets: gnipy's wall time (first solve, warm cache) at most this multiple of CasADi's
 #: (building and solving), and its solve at most CasADi's
@@ -105,7 +110,9 @@ if spec["cache"]:
 from gnipy.control import load_problem
 from benchmarks.control import problem_text
 import dataclasses
-prob = dataclasses.replace(load_problem(problem_text(spec["name"], spec["steps"])), optimizer=spec["optimizer"])
+prob = load_problem(problem_text(spec["name"], spec["steps"]))
+optimizer, _, every = spec["optimizer"].partition("-")
+prob = dataclasses.replace(prob, optimizer=optimizer, segments=prob.steps if every else 1)
 t1 = time.perf_counter()
 first = prob.solve(check_continuous=False)
 t2 = time.perf_counter()
@@ -481,8 +488,7 @@ def _optimum(ca) -> str:
     text = f"{ca['cost']:.12g}" + ("" if ca["success"] else " (no success)")
     if "matches" not in ca:
         return text
-    names = {"slsqp": "SLSQP", "ipopt": "IPOPT"}
-    found = [names.get(o, o) for o in ca["matches"]]
+    found = [OPTIMIZER_NAMES.get(o, o) for o in ca["matches"]]
     return text + (f" = gnipy's {' and '.join(found)} optimum" if found else ", none of gnipy's optima")
 
 
@@ -531,7 +537,7 @@ def bench_control(cfg, rep, results: dict, load) -> None:
                 def cell(ca):
                     return f"{g(ca['build_s'])} + {g(ca['solve_s'])}, {ca['iterations']}" if ca else "not transcribed"
 
-                rep.row(sec, [case, optimizer, g(cold["first_s"]), g(warm["first_s"]), g(cold["second_s"]),
+                rep.row(sec, [case, OPTIMIZER_NAMES[optimizer], g(cold["first_s"]), g(warm["first_s"]), g(cold["second_s"]),
                               cold["iterations"], cell(r.get("casadi")), cell(r.get("casadi_single")), notes],
                         f"{case} ({optimizer}): gnipy cold {g(cold['first_s'])} s, warm cache {g(warm['first_s'])} s, "
                         f"solve {g(cold['second_s'])} s" + (f"; fastest CasADi {g(best['build_s'])} + "

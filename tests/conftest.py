@@ -83,7 +83,7 @@ SLOW_FILES = frozenset({
     "integrators/test_roundoff.py", "integrators/test_paper_schemes.py", "integrators/test_comparators.py",
     "integrators/test_reduced_rattle.py", "integrators/test_energy_theorem.py",
     "native/test_backend.py", "native/test_primitives.py",
-    "control/test_optimal_control.py", "control/test_identification.py",
+    "control/test_optimal_control.py", "control/test_identification.py", "control/test_step_shooting.py",
     "models/test_group_models.py", "models/test_rolling_ball.py", "models/test_default_methods.py",
     "models/test_decisive_models.py", "models/test_whipple_bicycle.py", "models/test_rattleback.py",
     "models/test_rolling_disk.py", "models/test_differential_drive.py",

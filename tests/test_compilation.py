@@ -147,3 +147,37 @@ def test_the_maps_of_systems_and_groups_share_one_trace_inside_a_program():
     plain = program(System.metric.__wrapped__, SO3.exp.__wrapped__)
     for a, b in zip(jax.jit(decorated)(q0, jnp.ones(3)), jax.jit(plain)(q0, jnp.ones(3))):
         np.testing.assert_array_equal(a, b)
+
+
+def test_bind_computes_what_filter_jit_does_and_compiles_once_per_structure():
+    """gnipy.compilation.bind: `fun(tree, *args)` as filter_jit computes it; trees of one structure
+    with other numbers (new objects, other static function objects equal by value) share the program,
+    a tree of another structure (a static field, a shape) compiles its own."""
+    import equinox as eqx
+
+    from gnipy.compilation import _bound_program, bind
+
+    class Tree(eqx.Module):
+        a: jax.Array
+        b: tuple
+        power: int = eqx.field(static=True)
+
+    def fun(tree, x, y):
+        return tree.power * jnp.sum(tree.a * x) + tree.b[0] @ y, tree.b[1] * x
+
+    def make(a, power=2, n=3):
+        return Tree(jnp.asarray(a, jnp.float64) * jnp.ones(n), (np.arange(n, dtype=np.float64), np.float64(0.5)), power)
+
+    x, y = np.linspace(0.0, 1.0, 3), np.array([1.0, -2.0, 3.0])
+    program = _bound_program()
+    start = program._cache_size()
+    for a in (1.0, 2.5, -3.0):
+        tree = make(a)
+        got = bind(fun, tree)(x, y)
+        want = eqx.filter_jit(fun)(tree, x, y)
+        assert all(np.array_equal(np.asarray(g), np.asarray(w)) for g, w in zip(got, want))
+        assert np.asarray(got[0]) == 2 * a * np.sum(x) + np.arange(3.0) @ y
+    assert program._cache_size() == start + 1  # three trees, one structure, one program
+    bind(fun, make(1.0, power=3))(x, y)  # a static field
+    bind(fun, make(1.0, n=4))(np.ones(4), np.ones(4))  # shapes
+    assert program._cache_size() == start + 3

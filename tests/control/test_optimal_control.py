@@ -352,14 +352,14 @@ def test_a_value_that_is_not_finite_at_an_iterate_stops_the_solve_with_a_solver_
     handed to SciPy."""
     import jax.numpy as jnp
 
-    from gnipy.control.sqp import _AtPoint
+    from gnipy.control.sqp import AtPoint
 
     def fn(x):
         return jnp.sum(x) * jnp.array([1.0, jnp.nan]), jnp.ones((2, x.size))
 
-    at = _AtPoint(fn, "constraints and their Jacobian")
+    at = AtPoint(fn, "constraints and their Jacobian")
     with pytest.raises(gnipy.SolverFailure, match="constraints and their Jacobian are not finite.*smaller h"):
         at.first(np.array([0.5, -2.0]))
-    finite = _AtPoint(lambda x: (x**2, 2 * x), "cost and its gradient")
+    finite = AtPoint(lambda x: (x**2, 2 * x), "cost and its gradient")
     np.testing.assert_array_equal(finite.first(np.array([3.0])), [9.0])
     np.testing.assert_array_equal(finite.second(np.array([3.0])), [6.0])  # the same point: computed once

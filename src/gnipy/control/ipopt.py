@@ -5,7 +5,9 @@ cyipopt, on the exact derivatives of the shooting problem: the cost's gradient a
 constraints' Jacobian by reverse mode through the steps, and the exact Hessian of the Lagrangian
 $\\nabla^2(\\sigma J + \\lambda\\cdot g)$ by single shooting's second-order adjoint
 (:mod:`gnipy.control.second_order`; forward over reverse mode where that does not apply,
-:class:`gnipy.control.sqp.Functions`), compiled once per problem structure like the rest.
+:class:`gnipy.control.sqp.Functions`), compiled once per problem structure like the rest. With every
+step a segment (`segments = steps`, :mod:`gnipy.control.step_shooting`) IPOPT gets the constraints'
+Jacobian and the Hessian as sparse triplets instead.
 
 Why beside SLSQP: SLSQP builds its Hessian by quasi-Newton updates and solves a dense QP per
 iteration; on the ball-plate problem it took 121 iterations (60 steps) and 372 (120 steps), and
@@ -49,8 +51,14 @@ class _NLP:
 
     def __init__(self, cyipopt, functions, n: int, d: int, report, count):
         self.ipopt, self.F, self.report, self.count = cyipopt, functions, report, count
-        self.rows, self.cols = np.tril_indices(n)
-        self.jac_structure = np.nonzero(np.ones((d, n), dtype=bool))
+        # sparse derivatives where the transcription has them (every step a segment,
+        # gnipy.control.step_shooting), else dense
+        self.sparse = getattr(functions, "jacobian_values", None) is not None
+        if self.sparse:
+            self.jac_structure, (self.rows, self.cols) = functions.jacobian_structure, functions.hessian_structure
+        else:
+            self.rows, self.cols = np.tril_indices(n)
+            self.jac_structure = np.nonzero(np.ones((d, n), dtype=bool))
         self.error = None  # an error of gnipy's functions in a callback, raised after the solve
 
     def _call(self, fn, *args):
@@ -77,12 +85,16 @@ class _NLP:
         return self.jac_structure
 
     def jacobian(self, x):
+        if self.sparse:
+            return np.asarray(self._call(self.F.jacobian_values, x))
         return np.asarray(self._call(self.F.constraints_jacobian, x)).ravel()
 
     def hessianstructure(self):
         return self.rows, self.cols
 
     def hessian(self, x, lam, sigma):
+        if self.sparse:
+            return self._call(self.F.hessian_values, x, lam, sigma)
         return self._call(self.F.hessian, x, lam, sigma)[self.rows, self.cols]
 
     def intermediate(self, alg_mod, iter_count, obj_value, inf_pr, *rest):

@@ -75,19 +75,26 @@ def control_memory(system: System, steps: int, *, target_size: int = 1, segments
         IPOPT, the Hessian of the Lagrangian: the dense Hessian in five copies (the second-order
         adjoint's rows, JAX's, NumPy's, its lower triangle, IPOPT's factorization) and, where
         forward mode over reverse mode computes it (a running cost, several segments), a tangent
-        per unknown through the steps, O(K s n); 0 with SLSQP; the controlled run's nodes, O(K).
+        per unknown through the steps, O(K s n); with every step a segment (`segments = steps`,
+        :mod:`gnipy.control.step_shooting`) its sparse blocks, O(K (s + m)²); 0 with SLSQP; the
+        controlled run's nodes, O(K).
     """
     k = system.group.matrix_size if system.group is not None else 0
     group_dim = system.group.dim if system.group is not None else 0
     state = system.n + k * k + system.dim
-    shooting = (segments - 1) * (system.n + group_dim + system.dim)  # the states at the segments' starts
+    every_step = segments == steps > 1  # gnipy.control.step_shooting: every state after a step, R's nine entries
+    shooting = steps * state if every_step else (segments - 1) * (system.n + group_dim + system.dim)
     unknowns = steps * system.inputs + shooting
+    if every_step:  # sparse: the blocks over (s_k, u_k), in five copies
+        hessian = 8 * 5 * (steps * (state + system.inputs) ** 2 + 3 * steps * system.inputs)
+    else:
+        hessian = 8 * (_HESSIAN_NUMBERS_PER_UNKNOWN_STEP_STATE * state * steps * unknowns
+                       * (running_cost or segments > 1) + 5 * unknowns**2)
     parts = {
         "sqp": _SQP_BYTES_PER_UNKNOWN2 * unknowns**2,
         "jacobian": 3 * 8 * (target_size + shooting) * unknowns,  # JAX's, its NumPy copy, SciPy's
         "reverse": 8 * _REVERSE_NUMBERS_PER_STATE2 * state**2 * steps,
-        "hessian": (8 * (_HESSIAN_NUMBERS_PER_UNKNOWN_STEP_STATE * state * steps * unknowns
-                         * (running_cost or segments > 1) + 5 * unknowns**2) if optimizer == "ipopt" else 0),
+        "hessian": hessian if optimizer == "ipopt" else 0,
         "nodes": _NODE_COPIES * (steps + 1) * node_bytes(system),
     }
     parts["total"] = sum(parts.values())

@@ -33,6 +33,9 @@ constraints; each segment is still a run of the GNI's steps. Measured on the wor
 iterations and 5.4 s with one segment, 37 iterations and 13.6 s with four (the same optimum);
 ball-plate 108 iterations and 12.8 s with one, and with four SLSQP reached its 500-iteration cap
 (the states' unknowns, of other scales than the controls, slow its quasi-Newton updates).
+Every step a segment (`segments = steps`) is a transcription of its own
+(:mod:`gnipy.control.step_shooting`): all steps evaluated at once, the derivatives sparse, for
+IPOPT; it reaches single shooting's optimum, but is not faster here (the control guide).
 
 **Compiled once per structure.** The shooting problems are equinox Modules whose numbers are
 arrays, and the SQP's functions are two module-level compiled programs that take them as an
@@ -148,7 +151,9 @@ def solve_optimal_control(
         segments: the number of shooting segments: 1 (the default) is single shooting; with
             S > 1, multiple shooting: the method's state $(b, p^+)$ at the starts of segments
             2..S are unknowns too, and the steps' defects at the segment boundaries are
-            constraints (GNI-family methods; see the module docstring).
+            constraints (GNI-family methods; see the module docstring). `segments = steps`,
+            every step a segment, is one vectorized program with sparse derivatives
+            (:mod:`gnipy.control.step_shooting`; no running cost), which IPOPT takes as sparse.
         check_continuous: drive the continuous system (the reference) with the optimal inputs and
             report how far it ends from the target (`continuous_miss`): the discrete problem's
             target is met to round-off by the discrete dynamics, the physical system's only to the

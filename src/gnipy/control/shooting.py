@@ -145,12 +145,18 @@ def sqp_problem(single: SingleShooting, a: ControlArguments, U0, running_cost, n
     if a.segments == 1:
         x0, x_lo, x_hi, unknowns = U0.ravel(), np.tile(a.lo, a.K), np.tile(a.hi, a.K), controls
     else:
-        shooting = MultipleShooting.make(single, a.segments, U0)
-        s0 = np.asarray(shooting.s0)
+        if a.segments == a.K:  # every step a segment: one vectorized program, sparse derivatives
+            from .step_shooting import SparseFunctions, StepShooting
+
+            shooting = StepShooting.make(single, U0)
+            unknowns = SparseFunctions.of_steps(shooting, n_target)
+        else:
+            shooting = MultipleShooting.make(single, a.segments, U0)
+            unknowns = Functions.of(shooting)
+        s0 = np.asarray(shooting.s0).ravel()
         x0 = np.concatenate([U0.ravel(), s0])
         x_lo = np.concatenate([lo_x, np.full(s0.size, -np.inf)])
         x_hi = np.concatenate([hi_x, np.full(s0.size, np.inf)])
-        unknowns = Functions.of(shooting)
     # SLSQP starts its quasi-Newton Hessian at the identity; the effort's Hessian is h w I, so the
     # cost is divided by h w (its first steps are otherwise 1/(h w) too long)
     scale = 1.0 / (a.h * a.effort) if a.effort > 0 else 1.0 / a.h

@@ -13,10 +13,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..compilation import jit
+from ..compilation import bind
 from ..errors import SolverFailure
 
-__all__ = ["Functions", "SQPProblem", "StageResult", "solve_sqp", "finish_stage"]
+__all__ = ["Functions", "AtPoint", "cost_and_gradient", "constraints_and_jacobian", "lagrangian_hessian", "SQPProblem", "StageResult", "solve_sqp", "finish_stage"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -38,18 +38,19 @@ class Functions:
         """The functions of `problem.cost(x)` and `problem.constraints(x)`: two compiled programs,
         the cost with its gradient and the constraints with their Jacobian, each computed once per
         point (SciPy asks for a value and then its derivative at the same point). The programs are
-        module-level and take `problem` as an argument: a problem that is a pytree (an equinox
-        Module whose numbers are arrays) compiles once per structure, and every solve, warm start
-        and start of a multistart of that structure reuses the programs (gnipy.compilation.jit:
-        gnipy's compiler options; measured on the sleigh-steering problem: XLA's compile time
+        module-level functions of `problem`, bound to it (:func:`gnipy.compilation.bind`: the
+        problem's partition into arrays and the rest done once, not at every call): a problem that
+        is a pytree (an equinox Module whose numbers are arrays) compiles once per structure, and
+        every solve, warm start and start of a multistart of that structure reuses the programs
+        (with gnipy's compiler options; measured on the sleigh-steering problem: XLA's compile time
         6.3 s -> 4.2 s with them, the same optimum to the last digit)."""
-        cost = _AtPoint(lambda x: _cost_and_gradient(problem, x), "cost and its gradient")
-        constraints = _AtPoint(lambda x: _constraints_and_jacobian(problem, x), "constraints and their Jacobian")
+        cost = AtPoint(bind(cost_and_gradient, problem), "cost and its gradient")
+        constraints = AtPoint(bind(constraints_and_jacobian, problem), "constraints and their Jacobian")
         return cls(cost=cost.first, cost_gradient=cost.second, constraints=constraints.first,
                    constraints_jacobian=constraints.second, hessian=_Hessian(problem))
 
 
-class _AtPoint:
+class AtPoint:
     """A pair of arrays computed together at a point and kept for the last point asked. A value
     that is not finite stops the solve with a :class:`~gnipy.SolverFailure`: the compiled runs
     leave NaN nodes after a failed step (`simulate(..., throw=False)` under a transformation, so
@@ -62,7 +63,7 @@ class _AtPoint:
         x = np.ascontiguousarray(x, dtype=np.float64)
         key = x.tobytes()
         if key != self.key:
-            a, b = self.fn(jnp.asarray(x))
+            a, b = self.fn(x)  # a NumPy array: traced by filter_jit, without a device_put of its own
             a, b = np.asarray(a), np.asarray(b)
             if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
                 raise SolverFailure(
@@ -82,14 +83,14 @@ class _AtPoint:
 
 class _Hessian:
     """The Hessian of the Lagrangian of `problem` at a point, a NumPy array; a value that is not
-    finite stops the solve with a :class:`~gnipy.SolverFailure` (as :class:`_AtPoint`)."""
+    finite stops the solve with a :class:`~gnipy.SolverFailure` (as :class:`AtPoint`)."""
 
     def __init__(self, problem):
-        self.problem = problem
+        self.program = bind(lagrangian_hessian, problem)
 
     def __call__(self, x, lam, sigma):
-        H = np.asarray(_lagrangian_hessian(self.problem, jnp.asarray(x, jnp.float64), jnp.asarray(lam, jnp.float64),
-                                           jnp.asarray(sigma, jnp.float64)))
+        H = np.asarray(self.program(np.asarray(x, np.float64), np.asarray(lam, np.float64),
+                                    np.asarray(sigma, np.float64)))
         if not np.all(np.isfinite(H)):
             raise SolverFailure("control: the Hessian of the Lagrangian is not finite at an iterate of the optimizer: "
                                 "a step of the run failed or the cost or target is not twice differentiable there",
@@ -97,8 +98,7 @@ class _Hessian:
         return H
 
 
-@jit
-def _lagrangian_hessian(problem, x, lam, sigma):
+def lagrangian_hessian(problem, x, lam, sigma):
     """$\\nabla^2(\\sigma J + \\lambda\\cdot g)$ at `x` (compiled once per problem structure): the
     problem's own (`lagrangian_hessian`: single shooting's second-order adjoint,
     :mod:`gnipy.control.second_order`) where it has one, else forward mode over the reverse-mode
@@ -110,14 +110,12 @@ def _lagrangian_hessian(problem, x, lam, sigma):
     return H
 
 
-@jit
-def _cost_and_gradient(problem, x):
-    """The cost and its gradient at `x` (compiled once per problem structure)."""
+def cost_and_gradient(problem, x):
+    """The cost and its gradient at `x` (compiled once per problem structure: :func:`gnipy.compilation.bind`)."""
     return jax.value_and_grad(problem.cost)(x)
 
 
-@jit
-def _constraints_and_jacobian(problem, x):
+def constraints_and_jacobian(problem, x):
     """The constraints and their Jacobian at `x`, by reverse mode: one pass through the steps and
     one adjoint per constraint (compiled once per problem structure)."""
     g, pullback = jax.vjp(problem.constraints, x)
@@ -255,7 +253,9 @@ def finish_stage(problem: SQPProblem, res, stages: str, target_tol: float, kkt_t
     x = full[: problem.lo.size]
     x, polish, miss = _polish(x, f.constraints, f.constraints_jacobian, problem.lo, problem.hi, target_tol)
     jac = None
-    if problem.single or polish:
+    # by single shooting after a polish, and where the unknowns are every step's state (their dense
+    # Jacobian, K states by K states, is what IPOPT's sparse one avoids)
+    if problem.single or polish or getattr(problem.unknowns, "jacobian_values", None) is not None:
         jac = np.asarray(f.constraints_jacobian(x))
         kkt, lam, active, signs_ok = _kkt(np.asarray(f.cost_gradient(x)), jac, x, problem.lo, problem.hi)
     else:  # the KKT conditions of the multiple-shooting problem (equivalent; no other compile)
@@ -314,7 +314,7 @@ def _polish(x, c_val, c_jac, lo, hi, tol, max_steps: int = 8):
         at_lo, at_hi = _at_bounds(x, lo, hi)
         free = ~(at_lo | at_hi)
         J = np.asarray(c_jac(x))[:, free]
-        if J.shape[1] < J.shape[0]:  # (values that are not finite stop the solve earlier: _AtPoint)
+        if J.shape[1] < J.shape[0]:  # (values that are not finite stop the solve earlier: AtPoint)
             break
         dx = np.zeros_like(x)
         # the least-norm Gauss–Newton step by SVD: defined also when the target's rows are dependent
@@ -332,7 +332,7 @@ def _polish(x, c_val, c_jac, lo, hi, tol, max_steps: int = 8):
 
 def _kkt(grad, Jg, x, lo, hi):
     """KKT residual over the free controls, the multipliers, the active bounds and their signs
-    (`grad` and `Jg` are finite: :class:`_AtPoint` stops the solve at a value that is not)."""
+    (`grad` and `Jg` are finite: :class:`AtPoint` stops the solve at a value that is not)."""
     at_lo, at_hi = _at_bounds(x, lo, hi)
     free = ~(at_lo | at_hi)
     lam = np.linalg.lstsq(Jg[:, free].T, -grad[free], rcond=None)[0] if np.any(free) else np.zeros(Jg.shape[0])
