@@ -102,3 +102,23 @@ def test_every_step_refuses_a_running_cost_and_a_state_that_is_not_the_gnis():
     single, a = _single(dataclasses.replace(problem, method="dla"))
     with pytest.raises(InputError, match=r"segments: .*\(b, p\+\)"):
         StepShooting.make(single, np.zeros((a.K, a.m)))
+
+
+def test_a_step_whose_solve_fails_stops_the_evaluation():
+    """A step whose implicit solve does not converge is NaN in the compiled program (as a compiled
+    run leaves NaN nodes), and the optimizer's host side raises SolverFailure instead of handing
+    IPOPT a defect computed from an unconverged step (here: the GNI allowed one Newton iteration)."""
+    import equinox as eqx
+
+    import gnipy
+    from gnipy.errors import SolverFailure
+
+    problem = load_problem(problem_text("sleigh-steering", 4))
+    single, a = _single(problem)
+    U0 = np.zeros((a.K, a.m))
+    shooting = StepShooting.make(single, U0)
+    x = np.concatenate([U0.ravel() + 0.3, np.asarray(shooting.s0).ravel() + 0.1])
+    assert np.all(np.isfinite(SparseFunctions.of_steps(shooting, 3).constraints(x)))
+    capped = eqx.tree_at(lambda t: t.single.method, shooting, gnipy.GNI(max_steps=1))
+    with pytest.raises(SolverFailure, match="not finite at an iterate"):
+        SparseFunctions.of_steps(capped, 3).constraints(x)

@@ -97,8 +97,10 @@ class StepShooting(eqx.Module):
             return ravel_pytree((state.b, state.p_plus))[0]
 
         def step(k, s, u):
-            state = method.step(holding(core.at_step(k), u), as_state(s), one.h)[0]
-            return ravel_pytree((state.b, state.p_plus))[0]
+            # a step whose solve fails is NaN, as in a compiled run (simulate's throw=False): the optimizer's
+            # host side stops or shortens its step there (gnipy.control.sqp.AtPoint)
+            state, info = method.step(holding(core.at_step(k), u), as_state(s), one.h)
+            return jnp.where(info.ok, ravel_pytree((state.b, state.p_plus))[0], jnp.nan)
 
         def terminal(s, u0):  # the target at the last node, observed as the run observes it
             b, v, _ = method.observe(holding(core, u0), as_state(s), one.h)
