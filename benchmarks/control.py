@@ -63,7 +63,6 @@ from __future__ import annotations
 
 import json
 import os
-import re
 import subprocess
 import sys
 import tempfile
@@ -91,13 +90,9 @@ TARGET_WALL_RATIO, TARGET_SOLVE_RATIO = 2.0, 1.0
 
 def problem_text(name: str, steps: int) -> str:
     """The worked problem `name` at `steps` steps over its own horizon."""
-    from gnipy.control import WORKED_PROBLEMS
+    from gnipy.control.problems import worked_problem
 
-    text = WORKED_PROBLEMS[name]
-    k = int(re.search(r"^steps = (\d+)$", text, re.M).group(1))
-    h = float(re.search(r"^h = ([0-9.eE+-]+)$", text, re.M).group(1))
-    text = re.sub(r"^steps = \d+$", f"steps = {steps}", text, flags=re.M)
-    return re.sub(r"^h = [0-9.eE+-]+$", f"h = {h * k / steps!r}", text, flags=re.M)
+    return worked_problem(name, steps)
 
 
 _CHILD = r'''

@@ -341,3 +341,23 @@ def test_observation_files_are_checked(tripwire, fit_dir, tmp_path):
     with pytest.raises(gnipy.InputError, match=r"observations.file: .* more than the memory bound .* max_bytes=None"):
         load_fit_problem(problem, max_bytes=100)
     assert load_fit_problem(problem, max_bytes=None).h == 0.05
+
+
+def test_a_worked_problem_at_another_resolution_keeps_its_horizon():
+    """`worked_problem(name, steps)`: the same problem file with `steps` steps over the same horizon
+    (the control benchmark's cases); without steps the file itself; wrong names and counts refused."""
+    from gnipy.control.problems import WORKED_PROBLEMS, worked_problem
+
+    for name, text in WORKED_PROBLEMS.items():
+        assert worked_problem(name) == text
+        base = load_problem(text)
+        for steps in (7, 2 * base.steps):
+            other = load_problem(worked_problem(name, steps))
+            assert other.steps == steps and abs(other.steps * other.h - base.steps * base.h) <= 1e-12
+            assert other.target.keys() == base.target.keys()
+            assert all(np.array_equal(np.asarray(other.target[k]), np.asarray(base.target[k])) for k in base.target)
+            np.testing.assert_array_equal(np.asarray(other.bounds, dtype=float), np.asarray(base.bounds, dtype=float))
+    with pytest.raises(gnipy.InputError, match="name: expected one of 'sleigh-steering', 'ball-plate'"):
+        worked_problem("sleigh")
+    with pytest.raises(gnipy.InputError, match="steps: expected a whole number"):
+        worked_problem("ball-plate", 2.5)

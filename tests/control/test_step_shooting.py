@@ -14,9 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from benchmarks.control import problem_text  # the worked problems at other resolutions
 from gnipy.control.control_arguments import control_arguments, terminal_residual
-from gnipy.control.problems import load_problem
+from gnipy.control.problems import load_problem, worked_problem
 from gnipy.control.shooting import SingleShooting
 from gnipy.control.step_shooting import SparseFunctions, StepShooting
 from gnipy.errors import InputError
@@ -41,7 +40,7 @@ def test_the_sparse_derivatives_are_the_dense_ones(name, steps):
     on the sleigh only: its code is the same on a group (the state's layout, the start and the
     target's log are what the group changes, and the Jacobian checks them), and the ball-plate's
     vectorized Hessian of the implicit step takes about 30 s to compile."""
-    problem = load_problem(problem_text(name, steps))
+    problem = load_problem(worked_problem(name, steps))
     single, a = _single(problem)
     rng = np.random.default_rng(3)
     U0 = np.clip(0.3 * rng.standard_normal((a.K, a.m)), a.lo, a.hi)
@@ -84,7 +83,7 @@ def _final(single, U):
 
 
 def test_ipopt_on_every_step_reaches_the_single_shooting_optimum():
-    problem = load_problem(problem_text("sleigh-steering", 20))
+    problem = load_problem(worked_problem("sleigh-steering", 20))
     single = problem.solve(check_continuous=False)
     steps = dataclasses.replace(problem, optimizer="ipopt", segments=problem.steps).solve(check_continuous=False)
     assert single.success and steps.success, (single.message, steps.message)
@@ -95,7 +94,7 @@ def test_ipopt_on_every_step_reaches_the_single_shooting_optimum():
 
 
 def test_every_step_refuses_a_running_cost_and_a_state_that_is_not_the_gnis():
-    problem = load_problem(problem_text("sleigh-steering", 4))
+    problem = load_problem(worked_problem("sleigh-steering", 4))
     single, a = _single(problem, running_cost=lambda q, v, u, t: jnp.sum(v**2))
     with pytest.raises(InputError, match="segments: every step a segment .* running cost"):
         StepShooting.make(single, np.zeros((a.K, a.m)))
@@ -113,7 +112,7 @@ def test_a_step_whose_solve_fails_stops_the_evaluation():
     import gnipy
     from gnipy.errors import SolverFailure
 
-    problem = load_problem(problem_text("sleigh-steering", 4))
+    problem = load_problem(worked_problem("sleigh-steering", 4))
     single, a = _single(problem)
     U0 = np.zeros((a.K, a.m))
     shooting = StepShooting.make(single, U0)

@@ -29,8 +29,8 @@ from .fit_problems import FitProblem, load_fit_problem, write_fit_result
 from .fit_result import Combination
 from .identification import FitResult, Observations, fit
 from .optimal_control import ControlResult, solve_optimal_control, terminal_residual
-from .problems import WORKED_PROBLEMS, ControlProblem, load_problem, write_control_result
+from .problems import WORKED_PROBLEMS, ControlProblem, load_problem, worked_problem, write_control_result
 
 __all__ = ["fit", "FitResult", "Combination", "Observations", "solve_optimal_control", "ControlResult", "terminal_residual",
-           "ControlProblem", "load_problem", "write_control_result", "WORKED_PROBLEMS", "FitProblem",
+           "ControlProblem", "load_problem", "worked_problem", "write_control_result", "WORKED_PROBLEMS", "FitProblem",
            "load_fit_problem", "write_fit_result"]

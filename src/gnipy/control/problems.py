@@ -61,7 +61,7 @@ from .problem_files import (
     refuse_unknown_keys,
 )
 
-__all__ = ["ControlProblem", "WORKED_PROBLEMS", "load_problem", "write_control_result"]
+__all__ = ["ControlProblem", "WORKED_PROBLEMS", "worked_problem", "load_problem", "write_control_result"]
 
 #: The worked problems of the control guide, as problem files (`gni control --example NAME`).
 WORKED_PROBLEMS: dict[str, str] = {
@@ -145,6 +145,29 @@ phase = [1.5707963267948966, 0.0]
 periods = 1.0
 ''',
 }
+
+
+def worked_problem(name: str, steps: int | None = None) -> str:
+    """The problem file of the worked problem `name` (:data:`WORKED_PROBLEMS`); with `steps`, at
+    that many steps over its own horizon (h scaled to keep `steps` x h): the same problem at
+    another resolution (the control benchmark's, BENCHMARKS.md section 11).
+
+    Raises:
+        InputError: an unknown `name`, or `steps` not a whole number >= 1.
+    """
+    import re
+
+    if name not in WORKED_PROBLEMS:
+        raise InputError(f"name: expected one of {', '.join(map(repr, WORKED_PROBLEMS))}, got {name!r}")
+    text = WORKED_PROBLEMS[name]
+    if steps is None:
+        return text
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 1:
+        raise InputError(f"steps: expected a whole number of steps >= 1, got {steps!r}")
+    k = int(re.search(r"^steps = (\d+)$", text, re.M).group(1))
+    h = float(re.search(r"^h = ([0-9.eE+-]+)$", text, re.M).group(1))
+    text = re.sub(r"^steps = \d+$", f"steps = {int(steps)}", text, flags=re.M)
+    return re.sub(r"^h = [0-9.eE+-]+$", f"h = {h * k / int(steps)!r}", text, flags=re.M)
 
 _SECTIONS = {"name", "description", "system", "inputs", "start", "horizon", "target", "solver", "warm_start"}
 
