@@ -7,6 +7,7 @@ import sys
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from gnipy.compilation import memory_map_count, release_compiled_programs_if_needed
 
@@ -181,3 +182,10 @@ def test_bind_computes_what_filter_jit_does_and_compiles_once_per_structure():
     bind(fun, make(1.0, power=3))(x, y)  # a static field
     bind(fun, make(1.0, n=4))(np.ones(4), np.ones(4))  # shapes
     assert program._cache_size() == start + 3
+
+    class Unhashable(eqx.Module):  # a part that cannot key a program
+        a: jax.Array
+        options: set
+
+    with pytest.raises(TypeError, match="tree: its parts that are not arrays must be hashable"):
+        bind(lambda t, x: t.a @ x, Unhashable(jnp.ones(3), {1, 2}))

@@ -46,6 +46,7 @@ __all__ = [
     "compiler_options",
     "jit",
     "bind",
+    "split_arrays",
     "traced_once",
     "enable_compilation_cache",
     "default_cache_dir",
@@ -112,37 +113,48 @@ def jit(fun=None, **jitkwargs):
     return wrapper
 
 
+def split_arrays(tree):
+    """`(leaves, structure_key, rebuild)`: the array leaves of `tree` (a method, a system, or a
+    tuple of them; as jax arrays), a hashable key of everything else (None when a static part
+    cannot be hashed), and `rebuild(leaves)`. The form in which compiled loops take a method and
+    a system: their programs are keyed by the structure and called with the leaves
+    (:mod:`gnipy.preparation`; the native backend's loops, :mod:`gnipy.native.backend`; the
+    optimizers' callbacks, :func:`bind`)."""
+    import equinox as eqx
+    import jax
+    import jax.numpy as jnp
+
+    dyn, static = eqx.partition(tree, eqx.is_array)
+    leaves, treedef = jax.tree_util.tree_flatten(dyn)
+    static_leaves, static_def = jax.tree_util.tree_flatten(static)
+    key = (treedef, static_def, tuple(static_leaves))
+    try:
+        hash(key)
+    except TypeError:
+        key = None
+
+    def rebuild(ls):
+        return eqx.combine(jax.tree_util.tree_unflatten(treedef, ls), static)
+
+    return [jnp.asarray(a) for a in leaves], key, rebuild
+
+
 class _Structure:
-    """The static part of a pytree argument of :func:`bind` (the function, the shape of the tree's
-    arrays, and its other leaves with their own shape, as `equinox.filter_jit` keys them) as a static
-    argument of `jax.jit`: hashed once, compared by identity first."""
+    """The static part of a pytree argument of :func:`bind` (the function and :func:`split_arrays`'s
+    key of the tree) as a static argument of `jax.jit`: hashed once, compared by identity first."""
 
-    __slots__ = ("fun", "treedef", "static_treedef", "static_leaves", "_hash")
+    __slots__ = ("fun", "key", "tree", "_hash")
 
-    def __init__(self, fun, treedef, static):
-        import jax
-
-        self.fun, self.treedef = fun, treedef
-        self.static_leaves, self.static_treedef = jax.tree_util.tree_flatten(static)
-        self.static_leaves = tuple(self.static_leaves)
-        self._hash = hash((fun, treedef, self.static_treedef, self.static_leaves))
+    def __init__(self, fun, key, rebuild):
+        self.fun, self.key, self.tree = fun, key, rebuild
+        self._hash = hash((fun, key))
 
     def __hash__(self):
         return self._hash
 
     def __eq__(self, other):
-        return self is other or (
-            isinstance(other, _Structure) and self._hash == other._hash and self.fun is other.fun
-            and self.treedef == other.treedef and self.static_treedef == other.static_treedef
-            and self.static_leaves == other.static_leaves)
-
-    def tree(self, leaves):
-        """The tree with these arrays."""
-        import equinox as eqx
-        import jax
-
-        static = jax.tree_util.tree_unflatten(self.static_treedef, self.static_leaves)
-        return eqx.combine(jax.tree_util.tree_unflatten(self.treedef, leaves), static)
+        return self is other or (isinstance(other, _Structure) and self._hash == other._hash
+                                 and self.fun is other.fun and self.key == other.key)
 
 
 @functools.cache
@@ -165,13 +177,16 @@ def bind(fun, tree):
     (:mod:`gnipy.control.sqp`). Measured on the sleigh-steering problem's constraints and their
     Jacobian (80 steps; a 17-array problem): 0.79 ms a call through `filter_jit`, of which 0.30 ms
     were its partition and hashing of the problem; 0.50 ms this way. The `args` are arrays (NumPy
-    or JAX)."""
-    import equinox as eqx
-    import jax
+    or JAX).
 
-    dynamic, static = eqx.partition(tree, eqx.is_array)
-    leaves, treedef = jax.tree_util.tree_flatten(dynamic)
-    structure = _Structure(fun, treedef, static)
+    Raises:
+        TypeError: a part of `tree` that is not an array cannot be hashed.
+    """
+    leaves, key, rebuild = split_arrays(tree)
+    if key is None:
+        raise TypeError(f"tree: its parts that are not arrays must be hashable (they key the compiled program, as "
+                        f"for equinox.filter_jit); {type(tree).__name__} has one that is not")
+    structure = _Structure(fun, key, rebuild)
     program = _bound_program()
 
     def call(*args):

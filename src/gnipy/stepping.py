@@ -31,6 +31,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .compilation import split_arrays
 from .extras import require
 from .inputs import is_traced
 from . import monitor
@@ -48,27 +49,6 @@ GRADIENT_MEMORY_BYTES = 256 * 2**20
 def _tree_finite(tree) -> jax.Array:
     leaves = [jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(tree) if eqx.is_inexact_array(x)]
     return jnp.all(jnp.stack(leaves)) if leaves else jnp.asarray(True)
-
-
-def split_arrays(tree):
-    """`(leaves, structure_key, rebuild)`: the array leaves of `tree` (a method, a system, or a
-    tuple of them; as jax arrays), a hashable key of everything else (None when a static part
-    cannot be hashed), and `rebuild(leaves)`. The form in which compiled loops take a method and
-    a system: their programs are keyed by the structure and called with the leaves
-    (:mod:`gnipy.preparation`; the native backend's loops, :mod:`gnipy.native.backend`)."""
-    dyn, static = eqx.partition(tree, eqx.is_array)
-    leaves, treedef = jax.tree_util.tree_flatten(dyn)
-    static_leaves, static_def = jax.tree_util.tree_flatten(static)
-    key = (treedef, static_def, tuple(static_leaves))
-    try:
-        hash(key)
-    except TypeError:
-        key = None
-
-    def rebuild(ls):
-        return eqx.combine(jax.tree_util.tree_unflatten(treedef, ls), static)
-
-    return [jnp.asarray(a) for a in leaves], key, rebuild
 
 
 # The progress callback: compiled code calls `report_progress(steps_done)` through `jax.debug.callback`;
