@@ -444,7 +444,7 @@ def lane_main(*pairs: str) -> None:
 
         enable_compilation_cache()
     for rel, cwd in zip(pairs[::2], pairs[1::2]):
-        code = 0
+        code, start = 0, time.perf_counter()
         try:
             page_main(rel, cwd)
         except BaseException:  # noqa: BLE001 (reported as the page's failure)
@@ -452,6 +452,7 @@ def lane_main(*pairs: str) -> None:
             code = 1
         sys.stdout.flush()
         sys.stderr.flush()
+        print(f"({rel}: {time.perf_counter() - start:.1f} s in this lane)")
         print(f"\n{END_MARK} {rel} {code}", flush=True)
 
 

@@ -99,6 +99,7 @@ def test_a_failed_evaluation_is_an_evaluation_error_to_ipopt():
     import cyipopt
 
     from gnipy.control.ipopt import _NLP
+    from gnipy.control.sqp import Functions
 
     def failing(*args):
         raise gnipy.SolverFailure("a step failed", step=3, time=0.3, residual=1.0)
@@ -106,8 +107,8 @@ def test_a_failed_evaluation_is_an_evaluation_error_to_ipopt():
     def broken(x):
         raise ValueError("a bug")
 
-    F = dataclasses.make_dataclass("F", ["cost", "cost_gradient", "constraints", "constraints_jacobian", "hessian"])
-    nlp = _NLP(cyipopt, F(failing, broken, failing, failing, failing), n=2, d=1, report=None, count=[0])
+    F = Functions(cost=failing, cost_gradient=broken, constraints=failing, constraints_jacobian=failing, hessian=failing)
+    nlp = _NLP(cyipopt, F, n=2, d=1, report=None, count=[0])
     for call in (lambda: nlp.objective(np.zeros(2)), lambda: nlp.constraints(np.zeros(2)),
                  lambda: nlp.jacobian(np.zeros(2)), lambda: nlp.hessian(np.zeros(2), np.zeros(1), 1.0)):
         with pytest.raises(cyipopt.CyIpoptEvaluationError):

@@ -53,7 +53,7 @@ class _NLP:
         self.ipopt, self.F, self.report, self.count = cyipopt, functions, report, count
         # sparse derivatives where the transcription has them (every step a segment,
         # gnipy.control.step_shooting), else dense
-        self.sparse = getattr(functions, "jacobian_values", None) is not None
+        self.sparse = functions.sparse
         if self.sparse:
             self.jac_structure, (self.rows, self.cols) = functions.jacobian_structure, functions.hessian_structure
         else:

@@ -16,7 +16,7 @@ import numpy as np
 from ..compilation import bind
 from ..errors import SolverFailure
 
-__all__ = ["Functions", "AtPoint", "cost_and_gradient", "constraints_and_jacobian", "lagrangian_hessian", "SQPProblem", "StageResult", "solve_sqp", "finish_stage"]
+__all__ = ["Functions", "AtPoint", "cost_and_gradient", "constraints_and_jacobian", "lagrangian_hessian", "finite_hessian", "SQPProblem", "StageResult", "solve_sqp", "finish_stage"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -32,6 +32,10 @@ class Functions:
     constraints: Callable
     constraints_jacobian: Callable
     hessian: Callable
+
+    #: Whether the derivatives also come as sparse values at fixed places (IPOPT's form;
+    #: :class:`gnipy.control.step_shooting.SparseFunctions`); these are dense.
+    sparse = False
 
     @classmethod
     def of(cls, problem) -> "Functions":
@@ -63,7 +67,7 @@ class AtPoint:
         x = np.ascontiguousarray(x, dtype=np.float64)
         key = x.tobytes()
         if key != self.key:
-            a, b = self.fn(x)  # a NumPy array: traced by filter_jit, without a device_put of its own
+            a, b = self.fn(x)  # a NumPy array, passed to bind's program without a device_put of its own
             a, b = np.asarray(a), np.asarray(b)
             if not (np.all(np.isfinite(a)) and np.all(np.isfinite(b))):
                 raise SolverFailure(
@@ -89,13 +93,19 @@ class _Hessian:
         self.program = bind(lagrangian_hessian, problem)
 
     def __call__(self, x, lam, sigma):
-        H = np.asarray(self.program(np.asarray(x, np.float64), np.asarray(lam, np.float64),
-                                    np.asarray(sigma, np.float64)))
-        if not np.all(np.isfinite(H)):
-            raise SolverFailure("control: the Hessian of the Lagrangian is not finite at an iterate of the optimizer: "
-                                "a step of the run failed or the cost or target is not twice differentiable there",
-                                step=-1, time=float("nan"), residual=float("nan"))
-        return H
+        return finite_hessian(self.program(np.asarray(x, np.float64), np.asarray(lam, np.float64),
+                                           np.asarray(sigma, np.float64)))
+
+
+def finite_hessian(values) -> np.ndarray:
+    """`values` of the Lagrangian's Hessian (all of it, or its nonzeros) as a NumPy array; values
+    that are not finite stop the solve with a :class:`~gnipy.SolverFailure` (as :class:`AtPoint`)."""
+    H = np.asarray(values)
+    if not np.all(np.isfinite(H)):
+        raise SolverFailure("control: the Hessian of the Lagrangian is not finite at an iterate of the optimizer: "
+                            "a step of the run failed or the cost or target is not twice differentiable there",
+                            step=-1, time=float("nan"), residual=float("nan"))
+    return H
 
 
 def lagrangian_hessian(problem, x, lam, sigma):
@@ -255,7 +265,7 @@ def finish_stage(problem: SQPProblem, res, stages: str, target_tol: float, kkt_t
     jac = None
     # by single shooting after a polish, and where the unknowns are every step's state (their dense
     # Jacobian, K states by K states, is what IPOPT's sparse one avoids)
-    if problem.single or polish or getattr(problem.unknowns, "jacobian_values", None) is not None:
+    if problem.single or polish or problem.unknowns.sparse:
         jac = np.asarray(f.constraints_jacobian(x))
         kkt, lam, active, signs_ok = _kkt(np.asarray(f.cost_gradient(x)), jac, x, problem.lo, problem.hi)
     else:  # the KKT conditions of the multiple-shooting problem (equivalent; no other compile)

@@ -35,7 +35,7 @@ from ..compilation import bind
 from ..errors import InputError
 from ..saveat import SaveAt
 from ..simulate import simulate
-from .sqp import AtPoint, Functions, cost_and_gradient
+from .sqp import AtPoint, Functions, cost_and_gradient, finite_hessian
 
 __all__ = ["StepShooting", "SparseFunctions"]
 
@@ -221,6 +221,7 @@ class SparseFunctions(Functions):
     jacobian_values: Any = None
     hessian_structure: tuple = ()
     hessian_values: Any = None
+    sparse = True
 
     @classmethod
     def of_steps(cls, problem: StepShooting, n_target: int) -> "SparseFunctions":
@@ -242,14 +243,8 @@ class SparseFunctions(Functions):
             return J
 
         def hessian_values(x, lam, sigma):
-            v = np.asarray(hessian_program(np.asarray(x, np.float64), np.asarray(lam, np.float64),
-                                           np.asarray(sigma, np.float64)))
-            if not np.all(np.isfinite(v)):
-                from ..errors import SolverFailure
-
-                raise SolverFailure("control: the Hessian of the Lagrangian is not finite at an iterate of the "
-                                    "optimizer: a step failed there", step=-1, time=float("nan"),
-                                    residual=float("nan"))
+            v = finite_hessian(hessian_program(np.asarray(x, np.float64), np.asarray(lam, np.float64),
+                                               np.asarray(sigma, np.float64)))
             return np.bincount(where, weights=v[lower], minlength=pairs.size)
 
         def hessian(x, lam, sigma):
