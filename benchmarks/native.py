@@ -50,6 +50,32 @@ TARGET_CALL_US = 500.0
 TARGET_BUILD_S = 5.0
 TARGET_CACHED_S = 0.5
 
+def compiled_loop(system, q0, v0, method: str, h: float, steps: int):
+    """`(loop, carry)`: gnipy's compiled native loop of `method` on `system` from gnipy's start
+    state (`method.init`), and the carry `simulate` gives it (gnipy.native.backend.run_native): the
+    state, the counters and the monitor of a run of `steps` steps, which checks every node (without
+    it the loop would read and write past the end of the carry). `loop.run(carry, h, [steps])` runs
+    it as the hand-written loops are run (sections 7 and `benchmarks.instructions`)."""
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from benchmarks.run import initial_state
+    from gnipy import monitor
+    from gnipy.methods import get_method
+    from gnipy.native import backend as native_backend
+    from gnipy.preparation import prepare
+
+    qq, vv = initial_state(system, q0, v0)
+    prep = prepare(system, get_method(method), qq, vv, None, False, None)
+    st = prep.method.init(prep.core, prep.b0, jnp.asarray(prep.v0), h)
+    loop = native_backend.native_loop(prep.method, prep.core, st)
+    carry = np.concatenate([np.ravel(np.asarray(x, np.float64)) for x in jax.tree_util.tree_leaves(st)]
+                           + [np.array([0.0, -1.0, 0.0, 0.0, 0.0]),
+                              np.asarray(monitor.with_end(monitor.initial(h, steps * h, 0.0), steps), np.float64)])
+    return loop, carry
+
+
 _CHILD_NATIVE = r'''
 import json, statistics, sys, time
 import numpy as np
@@ -57,10 +83,8 @@ import gnipy
 import jax
 import jax.numpy as jnp
 from benchmarks import numba_gni
-from gnipy.methods import get_method
-from gnipy import monitor
+from benchmarks.native import compiled_loop
 from gnipy.native import backend as native_backend
-from gnipy.preparation import prepare
 spec = json.loads(sys.argv[1])
 h, reps = spec["h"], spec["reps"]
 out = {}
@@ -89,17 +113,8 @@ for name, method, nb_name in spec["cases"]:
     gn(1, "native")
     Sx = min(S, spec["xla_steps"])
     gn(Sx, "xla"), gn(1, "xla")
-    # the compiled loop alone, as the hand-written loop is timed: gnipy's start state (method.init)
-    qq, vv = initial_state(system, q0, v0)
-    prep = prepare(system, get_method(method), qq, vv, None, False, None)
-    st = prep.method.init(prep.core, prep.b0, jnp.asarray(prep.v0), h)
-    loop = native_backend.native_loop(prep.method, prep.core, st)
-    # the carry as simulate gives it (gnipy.native.backend.run_native): the state, the counters and
-    # the monitor of a run of S steps, which checks every node (without it the loop would read and
-    # write past the end of the carry)
-    carry0 = np.concatenate([np.ravel(np.asarray(x, np.float64)) for x in jax.tree_util.tree_leaves(st)]
-                            + [np.array([0.0, -1.0, 0.0, 0.0, 0.0]),
-                               np.asarray(monitor.with_end(monitor.initial(h, S * h, 0.0), S), np.float64)])
+    # the compiled loop alone, as the hand-written loop is timed
+    loop, carry0 = compiled_loop(system, q0, v0, method, h, S)
     loop.run(carry0, h, [S])
     hand, hand_v1, loop_t, nat, nat1, xla, xla1 = [], [], [], [], [], [], []
     for _ in range(reps):  # interleaved
