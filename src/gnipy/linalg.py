@@ -23,7 +23,7 @@ from jax import lax
 
 from .compilation import traced_once
 
-__all__ = ["solve", "solve_spd", "inverse_spd", "lu_factor", "lu_solve", "UNROLL_MAX", "LU_UNROLL_MAX"]
+__all__ = ["solve", "solve_spd", "lu_factor", "lu_solve", "UNROLL_MAX", "LU_UNROLL_MAX"]
 
 #: Largest N for which the elimination is unrolled (beyond it the trace grows as N³).
 UNROLL_MAX = 12
@@ -47,6 +47,14 @@ def solve_spd(A, b):
     """Solve $A x = b$ for a symmetric positive definite (or any matrix that needs no pivoting,
     e.g. diagonally dominant) A: Gaussian elimination without pivoting, unrolled for N ≤ 12.
 
+    The back substitution multiplies by each pivot's reciprocal, which the elimination forms
+    anyway, instead of dividing every right-hand side by the pivot (as LAPACK's `dgetf2` scales by
+    1/pivot): a division costs several multiplications, and the chord iteration's 5 x 5 inverse
+    took 25 of them (the native loop of the rolling ball's GNI step: 97 -> 51 divisions a step,
+    docs/user-guide/native-design.md). With a matrix that stays the same from step to step (a
+    constant metric) the reciprocal's rounding is the same at every step: a relative change of the
+    matrix by at most one rounding, the size of the error its entries already carry.
+
     Arguments:
         A: (N, N).
         b: (N,) or (N, K).
@@ -57,36 +65,6 @@ def solve_spd(A, b):
     n = A.shape[-1]
     if n > UNROLL_MAX:
         return jnp.linalg.solve(A, b)
-    return _eliminate(A, b, reciprocal=False)
-
-
-@traced_once
-def inverse_spd(A):
-    """$A^{-1}$ for a matrix that needs no pivoting (as :func:`solve_spd`), for an iteration
-    matrix: the back substitution multiplies by each pivot's reciprocal instead of dividing every
-    right-hand side by it (as LAPACK's `dgetf2` scales by 1/pivot). A 5 x 5 inverse took 25
-    divisions, each worth several multiplications (the chord iteration of the rolling ball's GNI
-    step, native: 0.31 -> 0.27 µs a step, docs/user-guide/native-design.md). Not for solves whose
-    result is the answer: with a matrix that stays the same from step to step (a constant metric),
-    the reciprocal's rounding would scale every step's result the same way, a bias that adds up over
-    a long run where divisions' roundings do not; an iteration matrix only sets how fast the
-    iteration converges, not its root.
-
-    Arguments:
-        A: (N, N), N ≤ :data:`UNROLL_MAX`.
-
-    Returns:
-        (N, N).
-    """
-    n = A.shape[-1]
-    if n > UNROLL_MAX:
-        return jnp.linalg.inv(A)
-    return _eliminate(A, jnp.eye(n, dtype=A.dtype), reciprocal=True)
-
-
-def _eliminate(A, b, *, reciprocal: bool):
-    """The unrolled elimination of :func:`solve_spd` and :func:`inverse_spd`."""
-    n = A.shape[-1]
     B, vec = _as_matrix_rhs(b, n)
     a = [[A[i, j] for j in range(n)] for i in range(n)]
     y = [B[i] for i in range(n)]
@@ -103,7 +81,7 @@ def _eliminate(A, b, *, reciprocal: bool):
         s = y[k]
         for j in range(k + 1, n):
             s = s - a[k][j] * x[j]
-        x[k] = s * inv[k] if reciprocal else s / a[k][k]
+        x[k] = s * inv[k]
     X = jnp.stack(x)
     return X[:, 0] if vec else X
 

@@ -18,7 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..linalg import solve as small_solve
-from ..linalg import UNROLL_MAX, inverse_spd, lu_factor, lu_solve
+from ..linalg import UNROLL_MAX, lu_factor, lu_solve, solve_spd
 from ..errors import MethodError
 
 __all__ = ["Integrator", "StepInfo", "MethodError", "solve_step", "implicit_solve", "newton", "default_root_finder",
@@ -83,7 +83,7 @@ def chord_solver(J):
     slower per iteration up to N = 12), above it the LU factors (:func:`gnipy.linalg.lu_factor`)."""
     n = J.shape[0]
     if n <= UNROLL_MAX:
-        return (inverse_spd(J),)
+        return (solve_spd(J, jnp.eye(n, dtype=J.dtype)),)
     return lu_factor(J)
 
 
