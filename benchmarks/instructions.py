@@ -128,31 +128,24 @@ def count(case: str = "rolling_ball_ex2", method: str = "gni-trapezoid", hand: s
     instructions run a step) and of the hand-written kernel, from runs of `steps` and 2·`steps`."""
     with tempfile.TemporaryDirectory(prefix="gnipy-instructions-") as tmp:
         folder = Path(tmp)
-        out = {}
-        for which in ("loop", "hand"):
-            totals = []
-            for s in (steps, 2 * steps):
-                profile, obj, address = _run(case, method, hand, s, which, folder)
-                costs = _costs(profile)
-                if which == "hand":
-                    totals.append((sum(costs.values()), collections.Counter()))
-                    continue
-                ops, size = _disassembly(obj)
-                inside = collections.Counter({a - address: c for a, c in costs.items() if address <= a < address + size})
-                totals.append((sum(costs.values()), inside, ops))
-            if which == "hand":
-                out["hand"] = (totals[1][0] - totals[0][0]) / steps
-                continue
-            (t1, in1, ops), (t2, in2, _) = totals
-            diff = {a: in2.get(a, 0) - in1.get(a, 0) for a in set(in1) | set(in2)}
-            by_freq = collections.Counter()
-            for a, c in diff.items():
-                by_freq[round(c / steps, 2)] += c / steps
-            out["loop"] = (t2 - t1) / steps
-            out["divisions"] = sum(c for a, c in diff.items() if ops.get(a, "").startswith(("vdiv", "div"))) / steps
-            out["square_roots"] = sum(c for a, c in diff.items() if "sqrt" in ops.get(a, "")) / steps
-            out["by_frequency"] = {f: n for f, n in sorted(by_freq.items()) if n >= 1.0}
-        return out
+
+        def at(s, which):  # (all instructions, those of gnipy_run by offset, its disassembly)
+            profile, obj, address = _run(case, method, hand, s, which, folder)
+            costs = _costs(profile)
+            ops, size = _disassembly(obj)
+            inside = {a - address: c for a, c in costs.items() if address <= a < address + size}
+            return sum(costs.values()), inside, ops
+
+        (h1, _, _), (h2, _, _) = at(steps, "hand"), at(2 * steps, "hand")
+        (t1, in1, ops), (t2, in2, _) = at(steps, "loop"), at(2 * steps, "loop")
+        diff = {a: in2.get(a, 0) - in1.get(a, 0) for a in set(in1) | set(in2)}
+        by_freq = collections.Counter()
+        for c in diff.values():
+            by_freq[round(c / steps, 2)] += c / steps
+        return {"hand": (h2 - h1) / steps, "loop": (t2 - t1) / steps,
+                "divisions": sum(c for a, c in diff.items() if ops.get(a, "").startswith(("vdiv", "div"))) / steps,
+                "square_roots": sum(c for a, c in diff.items() if "sqrt" in ops.get(a, "")) / steps,
+                "by_frequency": {f: n for f, n in sorted(by_freq.items()) if n >= 1.0}}
 
 
 def main(argv=None) -> None:
